@@ -1,0 +1,33 @@
+"""Summary statistics of an attitude error history (SPEC "What is measured").
+
+The workshop's loss is the sample standard deviation (``ddof = 1``) of the
+error over all ``N`` samples; the other statistics are reported beside it.
+All in degrees.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Column names of every statistics table, in order.
+STAT_COLUMNS = ("mean_deg", "median_deg", "std_deg", "three_sigma_deg", "rms_deg",
+                "max_deg", "final_deg")
+
+
+def error_statistics(error_deg: np.ndarray) -> dict[str, float]:
+    """Mean, median, std (ddof = 1), 3σ, RMS, max and final value of ``error_deg``."""
+    error = np.asarray(error_deg, dtype=float)
+    std = float(np.std(error, ddof=1)) if error.size > 1 else 0.0
+    return {
+        "mean_deg": float(np.mean(error)),
+        "median_deg": float(np.median(error)),
+        "std_deg": std,
+        "three_sigma_deg": 3.0 * std,
+        "rms_deg": float(np.sqrt(np.mean(error * error))),
+        "max_deg": float(np.max(error)),
+        "final_deg": float(error[-1]),
+    }
+
+
+def loss(error_deg: np.ndarray) -> float:
+    """The workshop's loss: sample standard deviation of the error, degrees."""
+    return error_statistics(error_deg)["std_deg"]

@@ -1,0 +1,56 @@
+"""Writing results: every file appears whole or not at all.
+
+Each writer renders to a temporary file in the destination folder and
+renames it into place (``os.replace`` is atomic on one file system), so an
+interrupted run never leaves a half-written CSV or PNG behind.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import os
+import tempfile
+from pathlib import Path
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(data)
+        # mkstemp makes owner-only files; results should be as readable as any file.
+        os.chmod(temporary, 0o666 & ~_umask())
+        os.replace(temporary, path)
+    except BaseException:
+        os.unlink(temporary)
+        raise
+
+
+def write_text(path, text: str) -> None:
+    _atomic_write_bytes(Path(path), text.encode("utf-8"))
+
+
+def write_csv(path, header, rows) -> None:
+    """A CSV with ``header`` and ``rows``; floats keep 12 significant digits."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for row in rows:
+        writer.writerow([f"{value:.12g}" if isinstance(value, float) else value
+                         for value in row])
+    write_text(path, buffer.getvalue())
+
+
+def write_figure(path, figure, dpi: int = 120) -> None:
+    """Save a matplotlib figure (format from the suffix)."""
+    path = Path(path)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi)
+    _atomic_write_bytes(path, buffer.getvalue())

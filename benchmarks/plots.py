@@ -1,0 +1,44 @@
+"""Figures in the workshop's style.
+
+Figures are built with :class:`matplotlib.figure.Figure` directly (no
+pyplot), so plotting never touches a global backend or opens a window.
+"""
+from __future__ import annotations
+
+import numpy as np
+import seaborn as sns
+from matplotlib.figure import Figure
+
+TITLE = "Absolute Attitude Error"
+Y_LABEL = "Degrees"
+X_LABEL = "Time (seconds)"
+#: The EKF is drawn as the workshop draws it: a thick black line.
+EKF_STYLE = {"color": "black", "linewidth": 3.0, "zorder": 3}
+
+
+def new_figure(ncols: int = 1, width: float = 8.0, height: float = 4.5):
+    """A figure with the project's look (seaborn's white grid, no global state)."""
+    with sns.axes_style("whitegrid"):
+        figure = Figure(figsize=(width * ncols, height), layout="constrained")
+        axes = figure.subplots(1, ncols, squeeze=False)[0]
+    return figure, axes
+
+
+def plot_errors(ax, time_s: np.ndarray, curves: dict, ekf_labels=("EKF",)) -> None:
+    """Draw error curves ``{legend label: (N,) degrees}`` on ``ax`` in the workshop style."""
+    for label, error_deg in curves.items():
+        style = EKF_STYLE if label in ekf_labels else {"linewidth": 1.2}
+        ax.plot(time_s, error_deg, label=label, **style)
+    ax.set_title(TITLE)
+    ax.set_xlabel(X_LABEL)
+    ax.set_ylabel(Y_LABEL)
+    ax.set_xlim(time_s[0], time_s[-1])
+    ax.set_ylim(bottom=0)
+    ax.legend(loc="upper left")
+
+
+def comparison_figure(time_s: np.ndarray, curves: dict) -> Figure:
+    """The workshop's comparison figure of error curves ``{label: degrees}``."""
+    figure, (ax,) = new_figure()
+    plot_errors(ax, time_s, curves)
+    return figure

@@ -1,0 +1,139 @@
+"""Run estimators on simulated data: one truth, one set of sensor readings per seed.
+
+Every estimator of a :func:`simulate` call sees *the same* truth and the
+same gyro and star tracker readings, so their errors differ only by what the
+estimators do with them.
+
+Randomness: ``seed`` feeds :class:`numpy.random.SeedSequence`, which spawns
+one independent stream for the gyro and one for the star tracker. So a run's
+numbers depend on the seed alone, and changing the star tracker's rate does
+not change the gyro noise (the star tracker noise is drawn at every step and
+sampled, as Simulink's noise block does).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from benchmarks.scenario import Scenario
+from dynamics.quaternion import attitude_error_rad
+from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free
+from dynamics.validation import InvalidParameterError
+from estimators import ESTIMATORS, AttitudeEstimator
+from sensors.gyro import Gyro
+from sensors.star_tracker import StarTracker
+
+#: The workshop's estimators in the order it introduces them.
+WORKSHOP_ESTIMATORS = tuple(ESTIMATORS)
+
+
+@dataclass(frozen=True)
+class SensorData:
+    """What the estimators are given, on the time grid ``t_k = k dt``.
+
+    Attributes
+    ----------
+    omega_meas_radps : (N, 3) gyro readings, rad/s, body frame
+    star_tracker_quat : (N, 4) held star tracker readings, scalar-first
+    available : (N,) bool, True where a new star tracker reading was taken
+    """
+
+    omega_meas_radps: np.ndarray
+    star_tracker_quat: np.ndarray
+    available: np.ndarray
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One seed's truth, sensor data and every estimator's output.
+
+    ``estimates[name]`` is ``(N, 4)``; ``error_deg[name]`` is ``(N,)``.
+    """
+
+    scenario: Scenario
+    seed: int
+    truth: RigidBodyTruth
+    sensors: SensorData
+    estimates: dict
+    error_deg: dict
+    labels: dict
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.truth.time_s
+
+
+def simulate_truth(scenario: Scenario) -> RigidBodyTruth:
+    """The torque-free truth of ``scenario`` (cached: it does not depend on the seed)."""
+    return _truth_cached(scenario.dt, scenario.n_steps,
+                         scenario.inertia_tensor_kg_m2.tobytes(),
+                         scenario.initial_attitude_quat.tobytes(),
+                         scenario.initial_rate_radps.tobytes())
+
+
+@lru_cache(maxsize=8)
+def _truth_cached(dt, n_steps, inertia, q0, omega0) -> RigidBodyTruth:
+    return simulate_torque_free(np.frombuffer(inertia).reshape(3, 3), np.frombuffer(q0),
+                                np.frombuffer(omega0), np.arange(n_steps) * dt)
+
+
+def sensor_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
+    """The gyro's and the star tracker's random generators for ``seed``."""
+    gyro_seq, star_seq = np.random.SeedSequence(seed).spawn(2)
+    return np.random.default_rng(gyro_seq), np.random.default_rng(star_seq)
+
+
+def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> SensorData:
+    """Gyro and star tracker readings of ``truth`` for ``seed``."""
+    gyro_rng, star_rng = sensor_generators(seed)
+    gyro = Gyro(scenario.gyro_noise, scenario.dt)
+    star_tracker = StarTracker(scenario.star_tracker_noise, scenario.time_between_measurements,
+                               scenario.dt)
+    readings = star_tracker.measure(truth.q_true, star_rng)
+    return SensorData(omega_meas_radps=gyro.measure(truth.omega_true_radps, gyro_rng),
+                      star_tracker_quat=readings.quat, available=readings.available)
+
+
+def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
+    """The estimator called ``name`` with its settings taken from ``scenario``."""
+    if name not in ESTIMATORS:
+        raise InvalidParameterError("estimator", name, f"must be one of {', '.join(ESTIMATORS)}")
+    cls = ESTIMATORS[name]
+    if name == "ekf":
+        return cls(dt=scenario.dt, pc_exponent=scenario.pc_exponent,
+                   measurement_covariance=scenario.measurement_covariance,
+                   initial_state=scenario.initial_state,
+                   initial_covariance=scenario.initial_covariance)
+    return cls(dt=scenario.dt, initial_attitude=scenario.initial_state)
+
+
+def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
+             seed: int = 0) -> RunResult:
+    """Simulate ``scenario`` for ``seed`` and run each estimator on the same data.
+
+    Parameters
+    ----------
+    scenario : Scenario, optional
+        Defaults to the workshop scenario.
+    estimators : iterable of str or AttitudeEstimator
+        Names from :data:`estimators.ESTIMATORS` (built from the scenario)
+        or ready estimator objects (used as they are, keyed by their
+        ``name``).
+    seed : int
+        Seed of the sensor noise.
+    """
+    scenario = scenario or Scenario()
+    truth = simulate_truth(scenario)
+    sensors = simulate_sensors(scenario, truth, seed)
+    estimates, errors, labels = {}, {}, {}
+    for item in estimators:
+        estimator = build_estimator(item, scenario) if isinstance(item, str) else item
+        q_est = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
+                              sensors.available)
+        estimates[estimator.name] = q_est
+        errors[estimator.name] = np.degrees(attitude_error_rad(truth.q_true, q_est))
+        labels[estimator.name] = estimator.label
+    return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
+                     estimates=estimates, error_deg=errors, labels=labels)

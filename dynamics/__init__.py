@@ -1,0 +1,44 @@
+"""Truth and quaternion mathematics.
+
+This package is the bottom of the dependency graph: ``sensors`` and
+``estimators`` use it, and it uses nothing of the project.
+
+Conventions (declared once, here): quaternions are scalar-first
+``[w, x, y, z]`` with the Hamilton product and unit norm; body rates are in
+rad/s in the body frame; the kinematics are ``q_dot = 0.5 * q ⊗ [0, ω]``.
+"""
+from dynamics.quaternion import (
+    attitude_error_rad,
+    from_rotation,
+    kinematics_matrix,
+    normalize,
+    quat_conjugate,
+    quat_multiply,
+    rotation_matrix,
+    to_rotation,
+)
+from dynamics.rigid_body import (
+    RigidBodyTruth,
+    angular_momentum_body,
+    closed_form_body_rates,
+    kinetic_energy,
+    simulate_torque_free,
+)
+from dynamics.validation import InvalidParameterError
+
+__all__ = [
+    "InvalidParameterError",
+    "RigidBodyTruth",
+    "angular_momentum_body",
+    "attitude_error_rad",
+    "closed_form_body_rates",
+    "from_rotation",
+    "kinematics_matrix",
+    "kinetic_energy",
+    "normalize",
+    "quat_conjugate",
+    "quat_multiply",
+    "rotation_matrix",
+    "simulate_torque_free",
+    "to_rotation",
+]

@@ -1,0 +1,107 @@
+r"""Quaternion algebra in the toolkit's one convention.
+
+Quaternions are scalar-first ``q = [w, x, y, z]`` and multiply with the
+Hamilton product, so that ``q_a ⊗ q_b`` composes rotations like the matrix
+product ``R(q_a) R(q_b)``. ``q`` rotates body-frame vectors into the
+reference frame: ``v_ref = R(q) v_body``. The kinematics with body rates
+``ω`` (rad/s) are
+
+.. math::
+
+    \dot q = \tfrac12\, q \otimes [0, \omega] = \tfrac12\, \Xi(q)\, \omega,
+    \qquad
+    \Xi(q) = \begin{bmatrix} -x & -y & -z \\ w & -z & y \\ z & w & -x \\ -y & x & w \end{bmatrix}.
+
+Every conversion to or from :class:`scipy.spatial.transform.Rotation` passes
+``scalar_first=True`` explicitly, so scipy's own scalar-last default never
+leaks in. Reference: Markley & Crassidis, *Fundamentals of Spacecraft
+Attitude Determination and Control*, 2014, section 2.9 (their book uses the
+scalar-last, "natural order" product; the formulas here are the Hamilton
+scalar-first ones of the workshop model).
+
+All functions take 1-D ``(4,)`` arrays or stacks ``(..., 4)`` and return the
+same.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def quat_multiply(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``q_a ⊗ q_b`` of scalar-first quaternions."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(q_a, dtype=float), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(q_b, dtype=float), -1, 0)
+    return np.stack([
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ], axis=-1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugate ``[w, -x, -y, -z]``: the inverse rotation of a unit quaternion."""
+    q = np.asarray(q, dtype=float)
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def normalize(q: np.ndarray) -> np.ndarray:
+    """Scale to unit norm along the last axis."""
+    q = np.asarray(q, dtype=float)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def kinematics_matrix(q: np.ndarray) -> np.ndarray:
+    r"""The 4x3 matrix :math:`\Xi(q)` with :math:`\dot q = \tfrac12 \Xi(q)\omega`.
+
+    For a stack ``(..., 4)`` returns ``(..., 4, 3)``.
+    """
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    return np.stack([
+        np.stack([-x, -y, -z], axis=-1),
+        np.stack([w, -z, y], axis=-1),
+        np.stack([z, w, -x], axis=-1),
+        np.stack([-y, x, w], axis=-1),
+    ], axis=-2)
+
+
+def rotation_matrix(q: np.ndarray) -> np.ndarray:
+    """Direction-cosine matrix ``R(q)`` taking body vectors to the reference frame.
+
+    ``q`` need not be exactly unit; it is normalised first.
+    """
+    w, x, y, z = np.moveaxis(normalize(q), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=-2)
+
+
+def to_rotation(q: np.ndarray) -> Rotation:
+    """The :class:`~scipy.spatial.transform.Rotation` of a scalar-first quaternion."""
+    return Rotation.from_quat(np.asarray(q, dtype=float), scalar_first=True)
+
+
+def from_rotation(rotation: Rotation) -> np.ndarray:
+    """Scalar-first quaternion(s) of a :class:`~scipy.spatial.transform.Rotation`.
+
+    scipy returns the representative with ``w >= 0``; ``q`` and ``-q`` are the
+    same attitude.
+    """
+    return rotation.as_quat(canonical=True, scalar_first=True)
+
+
+def attitude_error_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    r"""Angle of the rotation between two attitudes, in radians.
+
+    .. math:: e = 2 \arccos\bigl(\min(1, |q_\text{true} \cdot \hat q|)\bigr)
+
+    Sign-invariant: ``q`` and ``-q`` give zero error. Both inputs are taken as
+    unit quaternions (the workshop metric; see SPEC "What is measured").
+    Being an arccos near 1, it cannot resolve angles below about 1e-7 rad
+    (6e-6 degrees): identical attitudes can show an error of that size.
+    """
+    dot = np.abs(np.sum(np.asarray(q_true, dtype=float) * np.asarray(q_est, dtype=float), axis=-1))
+    return 2.0 * np.arccos(np.minimum(1.0, dot))

@@ -1,0 +1,153 @@
+r"""Additive extended Kalman filter on the four quaternion components.
+
+The workshop's EKF (SPEC, "The three estimators", item 3) treats the
+quaternion as an ordinary 4-vector, built on filterpy's
+:class:`~filterpy.kalman.ExtendedKalmanFilter` with ``dim_x = dim_z = 4``:
+
+.. math::
+
+    \text{predict:}\quad \hat x_{k+1|k} = f(\hat x_{k|k}, \tilde\omega_k), \qquad
+        P_{k+1|k} = F_k P_{k|k} F_k^\mathsf{T} + Q, \qquad
+        F_k = \left.\frac{\partial f}{\partial q}\right|_{\hat x_{k|k}}
+
+    \text{update:}\quad h(q) = q,\ H = I_4, \qquad
+        K = P H^\mathsf{T} (H P H^\mathsf{T} + R)^{-1}, \qquad
+        \hat x_{k|k} = \hat x_{k|k-1} + K (z_k - \hat x_{k|k-1}),
+
+    \qquad P_{k|k} = (I - K H) P (I - K H)^\mathsf{T} + K R K^\mathsf{T}
+    \quad\text{(Joseph form, as filterpy does)},
+
+with ``f`` and its exact Jacobian from :mod:`estimators.model`,
+``Q = exp(pc_exponent) I₄``, ``R = measurement_covariance``.
+
+Order within step ``k`` (the Simulink filter block with "use current
+measurement" off): output the prior ``x̂[k|k-1]`` as ``q̂[k]``; correct with
+``z_k`` if a reading is available; then predict to ``x̂[k+1|k]`` with
+``ω̃_k``. ``output="posterior"`` outputs ``x̂[k|k]`` instead.
+
+filterpy's own ``predict`` is linear (``x = F x``); here :meth:`predict_x`
+is overridden so the state goes through the nonlinear ``f`` and ``F`` is
+recomputed from the exact Jacobian at every step (filterpy issue #181 is
+about users having to discover exactly this). The state is kept as a 1-D
+``(4,)`` array, so ``x``, ``x_prior`` and ``x_post`` are 1-D too.
+
+This additive filter lets the estimate leave the unit sphere between steps
+and ignores the quaternion's norm constraint in ``P``; the multiplicative EKF
+of Markley & Crassidis (2014, §6.2) is the standard remedy.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from dynamics.validation import InvalidParameterError, finite_number
+from estimators.base import AttitudeEstimator
+from estimators.dead_reckoning import IDENTITY
+from estimators.model import propagate_with_jacobian
+
+_IDENTITY_4 = np.eye(4)
+
+
+def _measurement_jacobian(_x: np.ndarray) -> np.ndarray:
+    """``H = ∂h/∂q = I₄``."""
+    return _IDENTITY_4
+
+
+def _measurement_function(x: np.ndarray) -> np.ndarray:
+    """``h(q) = q``: the star tracker measures the quaternion itself."""
+    return x
+
+
+def covariance_matrix(name: str, value) -> np.ndarray:
+    """A 4x4 symmetric positive definite matrix from a scalar (times I₄), a
+    diagonal of 4, or a 4x4 matrix."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(name, value, "must be a number, 4 numbers or a 4x4 matrix") from None
+    if array.ndim == 0:
+        array = array * _IDENTITY_4
+    elif array.shape == (4,):
+        array = np.diag(array)
+    if array.shape != (4, 4):
+        raise InvalidParameterError(name, value, "must be a number, 4 numbers or a 4x4 matrix")
+    if not np.all(np.isfinite(array)):
+        raise InvalidParameterError(name, value, "must be finite")
+    if not np.allclose(array, array.T):
+        raise InvalidParameterError(name, value, "must be symmetric")
+    if np.linalg.eigvalsh(array)[0] <= 0:
+        raise InvalidParameterError(name, value, "must be positive definite")
+    return array
+
+
+class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
+    """The workshop's additive quaternion EKF (a filterpy ``ExtendedKalmanFilter``).
+
+    Parameters
+    ----------
+    dt : float
+        Gyro step, seconds.
+    pc_exponent : float
+        Process covariance ``Q = exp(pc_exponent) I₄`` (natural exponent).
+    measurement_covariance : float, (4,) or (4, 4)
+        ``R``; a scalar means ``R = value · I₄``.
+    initial_state : (4,) array-like
+        ``x̂[0|-1]``, scalar-first; normalised.
+    initial_covariance : float
+        ``P[0|-1] = initial_covariance · I₄``; must be > 0.
+    output : {"prior", "posterior"}
+        Which estimate :meth:`step` returns: the workshop's prior
+        ``x̂[k|k-1]`` (default) or the corrected ``x̂[k|k]``.
+
+    After each :meth:`step` the filterpy attributes are there to inspect:
+    ``x_prior``/``P_prior`` (after the predict), ``x_post``/``P_post``
+    (after the update), ``y``, ``S``, ``K``, ``F``.
+    """
+
+    name = "ekf"
+    label = "EKF"
+
+    def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
+                 measurement_covariance=1.0, initial_state=IDENTITY,
+                 initial_covariance: float = 1e-12, output: str = "prior"):
+        ExtendedKalmanFilter.__init__(self, dim_x=4, dim_z=4)
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_state)
+        self.pc_exponent = finite_number("pc_exponent", pc_exponent)
+        self.initial_covariance = finite_number("initial_covariance", initial_covariance,
+                                                strictly_positive=True)
+        if output not in ("prior", "posterior"):
+            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
+        self.output = output
+        self.R = covariance_matrix("measurement_covariance", measurement_covariance)
+        self.Q = math.exp(self.pc_exponent) * _IDENTITY_4
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = self.initial_attitude.copy()
+        self.P = self.initial_covariance * _IDENTITY_4
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+
+    @property
+    def attitude(self) -> np.ndarray:
+        """The current state ``x`` as a ``(4,)`` array (not renormalised)."""
+        return self.x
+
+    def predict_x(self, u=np.zeros(3)) -> None:
+        """Nonlinear state prediction ``x ← f(x, u)`` with ``u`` the gyro rate (rad/s);
+        also sets ``F`` to the exact Jacobian at the pre-step ``x``."""
+        self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
+
+    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+        estimate = self.x.copy()
+        if star_tracker_quat is not None:
+            self.update(np.asarray(star_tracker_quat, dtype=float),
+                        _measurement_jacobian, _measurement_function)
+            if self.output == "posterior":
+                estimate = self.x.copy()
+        elif self.output == "posterior":
+            self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        self.predict(u=omega_meas_radps)
+        return estimate
