@@ -6,21 +6,23 @@ on stderr naming the parameter, the value and the rule, and exit status 2.
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import sys
 from pathlib import Path
 
-from benchmarks.metrics import STAT_COLUMNS, error_statistics
-from benchmarks.output import write_csv, write_figure
-from benchmarks.plots import comparison_figure
+from benchmarks import experiments
+from benchmarks.experiments import SWEEP_PARAMETERS
+from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import WORKSHOP_ESTIMATORS, simulate
+from benchmarks.seeds import format_seeds, parse_seeds
+from benchmarks.simulation import WORKSHOP_ESTIMATORS
 from dynamics.validation import InvalidParameterError
 
 PROG = "attitude-bench"
 EXIT_USAGE = 2
 
-#: Command-line flag → scenario field, for the overridable settings.
+#: Scenario field → command-line flag, for the overridable settings.
 SCENARIO_FLAGS = {
     "gyro_noise": "--gyro-noise",
     "star_tracker_noise": "--star-tracker-noise",
@@ -30,8 +32,7 @@ SCENARIO_FLAGS = {
     "dt": "--dt",
 }
 
-TRACE_COLUMNS = ("time_s", "q_true_w", "q_true_x", "q_true_y", "q_true_z",
-                 "q_est_w", "q_est_x", "q_est_y", "q_est_z", "error_deg")
+TRACE_COLUMNS = experiments.TRACE_COLUMNS
 
 
 class UsageError(Exception):
@@ -40,26 +41,31 @@ class UsageError(Exception):
 
 class _Parser(argparse.ArgumentParser):
     """argparse, but its errors are one line and go through :class:`UsageError`,
-    and ``-1e-5`` or ``-inf`` is a value, not an option (Python 3.11's argparse
-    only knows ``-1`` and ``-0.5``)."""
+    and ``-1e-5``, ``-inf`` or ``-8.7,-10.9`` is a value, not an option
+    (Python 3.11's argparse only knows ``-1`` and ``-0.5``)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        number = r"((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf(inity)?)"
+        # Also a comma-separated list that starts negative: --values -8.7,-10.9
         self._negative_number_matcher = re.compile(
-            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-inf(inity)?$", re.IGNORECASE)
+            rf"^-{number}(,\s*[-+]?{number})*$", re.IGNORECASE)
 
     def error(self, message):
         raise UsageError(message)
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed = {text!r}: must be a whole number >= 0") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed = {text!r}: must be a whole number >= 0")
-    return value
+def _whole(name: str, minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(
+                f"{name} = {text!r}: must be a whole number >= {minimum}")
+        return value
+    return parse
 
 
 def _number(text: str) -> float:
@@ -67,6 +73,24 @@ def _number(text: str) -> float:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def _number_list(text: str) -> list[float]:
+    try:
+        values = [float(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"values = {text!r}: must be numbers separated by commas, e.g. 1e-5,1e-4") from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"values = {text!r}: must name at least one value")
+    return values
+
+
+def _seed_list(text: str) -> tuple[int, ...]:
+    try:
+        return parse_seeds(text)
+    except InvalidParameterError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
@@ -87,10 +111,19 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
                        help="gyro and estimator step (default 0.01)")
 
 
-def _add_run_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seed", type=_seed, default=0, help="sensor noise seed (default 0)")
+def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
+    if seed:
+        parser.add_argument("--seed", type=_whole("seed", 0), default=0,
+                            help="sensor noise seed (default 0)")
     parser.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_scenario_options(parser)
+
+
+def _estimator_option(parser, required=True):
+    parser.add_argument("--estimator", required=required, choices=WORKSHOP_ESTIMATORS,
+                        metavar="NAME", help=f"one of {', '.join(WORKSHOP_ESTIMATORS)}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -98,15 +131,57 @@ def build_parser() -> argparse.ArgumentParser:
                      "Kalman-filter workshop's tumbling-spacecraft scenario.")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                      parser_class=_Parser)
+
     run = commands.add_parser("run", help="run one estimator; write NAME.csv and NAME.png")
-    run.add_argument("--estimator", required=True, choices=WORKSHOP_ESTIMATORS, metavar="NAME",
-                     help=f"one of {', '.join(WORKSHOP_ESTIMATORS)}")
-    _add_run_options(run)
-    _add_scenario_options(run)
-    compare = commands.add_parser("compare", help="run the three workshop estimators on the "
-                                  "same data; write compare.png and summary.csv")
-    _add_run_options(compare)
-    _add_scenario_options(compare)
+    _estimator_option(run)
+    _add_common(run)
+
+    compare = commands.add_parser("compare", help="the three estimators on the same data; "
+                                  "write compare.png and summary.csv")
+    _add_common(compare)
+
+    sweep = commands.add_parser("sweep", help="one estimator, one setting varied; "
+                                "write sweep.png and sweep.csv")
+    _estimator_option(sweep)
+    sweep.add_argument("--param", required=True, choices=tuple(SWEEP_PARAMETERS),
+                       metavar="P", help=f"one of {', '.join(SWEEP_PARAMETERS)}")
+    sweep.add_argument("--values", required=True, type=_number_list, metavar="V1,V2,...",
+                       help="values of P, comma-separated")
+    _add_common(sweep)
+
+    tune = commands.add_parser("tune", help="fminbnd-style tuning of pc_exponent; "
+                               "write tune.json and tune.png")
+    tune.add_argument("--bounds", nargs=2, type=_number, metavar=("LO", "HI"),
+                      default=[-16.0, 0.0], help="search interval (default -16 0)")
+    tune.add_argument("--xtol", type=_number, default=0.01, metavar="X",
+                      help="x tolerance (default 0.01)")
+    tune.add_argument("--seeds", type=_seed_list, default=(0,), metavar="SPEC",
+                      help="seeds: 0, 0-19 or 1,5,9 (default 0)")
+    _add_common(tune, seed=False)
+
+    landscape = commands.add_parser("landscape", help="EKF statistics across pc_exponent; "
+                                    "write landscape.csv, .png and .gif")
+    landscape.add_argument("--pc-min", type=_number, default=-18.0, metavar="X",
+                           help="first pc_exponent (default -18)")
+    landscape.add_argument("--pc-max", type=_number, default=0.0, metavar="X",
+                           help="last pc_exponent (default 0)")
+    landscape.add_argument("--pc-step", type=_number, default=0.25, metavar="X",
+                           help="grid step (default 0.25)")
+    landscape.add_argument("--seeds", type=_seed_list, default=(0,), metavar="SPEC",
+                           help="seeds: 0, 0-19 or 1,5,9 (default 0)")
+    landscape.add_argument("--no-animation", action="store_true", help="skip landscape.gif")
+    _add_common(landscape, seed=False)
+
+    animate = commands.add_parser("animate", help="3-D attitude animation; write "
+                                  "attitude_NAME.gif and .png (truth alone without --estimator)")
+    _estimator_option(animate, required=False)
+    animate.add_argument("--every", type=_whole("every", 1), default=50, metavar="K",
+                         help="one frame every K steps (default 50)")
+    _add_common(animate)
+
+    workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
+                                   "with report.md")
+    _add_common(workshop, seed=False)
     return parser
 
 
@@ -124,46 +199,92 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
     return scenario
 
 
-def _summary_line(name: str, stats: dict) -> str:
+def summary_line(name: str, stats: dict) -> str:
     return (f"{name}: mean {stats['mean_deg']:.4f} deg, std {stats['std_deg']:.4f} deg, "
             f"max {stats['max_deg']:.4f} deg, final {stats['final_deg']:.4f} deg")
 
 
-def command_run(args, scenario: Scenario) -> None:
-    result = simulate(scenario, [args.estimator], seed=args.seed)
-    name = args.estimator
-    error = result.error_deg[name]
-    q_true, q_est = result.truth.q_true, result.estimates[name]
-    rows = ((float(t), *map(float, qt), *map(float, qe), float(e))
-            for t, qt, qe, e in zip(result.time_s, q_true, q_est, error))
-    write_csv(args.out / f"{name}.csv", TRACE_COLUMNS, rows)
-    write_figure(args.out / f"{name}.png",
-                 comparison_figure(result.time_s, {result.labels[name]: error}))
-    print(_summary_line(name, error_statistics(error)))
+def format_table(stats: dict, first_column: str = "estimator", columns=STAT_COLUMNS) -> str:
+    """A fixed-width text table of ``{row name: statistics}``."""
+    width = max(len(first_column), *(len(str(name)) for name in stats))
+    lines = [f"{first_column:<{width}}  " + "  ".join(f"{c:>15}" for c in columns)]
+    for name, row in stats.items():
+        lines.append(f"{str(name):<{width}}  " + "  ".join(f"{row[c]:>15.6f}" for c in columns))
+    return "\n".join(lines)
 
 
-def command_compare(args, scenario: Scenario) -> None:
-    result = simulate(scenario, WORKSHOP_ESTIMATORS, seed=args.seed)
-    stats = {name: error_statistics(error) for name, error in result.error_deg.items()}
-    write_csv(args.out / "summary.csv", ("estimator",) + STAT_COLUMNS,
-              ([name, *(stats[name][c] for c in STAT_COLUMNS)] for name in stats))
-    curves = {result.labels[name]: error for name, error in result.error_deg.items()}
-    write_figure(args.out / "compare.png", comparison_figure(result.time_s, curves))
+# Each command validates everything it needs before its first write.
+
+def command_run(args, scenario):
+    stats = experiments.run_one(scenario, args.estimator, args.seed, args.out)
+    print(summary_line(args.estimator, stats))
+
+
+def command_compare(args, scenario):
+    _, stats = experiments.compare(scenario, args.seed, args.out)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
 
 
-def format_table(stats: dict, first_column: str = "estimator") -> str:
-    """A fixed-width text table of ``{row name: statistics}``."""
-    width = max(len(first_column), *(len(str(name)) for name in stats))
-    lines = [f"{first_column:<{width}}  " + "  ".join(f"{c:>15}" for c in STAT_COLUMNS)]
-    for name, row in stats.items():
-        lines.append(f"{str(name):<{width}}  " + "  ".join(f"{row[c]:>15.6f}"
-                                                          for c in STAT_COLUMNS))
-    return "\n".join(lines)
+def command_sweep(args, scenario):
+    try:
+        experiments.sweep_scenarios(scenario, args.param, args.values)
+    except InvalidParameterError as err:
+        raise UsageError(f"{err} (from --values)") from None
+    rows = experiments.sweep(scenario, args.estimator, args.param, args.values, args.seed,
+                             args.out, quiet=args.quiet)
+    print(format_table({f"{row['value']:g}": row for row in rows}, first_column=args.param))
+    print(f"wrote {args.out / 'sweep.png'} and {args.out / 'sweep.csv'}")
 
 
-COMMANDS = {"run": command_run, "compare": command_compare}
+def command_tune(args, scenario):
+    from benchmarks.tuning import format_iteration_table, tune_pc_exponent, validate_bounds
+    from dynamics.validation import finite_number
+    validate_bounds(args.bounds)
+    finite_number("xtol", args.xtol, strictly_positive=True)
+    result = tune_pc_exponent(scenario, args.seeds, args.bounds, args.xtol, quiet=args.quiet)
+    print(format_iteration_table(result.iterations))
+    print()
+    print(result.message)
+    print(f"\npc_exponent = {result.pc_exponent:.4f}, loss = {result.loss_deg:.6f} deg "
+          f"({result.evaluations} evaluations, seeds {format_seeds(result.seeds)})")
+    if result.single_seed_optima:
+        spread = result.single_seed_optima
+        print(f"single-seed optima: 5% {spread['p5']:.3f}, 50% {spread['p50']:.3f}, "
+              f"95% {spread['p95']:.3f}")
+    experiments.write_json(args.out / "tune.json", result.as_json())
+    experiments.compare(scenario.replace(pc_exponent=result.pc_exponent), result.seeds[0],
+                        args.out, figure_name="tune.png", summary_name=None)
+    print(f"wrote {args.out / 'tune.json'} and {args.out / 'tune.png'}")
+
+
+def command_landscape(args, scenario):
+    from benchmarks.landscape import compute_landscape, pc_grid, write_landscape
+    grid = pc_grid(args.pc_min, args.pc_max, args.pc_step)
+    landscape = compute_landscape(scenario, grid, args.seeds, quiet=args.quiet)
+    files = write_landscape(landscape, args.out, animate=not args.no_animation)
+    best = landscape.table.iloc[landscape.best_index]
+    print(f"lowest mean error std {best['std_deg']:.6f} deg at pc_exponent = "
+          f"{landscape.best_pc_exponent:g} ({len(grid)} values x {len(args.seeds)} runs)")
+    print("wrote " + ", ".join(str(path) for path in files.values()))
+
+
+def command_animate(args, scenario):
+    name = args.estimator or "truth"
+    path = experiments.animate(scenario, args.estimator, args.seed, args.out, args.every,
+                               quiet=args.quiet)
+    print(f"wrote {path} and {path.with_suffix('.png')} ({name})")
+
+
+def command_workshop(args, scenario):
+    from benchmarks.workshop import run_workshop
+    report = run_workshop(scenario, args.out, quiet=args.quiet)
+    print(f"wrote {report}")
+
+
+COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
+            "tune": command_tune, "landscape": command_landscape, "animate": command_animate,
+            "workshop": command_workshop}
 
 
 def main(argv=None) -> int:

@@ -6,6 +6,7 @@ interrupted run never leaves a half-written CSV or PNG behind.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -54,3 +55,23 @@ def write_figure(path, figure, dpi: int = 120) -> None:
     buffer = io.BytesIO()
     figure.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi)
     _atomic_write_bytes(path, buffer.getvalue())
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """A temporary path beside ``path`` for writers that insist on a file name
+    (e.g. matplotlib's animation writers); renamed into place on success,
+    removed on failure."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
+                                         suffix=path.suffix)
+    os.close(handle)
+    try:
+        yield temporary
+        os.chmod(temporary, 0o666 & ~_umask())
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise

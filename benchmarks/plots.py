@@ -37,8 +37,18 @@ def plot_errors(ax, time_s: np.ndarray, curves: dict, ekf_labels=("EKF",)) -> No
     ax.legend(loc="upper left")
 
 
-def comparison_figure(time_s: np.ndarray, curves: dict) -> Figure:
+def comparison_figure(time_s: np.ndarray, curves: dict, ekf_labels=("EKF",)) -> Figure:
     """The workshop's comparison figure of error curves ``{label: degrees}``."""
     figure, (ax,) = new_figure()
-    plot_errors(ax, time_s, curves)
+    plot_errors(ax, time_s, curves, ekf_labels=ekf_labels)
     return figure
+
+
+def freeze_layout(figure: Figure) -> None:
+    """Lay the figure out once and keep that layout.
+
+    Animations redraw the same figure for every frame; re-running the
+    constrained layout each time costs about as much as drawing it.
+    """
+    figure.canvas.draw()   # runs the layout engine with the final artists in place
+    figure.set_layout_engine("none")

@@ -137,3 +137,29 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         labels[estimator.name] = estimator.label
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels)
+
+
+class SeedBatch:
+    """Truth and sensor data for several seeds, simulated once, for rerunning
+    estimators with different settings (tuning, sweeps, landscapes).
+
+    Only settings that do not change the data may vary between reruns: the
+    estimator's (e.g. ``pc_exponent``), not the sensors'.
+    """
+
+    def __init__(self, scenario: Scenario, seeds):
+        self.scenario = scenario
+        self.seeds = tuple(seeds)
+        self.truth = simulate_truth(scenario)
+        self.data = [simulate_sensors(scenario, self.truth, seed) for seed in self.seeds]
+
+    def errors_deg(self, estimator: str, **estimator_settings) -> np.ndarray:
+        """``(n_seeds, N)`` attitude errors of ``estimator`` built from the scenario
+        with ``estimator_settings`` (scenario fields) applied."""
+        case = self.scenario.replace(**estimator_settings) if estimator_settings else self.scenario
+        built = build_estimator(estimator, case)
+        errors = np.empty((len(self.seeds), self.scenario.n_steps))
+        for i, data in enumerate(self.data):
+            q_est = built.run(data.omega_meas_radps, data.star_tracker_quat, data.available)
+            errors[i] = np.degrees(attitude_error_rad(self.truth.q_true, q_est))
+        return errors

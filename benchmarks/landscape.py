@@ -1,0 +1,191 @@
+"""The loss landscape: EKF error statistics across ``pc_exponent`` (SPEC step 9).
+
+For each ``pc_exponent`` on a grid and each seed, the EKF runs on that
+seed's data; each statistic is averaged over the runs. The figure shows,
+side by side, the three estimators' error curves at the best value (left) and
+the mean, median and 3σ of the error against ``pc_exponent`` (right, a
+vertical line at that value); the animation moves that line across the
+sweep, the left panel's EKF curve following it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import seaborn as sns
+from matplotlib.animation import FuncAnimation, PillowWriter
+
+from benchmarks.metrics import error_statistics
+from benchmarks.output import atomic_path, write_csv, write_figure
+from benchmarks.plots import freeze_layout, new_figure, plot_errors
+from benchmarks.progress import progress
+from benchmarks.scenario import Scenario
+from benchmarks.simulation import SeedBatch
+from dynamics.validation import InvalidParameterError, finite_number
+from estimators import ESTIMATORS
+
+LANDSCAPE_COLUMNS = ("pc_exponent", "mean_deg", "median_deg", "std_deg", "three_sigma_deg",
+                     "rms_deg", "max_deg", "runs")
+#: Statistics drawn on the right-hand panel: (column, legend).
+PANEL_STATISTICS = (("mean_deg", "Mean"), ("median_deg", "Median"), ("three_sigma_deg", "3σ"))
+#: Refuse grids that would take hours on the per-run path by mistake.
+MAX_GRID_POINTS = 10_000
+
+
+def pc_grid(pc_min: float, pc_max: float, pc_step: float) -> np.ndarray:
+    """``pc_min, pc_min + step, …`` up to and including ``pc_max`` (to 1e-9 of a step)."""
+    pc_min = finite_number("pc_min", pc_min)
+    pc_max = finite_number("pc_max", pc_max)
+    pc_step = finite_number("pc_step", pc_step, strictly_positive=True)
+    if pc_max < pc_min:
+        raise InvalidParameterError("pc_max", pc_max, f"must be >= pc_min = {pc_min:g}")
+    count = int(np.floor((pc_max - pc_min) / pc_step + 1e-9)) + 1
+    if count > MAX_GRID_POINTS:
+        raise InvalidParameterError("pc_step", pc_step,
+                                    f"gives {count} grid points; at most {MAX_GRID_POINTS}")
+    return pc_min + pc_step * np.arange(count)
+
+
+@dataclass
+class Landscape:
+    """Per-run statistics over a ``pc_exponent`` grid, and the curves to draw.
+
+    Attributes
+    ----------
+    pc_values : (P,) grid
+    seeds : the seeds run at every grid value
+    runs : tidy frame, one row per (pc_exponent, seed), a column per statistic
+    table : frame with one row per grid value: each statistic's mean over runs
+    time_s : (N,) seconds
+    ekf_curves : (P, N) EKF error of the first seed at each grid value, degrees
+    reference_curves : {label: (N,)} dead reckoning and resets, first seed
+    """
+
+    pc_values: np.ndarray
+    seeds: tuple
+    runs: pd.DataFrame
+    table: pd.DataFrame
+    time_s: np.ndarray
+    ekf_curves: np.ndarray
+    reference_curves: dict
+
+    @property
+    def best_index(self) -> int:
+        """Grid index of the lowest mean loss (error std)."""
+        return int(np.argmin(self.table["std_deg"].to_numpy()))
+
+    @property
+    def best_pc_exponent(self) -> float:
+        return float(self.pc_values[self.best_index])
+
+
+def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = False) -> Landscape:
+    """Run the EKF at every grid value for every seed (plus the two dead
+    reckonings once per seed, for the left panel)."""
+    batch = SeedBatch(scenario, seeds)
+    records, ekf_curves = [], []
+    for pc in progress(pc_values, desc="landscape", unit="pc", quiet=quiet):
+        errors = batch.errors_deg("ekf", pc_exponent=float(pc))
+        ekf_curves.append(errors[0])
+        for seed, error in zip(batch.seeds, errors):
+            records.append({"pc_exponent": float(pc), "seed": seed, **error_statistics(error)})
+    return _assemble(batch, pc_values, records, np.array(ekf_curves))
+
+
+def _assemble(batch: SeedBatch, pc_values, records, ekf_curves) -> Landscape:
+    runs = pd.DataFrame.from_records(records)
+    table = runs.groupby("pc_exponent", sort=False)[list(LANDSCAPE_COLUMNS[1:-1])].mean()
+    table["runs"] = runs.groupby("pc_exponent", sort=False).size()
+    table = table.reset_index()
+    reference = {}
+    for name in ("dead-reckoning", "dead-reckoning-resets"):
+        reference[ESTIMATORS[name].label] = batch.errors_deg(name)[0]   # first seed only
+    return Landscape(pc_values=np.asarray(pc_values, dtype=float), seeds=batch.seeds, runs=runs,
+                     table=table, time_s=batch.truth.time_s, ekf_curves=ekf_curves,
+                     reference_curves=reference)
+
+
+def _draw(landscape: Landscape, index: int):
+    """The two-panel figure at grid ``index``; returns (figure, EKF line, vertical line)."""
+    figure, (left, right) = new_figure(ncols=2, width=7.0, height=4.5)
+    curves = dict(landscape.reference_curves)
+    curves["EKF"] = landscape.ekf_curves[index]
+    plot_errors(left, landscape.time_s, curves)
+    ekf_line = left.get_lines()[-1]
+    upper = max(np.max(landscape.ekf_curves), *(np.max(c) for c in curves.values()))
+    left.set_ylim(0, 1.05 * upper)
+    left.set_title(f"Absolute Attitude Error, pc exponent = {landscape.pc_values[index]:g}")
+    for column, label in PANEL_STATISTICS:
+        right.plot(landscape.table["pc_exponent"], landscape.table[column], label=label,
+                   linewidth=1.8)
+    vertical = right.axvline(landscape.pc_values[index], color="black", linestyle="--",
+                             linewidth=1.2, label="pc exponent shown")
+    right.set_xlabel("pc exponent (Q = exp(pc) I)")
+    right.set_ylabel("Degrees")
+    runs = len(landscape.seeds)
+    right.set_title("EKF error statistics" + (f" (mean of {runs} runs)" if runs > 1 else ""))
+    right.legend(loc="upper left")
+    return figure, ekf_line, vertical
+
+
+def landscape_figure(landscape: Landscape, index: int | None = None):
+    index = landscape.best_index if index is None else index
+    return _draw(landscape, index)[0]
+
+
+def spread_figure(landscape: Landscape):
+    """seaborn view of the per-run spread: median line and 5–95 % band per statistic."""
+    tidy = landscape.runs.melt(id_vars=["pc_exponent", "seed"],
+                               value_vars=[c for c, _ in PANEL_STATISTICS],
+                               var_name="statistic", value_name="degrees")
+    tidy["statistic"] = tidy["statistic"].map(dict(PANEL_STATISTICS))
+    figure, (ax,) = new_figure()
+    sns.lineplot(data=tidy, x="pc_exponent", y="degrees", hue="statistic",
+                 estimator="median", errorbar=("pi", 90), ax=ax)
+    ax.axvline(landscape.best_pc_exponent, color="black", linestyle="--", linewidth=1.2)
+    ax.set_title(f"Spread over {len(landscape.seeds)} runs (median, 5–95 % band)")
+    ax.set_xlabel("pc exponent (Q = exp(pc) I)")
+    ax.set_ylabel("Degrees")
+    return figure
+
+
+def write_animation(landscape: Landscape, path, fps: int = 8) -> int:
+    """The two panels animated over the sweep, as a GIF; returns the frame count."""
+    figure, ekf_line, vertical = _draw(landscape, 0)
+    left = figure.axes[0]
+
+    def update(index):
+        ekf_line.set_ydata(landscape.ekf_curves[index])
+        pc = landscape.pc_values[index]
+        vertical.set_xdata([pc, pc])
+        left.set_title(f"Absolute Attitude Error, pc exponent = {pc:g}")
+        return ekf_line, vertical
+
+    frames = len(landscape.pc_values)
+    freeze_layout(figure)
+    animation = FuncAnimation(figure, update, frames=frames, blit=False)
+    with atomic_path(path) as temporary:
+        animation.save(temporary, writer=PillowWriter(fps=fps), dpi=80)
+    return frames
+
+
+def write_landscape(landscape: Landscape, out, animate: bool = True) -> dict:
+    """Write ``landscape.csv``, ``landscape.png`` (and ``landscape.gif``; with
+    several seeds ``landscape_spread.png`` and ``landscape_runs.csv``)."""
+    table = landscape.table
+    write_csv(out / "landscape.csv", LANDSCAPE_COLUMNS,
+              ([float(row[c]) if c != "runs" else int(row[c]) for c in LANDSCAPE_COLUMNS]
+               for _, row in table.iterrows()))
+    write_figure(out / "landscape.png", landscape_figure(landscape))
+    files = {"csv": out / "landscape.csv", "png": out / "landscape.png"}
+    if animate:
+        write_animation(landscape, out / "landscape.gif")
+        files["gif"] = out / "landscape.gif"
+    if len(landscape.seeds) > 1:
+        write_figure(out / "landscape_spread.png", spread_figure(landscape))
+        columns = list(landscape.runs.columns)
+        write_csv(out / "landscape_runs.csv", columns,
+                  (list(row) for row in landscape.runs.itertuples(index=False)))
+        files["spread"] = out / "landscape_spread.png"
+    return files

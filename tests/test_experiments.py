@@ -1,0 +1,129 @@
+"""Sweeps, the landscape and the animations: files, rows and frames."""
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from benchmarks.cli import main
+from benchmarks.landscape import LANDSCAPE_COLUMNS, pc_grid
+
+SHORT = ["--tstop", "1", "--quiet"]
+
+
+def read_rows(path):
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_sweep_rows_equal_one_run_per_value(tmp_path):
+    values = ["-8.7", "-10.9", "-6"]
+    assert main(["sweep", "--estimator", "ekf", "--param", "pc-exponent",
+                 "--values", ",".join(values), "--seed", "2", "--out", str(tmp_path / "s"),
+                 *SHORT]) == 0
+    rows = read_rows(tmp_path / "s" / "sweep.csv")
+    assert list(rows[0]) == ["param", "value", "mean_deg", "median_deg", "std_deg",
+                             "three_sigma_deg", "rms_deg", "max_deg", "final_deg"]
+    assert [float(r["value"]) for r in rows] == [float(v) for v in values]
+    for value, row in zip(values, rows):
+        out = tmp_path / f"run{value}"
+        assert main(["run", "--estimator", "ekf", "--pc-exponent", value, "--seed", "2",
+                     "--out", str(out), *SHORT]) == 0
+        error = np.array([float(r["error_deg"]) for r in read_rows(out / "ekf.csv")])
+        assert float(row["max_deg"]) == pytest.approx(error.max(), rel=1e-9)
+        assert float(row["final_deg"]) == pytest.approx(error[-1], rel=1e-9)
+        assert float(row["std_deg"]) == pytest.approx(np.std(error, ddof=1), rel=1e-9)
+    assert Image.open(tmp_path / "s" / "sweep.png").size[0] > 500
+
+
+@pytest.mark.parametrize("param, values, bad", [
+    ("gyro-noise", "1e-5,-1", "gyro_noise"),
+    ("time-between-measurements", "0.2,0.015", "time_between_measurements"),
+    ("pc-exponent", "a,b", "values"),
+])
+def test_bad_sweep_values_fail_cleanly(tmp_path, capsys, param, values, bad):
+    out = tmp_path / "out"
+    assert main(["sweep", "--estimator", "ekf", "--param", param, "--values", values,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert bad in err and len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_landscape_csv_png_gif(tmp_path):
+    out = tmp_path / "l"
+    assert main(["landscape", "--pc-min", "-10", "--pc-max", "-8", "--pc-step", "0.5",
+                 "--seeds", "0-2", "--out", str(out), *SHORT]) == 0
+    rows = read_rows(out / "landscape.csv")
+    assert tuple(rows[0]) == LANDSCAPE_COLUMNS
+    assert [float(r["pc_exponent"]) for r in rows] == [-10, -9.5, -9, -8.5, -8]
+    assert all(r["runs"] == "3" for r in rows)
+    runs = read_rows(out / "landscape_runs.csv")
+    assert len(runs) == 15
+    at_minus_9 = [float(r["std_deg"]) for r in runs if float(r["pc_exponent"]) == -9]
+    assert float(rows[2]["std_deg"]) == pytest.approx(np.mean(at_minus_9), rel=1e-9)
+    with Image.open(out / "landscape.gif") as gif:
+        assert gif.n_frames == 5
+    for name in ("landscape.png", "landscape_spread.png"):
+        with Image.open(out / name) as image:
+            image.verify()
+
+
+def test_pc_grid_includes_both_ends():
+    grid = pc_grid(-18, 0, 0.25)
+    assert len(grid) == 73 and grid[0] == -18 and grid[-1] == pytest.approx(0)
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["--pc-step", "0"], "pc_step"),
+    (["--pc-min", "0", "--pc-max", "-1"], "pc_max"),
+    (["--pc-step", "1e-9"], "pc_step"),
+])
+def test_bad_landscape_grid_fails_cleanly(tmp_path, capsys, argv, name):
+    out = tmp_path / "out"
+    assert main(["landscape", "--out", str(out), *argv]) == 2
+    assert name in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize("estimator, frames", [(None, 5), ("ekf", 5)])
+def test_attitude_animation_frames_and_still(tmp_path, estimator, frames):
+    argv = ["animate", "--every", "25", "--out", str(tmp_path), *SHORT]
+    if estimator:
+        argv += ["--estimator", estimator]
+    assert main(argv) == 0
+    name = f"attitude_{estimator or 'truth'}"
+    with Image.open(tmp_path / f"{name}.gif") as gif:
+        assert gif.n_frames == frames       # steps 0, 25, 50, 75 and the last, 100
+    with Image.open(tmp_path / f"{name}.png") as still:
+        still.verify()
+
+
+def test_animate_rejects_bad_every(tmp_path, capsys):
+    assert main(["animate", "--every", "0", "--out", str(tmp_path / "o")]) == 2
+    assert "every" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_workshop_writes_report_with_every_figure(tmp_path):
+    assert main(["workshop", "--out", str(tmp_path), "--tstop", "1", "--quiet"]) == 0
+    report = (tmp_path / "report.md").read_text()
+    for heading in range(1, 10):
+        assert f"## {heading}." in report
+    linked = [line.split("](")[1].rstrip(")") for line in report.splitlines()
+              if line.startswith("![")]
+    assert len(linked) >= 11
+    for relative in linked:
+        assert (tmp_path / relative).is_file(), relative
+    assert "Func-count" in report and "| ekf |" in report
+
+
+def test_notebook_script_runs_as_plain_python(tmp_path):
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "workshop_notebook.py"
+    assert script.read_text().count("# %%") >= 8
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          env={"ATTITUDE_BENCH_TSTOP": "1", "ATTITUDE_BENCH_OUT": str(tmp_path),
+                               "PATH": "", "MPLBACKEND": "Agg"}, cwd=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "pc_exponent =" in done.stdout
+    assert (tmp_path / "compare.png").is_file() and (tmp_path / "landscape.png").is_file()
