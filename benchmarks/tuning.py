@@ -24,10 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from benchmarks.metrics import loss
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import SeedBatch
+from benchmarks.engine import make_runs, run_chunked
 from dynamics.validation import InvalidParameterError, finite_number
 
 DEFAULT_BOUNDS = (-16.0, 0.0)
@@ -97,16 +96,22 @@ def format_iteration_table(iterations) -> str:
 class EkfLoss:
     """``loss(pc_exponent)``: mean over seeds of each EKF run's error std, degrees.
 
-    Truth and sensor data are simulated once per seed (a :class:`SeedBatch`)
-    and reused for every evaluation, so only the filter runs again.
+    Each evaluation runs the EKF for every seed at once on the batched
+    engine (:mod:`benchmarks.engine`), which reproduces the filterpy path's
+    numbers to rounding.
     """
 
     def __init__(self, scenario: Scenario, seeds):
-        self.batch = SeedBatch(scenario, seeds)
+        self.scenario = scenario
+        self.seeds = tuple(seeds)
+
+    def run_losses(self, pc_exponent: float) -> np.ndarray:
+        """Each seed's loss at ``pc_exponent``."""
+        runs = make_runs(self.scenario, self.seeds, pc_exponent=pc_exponent)
+        return run_chunked(self.scenario, runs, ["ekf"]).statistics["ekf"]["std_deg"]
 
     def __call__(self, pc_exponent: float) -> float:
-        errors = self.batch.errors_deg("ekf", pc_exponent=pc_exponent)
-        return float(np.mean([loss(error) for error in errors]))
+        return float(np.mean(self.run_losses(pc_exponent)))
 
 
 @dataclass
