@@ -86,6 +86,16 @@ def _number_list(text: str) -> list[float]:
     return values
 
 
+def _estimator_list(text: str) -> tuple[str, ...]:
+    names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    unknown = [name for name in names if name not in WORKSHOP_ESTIMATORS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"estimators = {text!r}: must be names from {', '.join(WORKSHOP_ESTIMATORS)}, "
+            "separated by commas")
+    return names
+
+
 def _seed_list(text: str) -> tuple[int, ...]:
     try:
         return parse_seeds(text)
@@ -178,6 +188,26 @@ def build_parser() -> argparse.ArgumentParser:
     animate.add_argument("--every", type=_whole("every", 1), default=50, metavar="K",
                          help="one frame every K steps (default 50)")
     _add_common(animate)
+
+    montecarlo = commands.add_parser("montecarlo", help="many runs on the batched engine; "
+                                     "write montecarlo.csv and montecarlo.png")
+    montecarlo.add_argument("--estimators", type=_estimator_list,
+                            default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
+                            help=f"any of {', '.join(WORKSHOP_ESTIMATORS)} (default all)")
+    montecarlo.add_argument("--runs", type=_whole("runs", 1), default=100, metavar="N",
+                            help="number of runs; run i uses seed S + i (default 100)")
+    montecarlo.add_argument("--seed", type=_whole("seed", 0), default=0, metavar="S",
+                            help="base seed (default 0)")
+    montecarlo.add_argument("--chunk-size", type=_whole("chunk-size", 1), default=1024,
+                            metavar="N", help="runs per chunk file (default 1024)")
+    where = montecarlo.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_whole("workers", 1), metavar="N",
+                       help="run chunks on a local Dask cluster of N processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run chunks on an existing Dask cluster")
+    montecarlo.add_argument("--resume", action="store_true",
+                            help="finish an interrupted campaign in --out")
+    _add_common(montecarlo, seed=False)
 
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
@@ -276,6 +306,37 @@ def command_animate(args, scenario):
     print(f"wrote {path} and {path.with_suffix('.png')} ({name})")
 
 
+def command_montecarlo(args, scenario):
+    from benchmarks.engine.campaign import CAMPAIGN_COLUMNS, Campaign, run_campaign
+    from benchmarks.output import write_csv, write_figure
+    from benchmarks.plots import distribution_figure
+    from benchmarks.progress import progress
+    from estimators import ESTIMATORS
+    campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
+                        base_seed=args.seed, chunk_runs=args.chunk_size)
+    try:
+        with progress(total=args.runs, desc="montecarlo", unit="run", quiet=args.quiet) as bar:
+            frame = run_campaign(campaign, args.out, workers=args.workers or 0,
+                                 scheduler=args.scheduler, resume=args.resume, progress_bar=bar)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; finished chunks are kept in {args.out}; "
+              "rerun with --resume to finish", file=sys.stderr)
+        raise SystemExit(130) from None
+    write_csv(args.out / "montecarlo.csv", CAMPAIGN_COLUMNS,
+              (list(row) for row in frame[list(CAMPAIGN_COLUMNS)].itertuples(index=False)),
+              digits=17)
+    labels = {name: ESTIMATORS[name].label for name in args.estimators}
+    write_figure(args.out / "montecarlo.png", distribution_figure(frame, labels))
+    summary = frame.groupby("estimator", sort=False)[list(STAT_COLUMNS)].mean()
+    print(f"mean over {args.runs} runs (seeds {args.seed}-{args.seed + args.runs - 1}):")
+    print(format_table(summary.to_dict(orient="index")))
+    spread = frame.groupby("estimator", sort=False)["std_deg"].quantile([0.05, 0.5, 0.95])
+    for name in args.estimators:
+        p5, p50, p95 = spread[name].tolist()
+        print(f"{name}: error std over runs 5% {p5:.4f}, 50% {p50:.4f}, 95% {p95:.4f} deg")
+    print(f"wrote {args.out / 'montecarlo.csv'} and {args.out / 'montecarlo.png'}")
+
+
 def command_workshop(args, scenario):
     from benchmarks.workshop import run_workshop
     report = run_workshop(scenario, args.out, quiet=args.quiet)
@@ -284,7 +345,7 @@ def command_workshop(args, scenario):
 
 COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
             "tune": command_tune, "landscape": command_landscape, "animate": command_animate,
-            "workshop": command_workshop}
+            "montecarlo": command_montecarlo, "workshop": command_workshop}
 
 
 def main(argv=None) -> int:

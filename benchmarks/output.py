@@ -38,13 +38,18 @@ def write_text(path, text: str) -> None:
     _atomic_write_bytes(Path(path), text.encode("utf-8"))
 
 
-def write_csv(path, header, rows) -> None:
-    """A CSV with ``header`` and ``rows``; floats keep 12 significant digits."""
+def write_bytes(path, data: bytes) -> None:
+    _atomic_write_bytes(Path(path), data)
+
+
+def write_csv(path, header, rows, digits: int = 12) -> None:
+    """A CSV with ``header`` and ``rows``; floats keep ``digits`` significant
+    digits (17 round-trips a double exactly)."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
     for row in rows:
-        writer.writerow([f"{value:.12g}" if isinstance(value, float) else value
+        writer.writerow([f"{value:.{digits}g}" if isinstance(value, float) else value
                          for value in row])
     write_text(path, buffer.getvalue())
 

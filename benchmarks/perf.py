@@ -1,15 +1,32 @@
-"""Speed benchmark: ``python -m benchmarks.perf``. Prints, never asserts.
+"""Speed and memory benchmark: ``python -m benchmarks.perf``. Prints, never asserts.
 
-Times one 50-s run of the default scenario for each workshop estimator on
-the per-step (filterpy) path: the median of several repeats of
-``estimator.run`` on the same sensor data, plus the truth and sensor
-simulation once.
+From one run on this machine:
+
+1. the per-run (filterpy) path: seconds for one 50-s run of each workshop
+   estimator and its run-steps per second;
+2. the batched engine at batch sizes 1, 64 and 1024 — the EKF alone and all
+   three estimators together — in run-steps per second (one run-step is one
+   run advanced one step, noise drawing included), and its ratio to the
+   filterpy EKF;
+3. the wall time of a 73-value × 100-seed loss landscape (its computation);
+4. the peak resident memory and wall time of a 10,000-run statistics-only
+   campaign of the default scenario, run as a separate ``attitude-bench
+   montecarlo`` process and read from the operating system's accounting.
+
+The kernel is compiled (or loaded from numba's cache) before timing starts;
+that one-off time is printed too.
 """
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
+
+import numpy as np
 
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import (
@@ -42,20 +59,67 @@ def per_run_seconds(scenario: Scenario, repeats: int = 5) -> dict[str, float]:
     return results
 
 
+def engine_steps_per_second(scenario: Scenario, batch: int, estimators, repeats: int) -> float:
+    from benchmarks.engine import make_runs, run_batch
+    runs = make_runs(scenario, np.arange(batch))
+    seconds = _median_seconds(lambda: run_batch(scenario, runs, estimators), repeats)
+    return batch * scenario.n_steps / seconds
+
+
+def landscape_seconds(scenario: Scenario) -> float:
+    from benchmarks.landscape import compute_landscape, pc_grid
+    start = time.perf_counter()
+    compute_landscape(scenario, pc_grid(-18, 0, 0.25), seeds=range(100), quiet=True)
+    return time.perf_counter() - start
+
+
+def campaign_peak_memory(runs: int) -> tuple[float, float]:
+    """(peak MiB, wall seconds) of a statistics-only campaign in a child process."""
+    with tempfile.TemporaryDirectory() as out:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "benchmarks", "montecarlo", "--runs", str(runs),
+                        "--out", out, "--quiet"], check=True, stdout=subprocess.DEVNULL)
+        wall = time.perf_counter() - start
+        peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    if peak_kib <= before:  # pragma: no cover - an earlier child was larger
+        print("note: peak memory not separable from an earlier child process")
+    return peak_kib / 1024.0, wall
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf", description=__doc__)
-    parser.add_argument("--repeats", type=int, default=5, help="repeats per timing (median)")
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf",
+                                     description="Speed and memory benchmark (prints only).")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats per timing (median)")
+    parser.add_argument("--campaign-runs", type=int, default=10_000,
+                        help="runs of the memory campaign (default 10000)")
     args = parser.parse_args(argv)
     scenario = Scenario()
-    start = time.perf_counter()
-    truth = simulate_truth(scenario)
-    simulate_sensors(scenario, truth, seed=0)
-    print(f"truth and sensors, {scenario.tstop:g} s at {1 / scenario.dt:g} Hz: "
-          f"{time.perf_counter() - start:.3f} s")
     steps = scenario.n_steps
-    for name, seconds in per_run_seconds(scenario, args.repeats).items():
-        print(f"{name:<22} one {scenario.tstop:g}-s run: {seconds:.3f} s "
-              f"({steps / seconds:,.0f} steps/s)")
+
+    print(f"scenario: {scenario.tstop:g} s at {1 / scenario.dt:g} Hz ({steps} steps per run)")
+    print("\nper-run path (filterpy EKF, hand-written dead reckoning):")
+    per_run = per_run_seconds(scenario, max(args.repeats, 3))
+    for name, seconds in per_run.items():
+        print(f"  {name:<22} {seconds:.3f} s per run   {steps / seconds:>12,.0f} run-steps/s")
+    filterpy_rate = steps / per_run["ekf"]
+
+    from benchmarks.engine import make_runs, run_batch
+    start = time.perf_counter()
+    run_batch(scenario, make_runs(scenario, [0]))
+    print(f"\nbatched engine (kernel compile or cache load: {time.perf_counter() - start:.1f} s):")
+    rates = {}
+    for batch in (1, 64, 1024):
+        for label, estimators in (("ekf", ("ekf",)), ("all three", WORKSHOP_ESTIMATORS)):
+            rates[batch, label] = engine_steps_per_second(scenario, batch, estimators,
+                                                          args.repeats)
+            print(f"  batch {batch:>4}  {label:<9} {rates[batch, label]:>14,.0f} run-steps/s")
+    print(f"  ratio, batch 1024 EKF to filterpy EKF: {rates[1024, 'ekf'] / filterpy_rate:.0f}x")
+
+    print(f"\nlandscape, 73 pc values x 100 seeds: {landscape_seconds(scenario):.1f} s")
+    peak_mib, wall = campaign_peak_memory(args.campaign_runs)
+    print(f"campaign, {args.campaign_runs:,} runs x 3 estimators, statistics only: "
+          f"peak {peak_mib:,.0f} MiB, {wall:.1f} s wall (whole process)")
     return 0
 
 

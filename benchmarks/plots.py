@@ -5,6 +5,8 @@ pyplot), so plotting never touches a global backend or opens a window.
 """
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 import seaborn as sns
 from matplotlib.figure import Figure
@@ -52,3 +54,29 @@ def freeze_layout(figure: Figure) -> None:
     """
     figure.canvas.draw()   # runs the layout engine with the final artists in place
     figure.set_layout_engine("none")
+
+
+#: Statistics shown in the Monte Carlo distribution figure: (column, title).
+DISTRIBUTION_PANELS = (("mean_deg", "Mean error"), ("std_deg", "Error std (the loss)"),
+                       ("max_deg", "Maximum error"))
+
+
+def distribution_figure(frame, labels: dict | None = None) -> Figure:
+    """Per-estimator distributions over runs of a tidy per-run frame (one
+    violin per estimator and statistic, seaborn)."""
+    import pandas as pd   # seaborn's own dependency; imported where it is used
+
+    data = frame.copy()
+    labels = labels or {}
+    data["estimator"] = data["estimator"].map(
+        lambda name: textwrap.fill(labels.get(name, name), 20))
+    figure, axes = new_figure(ncols=len(DISTRIBUTION_PANELS), width=4.5, height=4.5)
+    for ax, (column, title) in zip(axes, DISTRIBUTION_PANELS):
+        sns.violinplot(data=data, x="estimator", y=column, hue="estimator", ax=ax,
+                       cut=0, inner="quartile", legend=False)
+        ax.set_title(title)
+        ax.set_xlabel("")
+        ax.set_ylabel("Degrees")
+    runs = data["run"].nunique() if isinstance(data, pd.DataFrame) else len(data)
+    figure.suptitle(f"Attitude error over {runs} Monte Carlo runs")
+    return figure

@@ -30,9 +30,11 @@ from dynamics.quaternion import attitude_error_rad
 from dynamics.validation import InvalidParameterError
 from sensors.star_tracker import steps_between_readings
 
-#: Steps advanced per kernel call: bounds the noise buffers (two of B × 1000 × 3
-#: floats, 49 MB at B = 1024) whatever the run length.
-BLOCK_STEPS = 1000
+#: Steps advanced per kernel call. It bounds the noise buffer (B × 2500 × 3
+#: floats, 61 MB at B = 1024) whatever the run length; larger blocks mean
+#: fewer, longer calls into numpy's generators, which then overlap better on
+#: two threads (numpy releases the GIL while it fills).
+BLOCK_STEPS = 2500
 #: The median histogram: 128 bins per octave (the error's float exponent and
 #: top 7 mantissa bits) from 2⁻²⁰ ≈ 9.5e-7 degrees up, plus one bin below.
 HISTOGRAM_MIN_DEG = 2.0 ** -20

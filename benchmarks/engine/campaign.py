@@ -1,0 +1,173 @@
+"""Monte Carlo campaigns: many runs, in chunks, in-process or on a Dask cluster.
+
+Run ``i`` of a campaign with base seed ``S`` uses seed ``S + i``, so its
+numbers depend on those two alone, never on the chunk size or on which
+worker computed it. Each finished chunk is written to ``DIR/chunks/`` at
+once (write to a temporary file, then rename), and ``DIR/campaign.json``
+records the campaign's settings; ``resume=True`` finishes an interrupted
+campaign by computing only the chunks whose files are missing.
+
+Dask is optional (``pip install .[distributed]``): ``workers=N`` starts a
+local cluster of N single-threaded worker processes, ``scheduler=ADDRESS``
+uses an existing cluster. Chunk results travel back to this process, which
+writes them, so workers need no access to the output folder.
+"""
+from __future__ import annotations
+
+import io
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.engine.batch import CHUNK_RUNS, make_runs, run_batch
+from benchmarks.metrics import STAT_COLUMNS
+from benchmarks.output import write_bytes, write_text
+from benchmarks.scenario import Scenario
+from dynamics.validation import InvalidParameterError
+
+MANIFEST = "campaign.json"
+CHUNKS = "chunks"
+CAMPAIGN_COLUMNS = ("run", "seed", "estimator") + STAT_COLUMNS
+_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """What a campaign computes: ``runs`` runs of ``estimators`` from ``base_seed``."""
+
+    scenario: Scenario
+    estimators: tuple
+    runs: int
+    base_seed: int = 0
+    chunk_runs: int = CHUNK_RUNS
+
+    def manifest(self) -> dict:
+        return {"format": _FORMAT, "scenario": self.scenario.as_dict(),
+                "estimators": list(self.estimators), "runs": self.runs,
+                "base_seed": self.base_seed, "chunk_runs": self.chunk_runs}
+
+    def chunks(self) -> list[tuple[int, int]]:
+        return [(start, min(start + self.chunk_runs, self.runs))
+                for start in range(0, self.runs, self.chunk_runs)]
+
+
+def chunk_path(out: Path, start: int, stop: int) -> Path:
+    return Path(out) / CHUNKS / f"runs-{start:09d}-{stop:09d}.npz"
+
+
+def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, stop: int,
+                  threads: int | None = None) -> dict:
+    """Statistics of runs ``start … stop-1``: ``{"seed": …, "NAME/COLUMN": …}``.
+
+    Runs on Dask workers too; ``threads`` caps the kernel's threads there so
+    that worker processes do not oversubscribe the cores.
+    """
+    if threads is not None:
+        import numba
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    runs = make_runs(scenario, np.arange(base_seed + start, base_seed + stop))
+    batch = run_batch(scenario, runs, estimators, threads=threads)
+    arrays = {"seed": runs.seeds}
+    for name in batch.estimators:
+        for column in STAT_COLUMNS:
+            arrays[f"{name}/{column}"] = batch.statistics[name][column]
+    return arrays
+
+
+def _write_chunk(out: Path, start: int, stop: int, arrays: dict) -> None:
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    write_bytes(chunk_path(out, start, stop), buffer.getvalue())
+
+
+def _prepare(campaign: Campaign, out: Path, resume: bool) -> None:
+    manifest_path = out / MANIFEST
+    expected = campaign.manifest()
+    if manifest_path.exists():
+        if not resume:
+            raise InvalidParameterError(
+                "out", str(out), "already holds a campaign; pass --resume to finish it "
+                "or choose another --out")
+        found = json.loads(manifest_path.read_text())
+        for key in expected:
+            if found.get(key) != expected[key]:
+                raise InvalidParameterError(
+                    "resume", str(out), f"the campaign there has {key} = {found.get(key)!r}, "
+                    f"not {expected[key]!r}; resume it with its own settings")
+    elif resume:
+        raise InvalidParameterError("resume", str(out), "holds no campaign to resume")
+    else:
+        write_text(manifest_path, json.dumps(expected, indent=2) + "\n")
+    # A crash can leave a temporary file beside the chunks: never a result.
+    for stale in (out / CHUNKS).glob(".*.tmp*") if (out / CHUNKS).exists() else ():
+        stale.unlink(missing_ok=True)
+
+
+def _dask_client(workers: int, scheduler: str | None):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise InvalidParameterError(
+            "workers" if workers else "scheduler", workers or scheduler,
+            "needs Dask; install it with pip install '.[distributed]'") from None
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    if scheduler:
+        return Client(scheduler), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | None = None,
+                 resume: bool = False, progress_bar=None) -> pd.DataFrame:
+    """Compute every missing chunk, then return the tidy per-run statistics."""
+    out = Path(out)
+    _prepare(campaign, out, resume)
+    todo = [(start, stop) for start, stop in campaign.chunks()
+            if not chunk_path(out, start, stop).exists()]
+    if progress_bar is not None:
+        progress_bar.update(campaign.runs - sum(stop - start for start, stop in todo))
+    arguments = (campaign.scenario, campaign.estimators, campaign.base_seed)
+    if workers or scheduler:
+        client, cluster = _dask_client(workers, scheduler)
+        try:
+            from distributed import as_completed
+            futures = {client.submit(compute_chunk, *arguments, start, stop, 1, pure=False):
+                       (start, stop) for start, stop in todo}
+            for future in as_completed(futures):
+                start, stop = futures[future]
+                _write_chunk(out, start, stop, future.result())
+                if progress_bar is not None:
+                    progress_bar.update(stop - start)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    else:
+        for start, stop in todo:
+            _write_chunk(out, start, stop, compute_chunk(*arguments, start, stop))
+            if progress_bar is not None:
+                progress_bar.update(stop - start)
+    return load_campaign(campaign, out)
+
+
+def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
+    """The finished chunks joined in run order: one row per (run, estimator)."""
+    parts = []
+    for start, stop in campaign.chunks():
+        with np.load(chunk_path(out, start, stop)) as data:
+            for name in campaign.estimators:
+                part = pd.DataFrame({"run": np.arange(start, stop), "seed": data["seed"],
+                                     "estimator": name})
+                for column in STAT_COLUMNS:
+                    part[column] = data[f"{name}/{column}"]
+                parts.append(part)
+    frame = pd.concat(parts, ignore_index=True)
+    order = {name: i for i, name in enumerate(campaign.estimators)}
+    frame["_order"] = frame["estimator"].map(order)
+    return (frame.sort_values(["_order", "run"], kind="stable").drop(columns="_order")
+            .reset_index(drop=True))
