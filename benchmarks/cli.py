@@ -6,7 +6,6 @@ on stderr naming the parameter, the value and the rule, and exit status 2.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 from pathlib import Path

@@ -141,6 +141,17 @@ def _record(slot, run, k, inv_count, q_true_k, q, stats, hist, hist_first_bits, 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _matmul4(a, b, out):
+    """out = a b for 4x4 arrays (out distinct from a and b)."""
+    for i in range(4):
+        for j in range(4):
+            total = 0.0
+            for m in range(4):
+                total += a[i, m] * b[m, j]
+            out[i, j] = total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _ekf_update(x, P, z, R, scratch):
     """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
     P = (I - K) P (I - K)ᵀ + K R Kᵀ."""
@@ -173,12 +184,7 @@ def _ekf_update(x, P, z, R, scratch):
                 for j in range(4):
                     S[row, j] -= factor * S[col, j]
                     inverse[row, j] -= factor * inverse[col, j]
-    for i in range(4):
-        for j in range(4):
-            total = 0.0
-            for m in range(4):
-                total += P[i, m] * inverse[m, j]
-            K[i, j] = total
+    _matmul4(P, inverse, K)
     y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
     for i in range(4):
         x[i] = x[i] + (K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2 + K[i, 3] * y3)
@@ -186,19 +192,9 @@ def _ekf_update(x, P, z, R, scratch):
         for j in range(4):
             IK[i, j] = (1.0 if i == j else 0.0) - K[i, j]
     # T = (I - K) P ; P = T (I - K)ᵀ + (K R) Kᵀ
-    for i in range(4):
-        for j in range(4):
-            total = 0.0
-            for m in range(4):
-                total += IK[i, m] * P[m, j]
-            T[i, j] = total
+    _matmul4(IK, P, T)
     KR = S   # S is no longer needed
-    for i in range(4):
-        for j in range(4):
-            total = 0.0
-            for m in range(4):
-                total += K[i, m] * R[m, j]
-            KR[i, j] = total
+    _matmul4(K, R, KR)
     for i in range(4):
         for j in range(4):
             first = 0.0
