@@ -47,7 +47,8 @@ def test_killed_campaign_resumes_without_redoing_chunks(tmp_path):
     out = tmp_path / "campaign"
     argv = ["montecarlo", "--runs", "400", "--chunk-size", "8", "--seed", "3",
             "--out", str(out), "--quiet"]
-    process = subprocess.Popen([sys.executable, "-m", "benchmarks", *argv],
+    # From another folder, so the installed package runs, not the source tree.
+    process = subprocess.Popen([sys.executable, "-m", "benchmarks", *argv], cwd=tmp_path,
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     chunks = out / CHUNKS
     deadline = time.monotonic() + 240
