@@ -14,10 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import seaborn as sns
-from matplotlib.animation import FuncAnimation, PillowWriter
 
 from benchmarks.output import atomic_path, write_csv, write_figure
-from benchmarks.plots import freeze_layout, new_figure, plot_errors
+from benchmarks.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.engine import make_runs, run_batch, run_chunked
@@ -155,24 +154,19 @@ def spread_figure(landscape: Landscape):
     return figure
 
 
-def write_animation(landscape: Landscape, path, fps: int = 8) -> int:
+def write_animation(landscape: Landscape, path, fps: int = 8, dpi: int = 80) -> int:
     """The two panels animated over the sweep, as a GIF; returns the frame count."""
     figure, ekf_line, vertical = _draw(landscape, 0)
     left = figure.axes[0]
-
-    def update(index):
-        ekf_line.set_ydata(landscape.ekf_curves[index])
-        pc = landscape.pc_values[index]
-        vertical.set_xdata([pc, pc])
-        left.set_title(f"Absolute Attitude Error, pc exponent = {pc:g}")
-        return ekf_line, vertical
-
-    frames = len(landscape.pc_values)
     freeze_layout(figure)
-    animation = FuncAnimation(figure, update, frames=frames, blit=False)
-    with atomic_path(path) as temporary:
-        animation.save(temporary, writer=PillowWriter(fps=fps), dpi=80)
-    return frames
+    writer = BlittingPillowWriter([ekf_line, vertical, left.title], fps=fps)
+    with atomic_path(path) as temporary, writer.saving(figure, temporary, dpi):
+        for index, pc in enumerate(landscape.pc_values):
+            ekf_line.set_ydata(landscape.ekf_curves[index])
+            vertical.set_xdata([pc, pc])
+            left.set_title(f"Absolute Attitude Error, pc exponent = {pc:g}")
+            writer.grab_frame()
+    return len(landscape.pc_values)
 
 
 def write_landscape(landscape: Landscape, out, animate: bool = True) -> dict:
