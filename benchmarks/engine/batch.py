@@ -221,21 +221,15 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     gyro_buffer = np.empty((n_runs, block_steps, 3))
     star_buffer = np.empty((n_runs, max_readings, 4))
 
-    def draw(index):
-        k0, stop = blocks[index]
-        gyro, star = gyro_buffer, star_buffer
-        # Readings fall at k ≡ 0 (mod m) within [k0, stop).
-        star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
-        if k0 == 0:
-            star_counts = (stop - 1) // steps_between + 1
-        _fill_normals(generators, gyro[:, :stop - k0], star, star_counts, threads)
-        return gyro[:, :stop - k0], star
-
     # Draw a block's noise on every core, then advance every run through it.
-    for index, (k0, _) in enumerate(blocks):
-        block_gyro, block_star = draw(index)
+    for k0, stop in blocks:
+        # Readings fall at k ≡ 0 (mod m) in [k0, stop); floor division makes
+        # (-1) // m = -1, so the reading at k = 0 is counted too.
+        star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
+        block_gyro = gyro_buffer[:, :stop - k0]
+        _fill_normals(generators, block_gyro, star_buffer, star_counts, threads)
         kernels.advance(k0, q_true, omega_true, dt, gyro_std, star_std, steps_between,
-                        block_gyro, block_star, enabled, q_dr, q_resets, x_ekf, P_ekf,
+                        block_gyro, star_buffer, enabled, q_dr, q_resets, x_ekf, P_ekf,
                         q_variance, R, stats, hist, _FIRST_BITS, traces, keep_traces)
 
     statistics, estimates = {}, ({} if keep_traces else None)
