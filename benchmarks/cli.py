@@ -31,9 +31,6 @@ SCENARIO_FLAGS = {
     "dt": "--dt",
 }
 
-TRACE_COLUMNS = experiments.TRACE_COLUMNS
-
-
 class UsageError(Exception):
     """Bad command-line input; the message is the whole one-line explanation."""
 
@@ -267,10 +264,8 @@ def command_sweep(args, scenario):
 
 
 def command_tune(args, scenario):
-    from benchmarks.tuning import format_iteration_table, tune_pc_exponent, validate_bounds
-    from dynamics.validation import finite_number
-    validate_bounds(args.bounds)
-    finite_number("xtol", args.xtol, strictly_positive=True)
+    from benchmarks.tuning import format_iteration_table, tune_pc_exponent
+    # tune_pc_exponent checks bounds and xtol before its first evaluation.
     result = tune_pc_exponent(scenario, args.seeds, args.bounds, args.xtol, quiet=args.quiet)
     print(format_iteration_table(result.iterations))
     print()

@@ -15,13 +15,13 @@ import numpy as np
 import pandas as pd
 import seaborn as sns
 
+from benchmarks.engine import make_runs, run_batch, run_chunked
+from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import atomic_path, write_csv, write_figure
 from benchmarks.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.engine import make_runs, run_batch, run_chunked
 from benchmarks.simulation import simulate_truth
-from dynamics.quaternion import attitude_error_rad
 from dynamics.validation import InvalidParameterError, finite_number
 from estimators import ESTIMATORS
 
@@ -96,12 +96,11 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
     first = make_runs(scenario, seeds[0], pc_exponent=pc_values)
     truth = simulate_truth(scenario)
     curves = run_batch(scenario, first, ["ekf"], keep_traces=True).estimates["ekf"]
-    ekf_curves = np.degrees(attitude_error_rad(truth.q_true, curves))
+    ekf_curves = attitude_error_deg(truth.q_true, curves)
     references = run_batch(scenario, make_runs(scenario, [seeds[0]]),
                            ["dead-reckoning", "dead-reckoning-resets"], keep_traces=True)
     reference_curves = {
-        ESTIMATORS[name].label: np.degrees(attitude_error_rad(truth.q_true,
-                                                              references.estimates[name][0]))
+        ESTIMATORS[name].label: attitude_error_deg(truth.q_true, references.estimates[name][0])
         for name in ("dead-reckoning", "dead-reckoning-resets")}
     table = records.groupby("pc_exponent", sort=False)[list(LANDSCAPE_COLUMNS[1:-1])].mean()
     table["runs"] = records.groupby("pc_exponent", sort=False).size()

@@ -8,9 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynamics.quaternion import attitude_error_rad
+
 #: Column names of every statistics table, in order.
 STAT_COLUMNS = ("mean_deg", "median_deg", "std_deg", "three_sigma_deg", "rms_deg",
                 "max_deg", "final_deg")
+
+
+def attitude_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    """The sign-invariant attitude error of SPEC, in degrees, for ``(..., 4)`` stacks."""
+    return np.degrees(attitude_error_rad(q_true, q_est))
 
 
 def error_statistics(error_deg: np.ndarray) -> dict[str, float]:

@@ -18,8 +18,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from benchmarks.metrics import attitude_error_deg
 from benchmarks.scenario import Scenario
-from dynamics.quaternion import attitude_error_rad
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free
 from dynamics.validation import InvalidParameterError
 from estimators import ESTIMATORS, AttitudeEstimator
@@ -140,7 +140,7 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         q_est = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
                               sensors.available)
         estimates[estimator.name] = q_est
-        errors[estimator.name] = np.degrees(attitude_error_rad(truth.q_true, q_est))
+        errors[estimator.name] = attitude_error_deg(truth.q_true, q_est)
         labels[estimator.name] = estimator.label
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels)

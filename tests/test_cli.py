@@ -6,7 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from benchmarks.cli import TRACE_COLUMNS, main
+from benchmarks.cli import main
+from benchmarks.experiments import TRACE_COLUMNS
 from benchmarks.metrics import STAT_COLUMNS
 
 SHORT = ["--tstop", "2"]

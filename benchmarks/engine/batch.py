@@ -23,10 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchmarks.metrics import STAT_COLUMNS
+from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, sensor_generators, simulate_truth
-from dynamics.quaternion import attitude_error_rad
 from dynamics.validation import InvalidParameterError
 from sensors.star_tracker import steps_between_readings
 
@@ -154,12 +153,11 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, threads):
             if star_counts[r]:
                 star_rng.standard_normal(out=star_out[r, :star_counts[r]])
 
-    groups = np.array_split(np.arange(len(generators)), max(1, threads))
     if threads <= 1 or len(generators) < 2 * threads:
         fill(range(len(generators)))
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        list(pool.map(fill, groups))
+        list(pool.map(fill, np.array_split(np.arange(len(generators)), threads)))
 
 
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
@@ -240,7 +238,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         std = np.sqrt(m2 / (n_steps - 1)) if n_steps > 1 else np.zeros(n_runs)
         if keep_traces:
             estimates[name] = traces[slot]
-            errors = np.degrees(attitude_error_rad(q_true, traces[slot]))
+            errors = attitude_error_deg(q_true, traces[slot])
             median = np.median(errors, axis=1)
         else:
             median = histogram_median(hist[slot].astype(np.int64), n_steps)

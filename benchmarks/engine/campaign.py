@@ -103,7 +103,7 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> None:
     else:
         write_text(manifest_path, json.dumps(expected, indent=2) + "\n")
     # A crash can leave a temporary file beside the chunks: never a result.
-    for stale in (out / CHUNKS).glob(".*.tmp*") if (out / CHUNKS).exists() else ():
+    for stale in (out / CHUNKS).glob(".*.tmp*"):
         stale.unlink(missing_ok=True)
 
 
