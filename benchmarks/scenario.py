@@ -1,8 +1,27 @@
-"""The workshop scenario: every setting of a run, validated where it enters.
+"""Scenarios: every setting of a run, validated where it enters.
 
-:class:`Scenario` holds SPEC's defaults ("Default parameters"). A scenario
-can be loaded from a TOML file whose keys are the field names (any subset;
-unknown keys are an error) and then overridden field by field::
+:class:`Scenario` holds SPEC's defaults ("Default parameters"), so
+``Scenario()`` is the workshop exercise, and the settings that go beyond it:
+the gyro's bias model (:mod:`sensors.gyro`), the rotation-noise star tracker
+(:mod:`sensors.star_tracker`), and each estimator's own options.
+
+A TOML file may use the workshop's flat keys (the field names), sections, or
+both::
+
+    tstop = 3600.0
+    dt = 0.1
+    initial_state = [1.0, 0.0, 0.0, 0.0]
+
+    [truth]          # inertia_tensor_kg_m2, initial_attitude_quat, initial_rate_radps
+    [gyro]           # noise_power or arw_deg_per_rthr, bias_random_walk or
+                     # bias_rw_deg_per_hr_rthr, initial_bias_radps or
+                     # initial_bias_deg_per_hr, scale_misalignment
+    [star_tracker]   # model ("workshop" or "rotation"), interval_s, noise_power,
+                     # sigma_arcsec, dropout_probability, outages_s, sign, to_body_quat
+    [estimators.mekf]   # any constructor keyword of that estimator
+
+Missing keys take the defaults; an unknown key is an error naming its
+section. Then override field by field::
 
     scenario = Scenario.from_toml("scenarios/default.toml").replace(gyro_noise=1e-4)
 
@@ -28,7 +47,22 @@ from dynamics.validation import (
     nonzero_quaternion,
 )
 from estimators.ekf import covariance_matrix
-from sensors.star_tracker import steps_between_readings
+from estimators import ESTIMATORS
+from sensors.gyro import Gyro
+from sensors.noise import (
+    arw_deg_per_rthr_to_rad_per_rts,
+    deg_per_hr_to_radps,
+    rrw_deg_per_hr_rthr_to_rad_per_s1p5,
+)
+from sensors.star_tracker import (
+    SIGN_CONVENTIONS,
+    RotationStarTracker,
+    StarTracker,
+    outage_windows,
+    steps_between_readings,
+)
+
+STAR_TRACKER_MODELS = ("workshop", "rotation")
 
 
 def _diag(*values):
@@ -41,7 +75,7 @@ def _vector(*values):
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """All settings of one workshop run (SI units, radians).
+    """All settings of one run (SI units, radians); the defaults are the workshop's.
 
     Attributes
     ----------
@@ -69,6 +103,31 @@ class Scenario:
         Initial estimate of every estimator ([1, 0, 0, 0]).
     initial_covariance : float
         EKF P₀ = initial_covariance · I₄ (1e-12).
+    gyro_bias_random_walk : float
+        σ_u, the gyro bias's rate random walk, rad/s^{3/2} (0). ``gyro_noise``
+        is σ_v², the square of the angle random walk density.
+    gyro_initial_bias_radps : (3,) array
+        The gyro's bias at t = 0, rad/s (0).
+    gyro_scale_misalignment : (3, 3) array
+        Scale factor errors (diagonal) and misalignments (0).
+    star_tracker_model : {"workshop", "rotation"}
+        Additive quaternion noise of power ``star_tracker_noise`` (the
+        workshop's), or a small error rotation of ``star_tracker_sigma_arcsec``.
+    star_tracker_sigma_arcsec : (3,) array
+        Rotation model: error σ about the sensor x, y (across the boresight)
+        and z (roll) axes, arcsec ([6, 6, 40]).
+    star_tracker_dropout_probability : float
+        Rotation model: chance a scheduled reading is lost (0).
+    star_tracker_outages_s : tuple of (start, stop)
+        Rotation model: windows without readings, seconds (none).
+    star_tracker_sign : {"raw", "canonical"}
+        Rotation model: report ``q`` as it comes, or with ``w >= 0`` ("raw").
+    star_tracker_to_body_quat : (4,) array
+        Rotation model: sensor-to-body rotation ([1, 0, 0, 0]).
+    estimator_options : dict
+        ``{estimator name: {keyword: value}}``, from ``[estimators.NAME]``
+        sections: each estimator's own settings beyond the scenario's
+        (:meth:`estimators.AttitudeEstimator.from_scenario`).
     """
 
     tstop: float = 50.0
@@ -83,6 +142,16 @@ class Scenario:
     measurement_covariance: np.ndarray = field(default_factory=lambda: np.eye(4))
     initial_state: np.ndarray = _vector(1.0, 0.0, 0.0, 0.0)
     initial_covariance: float = 1e-12
+    gyro_bias_random_walk: float = 0.0
+    gyro_initial_bias_radps: np.ndarray = _vector(0.0, 0.0, 0.0)
+    gyro_scale_misalignment: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    star_tracker_model: str = "workshop"
+    star_tracker_sigma_arcsec: np.ndarray = _vector(6.0, 6.0, 40.0)
+    star_tracker_dropout_probability: float = 0.0
+    star_tracker_outages_s: tuple = ()
+    star_tracker_sign: str = "raw"
+    star_tracker_to_body_quat: np.ndarray = _vector(1.0, 0.0, 0.0, 0.0)
+    estimator_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
         set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
@@ -110,6 +179,58 @@ class Scenario:
         set_("initial_state", nonzero_quaternion("initial_state", self.initial_state))
         set_("initial_covariance", finite_number("initial_covariance", self.initial_covariance,
                                                  strictly_positive=True))
+        if self.star_tracker_model not in STAR_TRACKER_MODELS:
+            raise InvalidParameterError("star_tracker_model", self.star_tracker_model,
+                                        f"must be one of {', '.join(STAR_TRACKER_MODELS)}")
+        if self.star_tracker_sign not in SIGN_CONVENTIONS:
+            raise InvalidParameterError("star_tracker_sign", self.star_tracker_sign,
+                                        f"must be one of {', '.join(SIGN_CONVENTIONS)}")
+        set_("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
+                                                      self.star_tracker_outages_s))
+        # The sensor classes validate (and normalise) their own settings.
+        gyro, star_tracker = self.build_gyro(), self.build_star_tracker()
+        set_("gyro_bias_random_walk", gyro.bias_random_walk)
+        set_("gyro_initial_bias_radps", gyro.initial_bias_radps)
+        set_("gyro_scale_misalignment", np.zeros((3, 3)) if gyro.scale_misalignment is None
+             else gyro.scale_misalignment)
+        if isinstance(star_tracker, RotationStarTracker):
+            set_("star_tracker_sigma_arcsec", star_tracker.sigma_arcsec)
+            set_("star_tracker_dropout_probability", star_tracker.dropout_probability)
+            set_("star_tracker_to_body_quat", star_tracker.sensor_to_body_quat)
+        else:
+            set_("star_tracker_sigma_arcsec", finite_vector(
+                "star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec, 3))
+            set_("star_tracker_to_body_quat", nonzero_quaternion(
+                "star_tracker_to_body_quat", self.star_tracker_to_body_quat))
+        set_("estimator_options", _checked_options(self, self.estimator_options))
+
+    def build_gyro(self) -> Gyro:
+        """The gyro this scenario describes."""
+        return Gyro(self.gyro_noise, self.dt, bias_random_walk=self.gyro_bias_random_walk,
+                    initial_bias_radps=self.gyro_initial_bias_radps,
+                    scale_misalignment=self.gyro_scale_misalignment)
+
+    def build_star_tracker(self) -> StarTracker | RotationStarTracker:
+        """The star tracker this scenario describes."""
+        if self.star_tracker_model == "workshop":
+            return StarTracker(self.star_tracker_noise, self.time_between_measurements, self.dt)
+        return RotationStarTracker(
+            self.star_tracker_sigma_arcsec, self.time_between_measurements, self.dt,
+            dropout_probability=self.star_tracker_dropout_probability,
+            outages_s=self.star_tracker_outages_s, sign=self.star_tracker_sign,
+            sensor_to_body_quat=self.star_tracker_to_body_quat)
+
+    @property
+    def star_tracker_attitude_covariance_rad2(self) -> np.ndarray:
+        """Covariance (rad²) of a star tracker reading's body-frame error: what
+        a filter matched to this scenario takes as its ``R``."""
+        return self.build_star_tracker().attitude_covariance_rad2
+
+    @property
+    def is_workshop_sensors(self) -> bool:
+        """True when the gyro has no bias model and the star tracker is the workshop's."""
+        return (self.star_tracker_model == "workshop"
+                and not self.build_gyro().has_bias_model)
 
     @property
     def n_steps(self) -> int:
@@ -130,13 +251,13 @@ class Scenario:
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict:
-        """Plain-Python values (lists for arrays), e.g. for JSON or TOML."""
-        return {name: (value.tolist() if isinstance(value, np.ndarray) else value)
-                for name, value in ((f, getattr(self, f)) for f in field_names())}
+        """Plain-Python values (lists for arrays and tuples), e.g. for JSON or TOML."""
+        return {name: _plain(getattr(self, name)) for name in field_names()}
 
     @classmethod
     def from_toml(cls, path) -> "Scenario":
-        """Load a scenario file; keys are field names, missing ones take defaults."""
+        """Load a scenario file: flat field names and/or sections (see the
+        module docstring); missing keys take the defaults."""
         path = Path(path)
         try:
             with path.open("rb") as handle:
@@ -149,8 +270,166 @@ class Scenario:
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
             raise InvalidParameterError("scenario", str(path),
                                         f"must be valid TOML ({err})") from None
-        return cls().replace(**data)
+        return cls().replace(**flatten_sections(data))
 
 
 def field_names() -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(Scenario))
+
+
+#: The workshop's own settings: the keys of ``scenarios/default.toml``.
+WORKSHOP_FIELDS = ("tstop", "dt", "inertia_tensor_kg_m2", "initial_attitude_quat",
+                   "initial_rate_radps", "gyro_noise", "star_tracker_noise",
+                   "time_between_measurements", "pc_exponent", "measurement_covariance",
+                   "initial_state", "initial_covariance")
+
+
+def _plain(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return [_plain(item) for item in value]
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    return value
+
+
+@dataclass(frozen=True)
+class SectionKey:
+    """A key of a TOML section: the field it sets and, for datasheet units,
+    the conversion to the field's SI unit."""
+
+    field: str
+    convert: object = None
+
+
+#: section → key → what it sets.
+SECTIONS = {
+    "truth": {
+        "inertia_tensor_kg_m2": SectionKey("inertia_tensor_kg_m2"),
+        "initial_attitude_quat": SectionKey("initial_attitude_quat"),
+        "initial_rate_radps": SectionKey("initial_rate_radps"),
+    },
+    "gyro": {
+        "noise_power": SectionKey("gyro_noise"),
+        "arw_deg_per_rthr": SectionKey(
+            "gyro_noise", lambda v: arw_deg_per_rthr_to_rad_per_rts(
+                finite_number("gyro.arw_deg_per_rthr", v, minimum=0.0)) ** 2),
+        "bias_random_walk": SectionKey("gyro_bias_random_walk"),
+        "bias_rw_deg_per_hr_rthr": SectionKey(
+            "gyro_bias_random_walk", lambda v: rrw_deg_per_hr_rthr_to_rad_per_s1p5(
+                finite_number("gyro.bias_rw_deg_per_hr_rthr", v, minimum=0.0))),
+        "initial_bias_radps": SectionKey("gyro_initial_bias_radps"),
+        "initial_bias_deg_per_hr": SectionKey(
+            "gyro_initial_bias_radps", lambda v: deg_per_hr_to_radps(
+                finite_vector("gyro.initial_bias_deg_per_hr", v, 3))),
+        "scale_misalignment": SectionKey("gyro_scale_misalignment"),
+    },
+    "star_tracker": {
+        "model": SectionKey("star_tracker_model"),
+        "interval_s": SectionKey("time_between_measurements"),
+        "noise_power": SectionKey("star_tracker_noise"),
+        "sigma_arcsec": SectionKey("star_tracker_sigma_arcsec"),
+        "dropout_probability": SectionKey("star_tracker_dropout_probability"),
+        "outages_s": SectionKey("star_tracker_outages_s"),
+        "sign": SectionKey("star_tracker_sign"),
+        "to_body_quat": SectionKey("star_tracker_to_body_quat"),
+    },
+}
+
+
+def flatten_sections(data: dict) -> dict:
+    """Turn a TOML document's sections into field values (flat keys pass through).
+
+    ``[estimators.NAME]`` keys that an estimator owns as a scenario field
+    (the EKF's ``pc_exponent``, …) set that field; the others become
+    ``estimator_options[NAME]``. A key set twice (flat and in a section, or
+    in two units) is an error.
+    """
+    flat, options = {}, {}
+
+    def put(field_name, value, where):
+        if field_name in flat:
+            raise InvalidParameterError(where, _plain(value), f"sets {field_name}, which "
+                                        "is already set elsewhere in the file")
+        flat[field_name] = value
+
+    for key, value in data.items():
+        if key in SECTIONS:
+            if not isinstance(value, dict):
+                raise InvalidParameterError(key, value, "must be a [section] of keys")
+            for item, item_value in value.items():
+                spec = SECTIONS[key].get(item)
+                if spec is None:
+                    raise InvalidParameterError(f"{key}.{item}", item_value,
+                                                f"is not a setting of [{key}]; known: "
+                                                f"{', '.join(SECTIONS[key])}")
+                converted = spec.convert(item_value) if spec.convert else item_value
+                put(spec.field, converted, f"{key}.{item}")
+        elif key == "estimators":
+            if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+                raise InvalidParameterError(key, value, "must hold [estimators.NAME] sections")
+            for name, settings in value.items():
+                cls = _estimator_class(name)
+                for item, item_value in settings.items():
+                    if item in cls.owned_fields:
+                        put(cls.scenario_defaults[item], item_value, f"estimators.{name}.{item}")
+                    else:
+                        options.setdefault(name, {})[item] = item_value
+        else:
+            put(key, value, key)
+    if options:
+        put("estimator_options", options, "estimators")
+    return flat
+
+
+def _estimator_class(name: str):
+    if name not in ESTIMATORS:
+        raise InvalidParameterError(f"estimators.{name}", name,
+                                    f"is not an estimator; known: {', '.join(ESTIMATORS)}")
+    return ESTIMATORS[name]
+
+
+def _checked_options(scenario: Scenario, options) -> dict:
+    """Validate ``[estimators.NAME]`` options by building each estimator from the scenario."""
+    if not isinstance(options, dict):
+        raise InvalidParameterError("estimator_options", options,
+                                    "must map estimator names to their settings")
+    checked = {}
+    for name, settings in options.items():
+        cls = _estimator_class(name)
+        if not isinstance(settings, dict):
+            raise InvalidParameterError(f"estimators.{name}", settings,
+                                        "must be a section of settings")
+        known = cls.option_names()
+        for item, value in settings.items():
+            if item in cls.owned_fields:
+                raise InvalidParameterError(
+                    f"estimators.{name}.{item}", _plain(value),
+                    f"is the scenario setting {cls.scenario_defaults[item]}; set that instead")
+            if item not in known:
+                raise InvalidParameterError(
+                    f"estimators.{name}.{item}", _plain(value),
+                    f"is not a setting of {name}; known: {', '.join(known)}")
+        checked[name] = dict(settings)
+    for name in checked:
+        try:
+            ESTIMATORS[name].from_scenario(_OptionsView(scenario, checked))
+        except InvalidParameterError as err:
+            if err.name in checked[name]:
+                raise InvalidParameterError(f"estimators.{name}.{err.name}", err.value,
+                                            err.rule) from None
+            raise
+    return checked
+
+
+class _OptionsView:
+    """The scenario as an estimator's ``from_scenario`` sees it, with options
+    not yet stored (the scenario is frozen while it validates itself)."""
+
+    def __init__(self, scenario: Scenario, options: dict):
+        self._scenario = scenario
+        self.estimator_options = options
+
+    def __getattr__(self, name):
+        return getattr(self._scenario, name)

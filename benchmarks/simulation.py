@@ -5,11 +5,10 @@ same gyro and star tracker readings, so their errors differ only by what the
 estimators do with them.
 
 Randomness: ``seed`` feeds :class:`numpy.random.SeedSequence`, which spawns
-one independent stream for the gyro and one for the star tracker (see
-:func:`sensor_generators`). So a run's
-numbers depend on the seed alone, and changing the star tracker's rate does
-not change the gyro noise (the star tracker noise is drawn at every step and
-sampled, as Simulink's noise block does).
+independent streams for the gyro, the star tracker and the star tracker's
+random dropouts (see :func:`sensor_generators`). So a run's numbers depend on
+the seed alone, and changing the star tracker's rate does not change the gyro
+noise (the star tracker noise is drawn only at its readings).
 """
 from __future__ import annotations
 
@@ -22,12 +21,11 @@ from benchmarks.metrics import attitude_error_deg
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free
 from dynamics.validation import InvalidParameterError
-from estimators import ESTIMATORS, AttitudeEstimator
-from sensors.gyro import Gyro
-from sensors.star_tracker import StarTracker
+from estimators import ESTIMATORS, AttitudeEstimator, EstimateTrace
+from sensors.star_tracker import RotationStarTracker
 
 #: The workshop's estimators in the order it introduces them.
-WORKSHOP_ESTIMATORS = tuple(ESTIMATORS)
+WORKSHOP_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf")
 
 
 @dataclass(frozen=True)
@@ -39,18 +37,23 @@ class SensorData:
     omega_meas_radps : (N, 3) gyro readings, rad/s, body frame
     star_tracker_quat : (N, 4) held star tracker readings, scalar-first
     available : (N,) bool, True where a new star tracker reading was taken
+    gyro_bias_radps : (N, 3) the gyro's true bias β_k, rad/s (zeros for the
+        workshop gyro)
     """
 
     omega_meas_radps: np.ndarray
     star_tracker_quat: np.ndarray
     available: np.ndarray
+    gyro_bias_radps: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class RunResult:
     """One seed's truth, sensor data and every estimator's output.
 
-    ``estimates[name]`` is ``(N, 4)``; ``error_deg[name]`` is ``(N,)``.
+    ``estimates[name]`` is ``(N, 4)``; ``error_deg[name]`` is ``(N,)``;
+    ``traces[name]`` (when asked for) is the estimator's
+    :class:`~estimators.EstimateTrace`, with its covariances and bias estimate.
     """
 
     scenario: Scenario
@@ -60,6 +63,7 @@ class RunResult:
     estimates: dict
     error_deg: dict
     labels: dict
+    traces: dict | None = None
 
     @property
     def time_s(self) -> np.ndarray:
@@ -80,44 +84,41 @@ def _truth_cached(dt, n_steps, inertia, q0, omega0) -> RigidBodyTruth:
                                 np.frombuffer(omega0), np.arange(n_steps) * dt)
 
 
-def sensor_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
-    """The gyro's and the star tracker's random generators for ``seed``.
+def sensor_generators(seed: int) -> tuple[np.random.Generator, ...]:
+    """The gyro's, the star tracker's and the star tracker dropouts' random
+    generators for ``seed``.
 
-    Both use numpy's SFC64 bit generator, which draws normals about 20 %
+    All use numpy's SFC64 bit generator, which draws normals about 20 %
     faster than the default PCG64 and matters in Monte Carlo campaigns, where
-    drawing the noise is half the work.
+    drawing the noise is half the work. (``SeedSequence.spawn`` numbers its
+    children, so adding the third stream left the first two as they were.)
     """
-    gyro_seq, star_seq = np.random.SeedSequence(seed).spawn(2)
-    return (np.random.Generator(np.random.SFC64(gyro_seq)),
-            np.random.Generator(np.random.SFC64(star_seq)))
+    return tuple(np.random.Generator(np.random.SFC64(sequence))
+                 for sequence in np.random.SeedSequence(seed).spawn(3))
 
 
 def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> SensorData:
     """Gyro and star tracker readings of ``truth`` for ``seed``."""
-    gyro_rng, star_rng = sensor_generators(seed)
-    gyro = Gyro(scenario.gyro_noise, scenario.dt)
-    star_tracker = StarTracker(scenario.star_tracker_noise, scenario.time_between_measurements,
-                               scenario.dt)
-    readings = star_tracker.measure(truth.q_true, star_rng)
-    return SensorData(omega_meas_radps=gyro.measure(truth.omega_true_radps, gyro_rng),
-                      star_tracker_quat=readings.quat, available=readings.available)
+    gyro_rng, star_rng, dropout_rng = sensor_generators(seed)
+    star_tracker = scenario.build_star_tracker()
+    if isinstance(star_tracker, RotationStarTracker):
+        readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng)
+    else:
+        readings = star_tracker.measure(truth.q_true, star_rng)
+    omega, bias = scenario.build_gyro().measure_with_bias(truth.omega_true_radps, gyro_rng)
+    return SensorData(omega_meas_radps=omega, star_tracker_quat=readings.quat,
+                      available=readings.available, gyro_bias_radps=bias)
 
 
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
-    """The estimator called ``name`` with its settings taken from ``scenario``."""
+    """The estimator called ``name``, built from ``scenario`` (its ``from_scenario``)."""
     if name not in ESTIMATORS:
         raise InvalidParameterError("estimator", name, f"must be one of {', '.join(ESTIMATORS)}")
-    cls = ESTIMATORS[name]
-    if name == "ekf":
-        return cls(dt=scenario.dt, pc_exponent=scenario.pc_exponent,
-                   measurement_covariance=scenario.measurement_covariance,
-                   initial_state=scenario.initial_state,
-                   initial_covariance=scenario.initial_covariance)
-    return cls(dt=scenario.dt, initial_attitude=scenario.initial_state)
+    return ESTIMATORS[name].from_scenario(scenario)
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
-             seed: int = 0) -> RunResult:
+             seed: int = 0, *, traces: bool = False) -> RunResult:
     """Simulate ``scenario`` for ``seed`` and run each estimator on the same data.
 
     Parameters
@@ -130,18 +131,26 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         ``name``).
     seed : int
         Seed of the sensor noise.
+    traces : bool
+        Also keep each estimator's covariances and bias estimates
+        (:meth:`~estimators.AttitudeEstimator.track`), in ``RunResult.traces``.
     """
     scenario = scenario or Scenario()
     truth = simulate_truth(scenario)
     sensors = simulate_sensors(scenario, truth, seed)
-    estimates, errors, labels = {}, {}, {}
+    estimates, errors, labels, kept = {}, {}, {}, {}
     for item in estimators:
         estimator = build_estimator(item, scenario) if isinstance(item, str) else item
-        q_est = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
-                              sensors.available)
+        record = (sensors.omega_meas_radps, sensors.star_tracker_quat, sensors.available)
+        if traces:
+            kept[estimator.name] = estimator.track(*record)
+            q_est = kept[estimator.name].quat
+        else:
+            q_est = estimator.run(*record)
         estimates[estimator.name] = q_est
         errors[estimator.name] = attitude_error_deg(truth.q_true, q_est)
         labels[estimator.name] = estimator.label
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
-                     estimates=estimates, error_deg=errors, labels=labels)
+                     estimates=estimates, error_deg=errors, labels=labels,
+                     traces=kept if traces else None)
 

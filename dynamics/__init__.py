@@ -9,12 +9,16 @@ rad/s in the body frame; the kinematics are ``q_dot = 0.5 * q ⊗ [0, ω]``.
 """
 from dynamics.quaternion import (
     attitude_error_rad,
+    attitude_error_vector_rad,
     from_rotation,
     kinematics_matrix,
     normalize,
     quat_conjugate,
+    quat_from_rotvec,
     quat_multiply,
     rotation_matrix,
+    rotvec_from_quat,
+    skew,
     to_rotation,
 )
 from dynamics.rigid_body import (
@@ -31,14 +35,18 @@ __all__ = [
     "RigidBodyTruth",
     "angular_momentum_body",
     "attitude_error_rad",
+    "attitude_error_vector_rad",
     "closed_form_body_rates",
     "from_rotation",
     "kinematics_matrix",
     "kinetic_energy",
     "normalize",
     "quat_conjugate",
+    "quat_from_rotvec",
     "quat_multiply",
     "rotation_matrix",
+    "rotvec_from_quat",
     "simulate_torque_free",
+    "skew",
     "to_rotation",
 ]

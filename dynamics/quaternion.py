@@ -105,3 +105,53 @@ def attitude_error_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     """
     dot = np.abs(np.sum(np.asarray(q_true, dtype=float) * np.asarray(q_est, dtype=float), axis=-1))
     return 2.0 * np.arccos(np.minimum(1.0, dot))
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    r"""The cross-product matrix :math:`[v\times]` with :math:`[v\times] u = v \times u`."""
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def quat_from_rotvec(theta_rad: np.ndarray) -> np.ndarray:
+    r"""The unit quaternion of the rotation vector :math:`\theta` (the exponential map).
+
+    .. math:: \delta q(\theta) = \bigl[\cos\tfrac{|\theta|}2,\
+              \tfrac{\theta}{|\theta|}\sin\tfrac{|\theta|}2\bigr]
+
+    For ``(..., 3)`` returns ``(..., 4)``. Exact at ``θ = 0`` (the series
+    ``sin(x/2)/x = ½ - x²/48`` below 1e-4 rad, where it is exact in floating point).
+    """
+    theta = np.asarray(theta_rad, dtype=float)
+    angle = np.linalg.norm(theta, axis=-1, keepdims=True)
+    small = angle < 1e-4
+    half_sinc = np.where(small, 0.5 - angle * angle / 48.0,
+                         np.sin(0.5 * angle) / np.where(small, 1.0, angle))
+    return np.concatenate([np.cos(0.5 * angle), half_sinc * theta], axis=-1)
+
+
+def rotvec_from_quat(q: np.ndarray) -> np.ndarray:
+    r"""The rotation vector of a unit quaternion (the logarithm map), angle in [0, π].
+
+    ``q`` and ``-q`` give the same vector: the sign is aligned to ``w >= 0``
+    first. For ``(..., 4)`` returns ``(..., 3)``.
+    """
+    q = np.asarray(q, dtype=float)
+    q = np.where(q[..., :1] < 0, -q, q)
+    vector_norm = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(vector_norm, q[..., :1])
+    # angle / |v| → 2 / w as |v| → 0 (q unit, so w → 1).
+    scale = np.where(vector_norm < 1e-12, 2.0 / np.maximum(q[..., :1], 1e-300),
+                     angle / np.where(vector_norm < 1e-12, 1.0, vector_norm))
+    return scale * q[..., 1:]
+
+
+def attitude_error_vector_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    r"""The body-frame small-angle error :math:`\delta\theta` of an estimate, radians.
+
+    The rotation vector of :math:`\hat q^{-1} \otimes q`, so that
+    :math:`q = \hat q \otimes \delta q(\delta\theta)` (the error state of the
+    multiplicative EKF). Its norm is :func:`attitude_error_rad`; its components
+    are the roll, pitch and yaw errors about the body axes.
+    """
+    return rotvec_from_quat(quat_multiply(quat_conjugate(q_est), q_true))

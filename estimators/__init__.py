@@ -6,18 +6,22 @@ name                           class
 ``dead-reckoning``             :class:`DeadReckoning`
 ``dead-reckoning-resets``      :class:`DeadReckoningWithResets`
 ``ekf``                        :class:`QuaternionEKF` (filterpy EKF)
+``mekf``                       :class:`MultiplicativeEKF` (filterpy KF)
 =============================  ==========================================
 
 Each takes keyword-only settings, steps on 1-D arrays and returns ``(4,)``
 scalar-first quaternions; see :class:`estimators.base.AttitudeEstimator`.
 """
-from estimators.base import AttitudeEstimator
+from estimators.base import AttitudeEstimator, EstimateTrace
 from estimators.dead_reckoning import DeadReckoning
 from estimators.dead_reckoning_resets import DeadReckoningWithResets
 from estimators.ekf import QuaternionEKF
+from estimators.mekf import MultiplicativeEKF
 
-#: Command-line name → class, in the order the workshop introduces them.
-ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF)}
+#: Command-line name → class: the workshop's three in the order it introduces
+#: them, then the flight filters. Adding an estimator is one line here.
+ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
+                                        MultiplicativeEKF)}
 
 __all__ = ["ESTIMATORS", "AttitudeEstimator", "DeadReckoning", "DeadReckoningWithResets",
-           "QuaternionEKF"]
+           "EstimateTrace", "MultiplicativeEKF", "QuaternionEKF"]

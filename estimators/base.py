@@ -10,8 +10,23 @@ estimator for another is one line::
 
 All arrays in and out are 1-D per step (``(3,)`` rates, ``(4,)``
 quaternions) or stacked ``(N, ...)`` for whole runs.
+
+Every estimator answers the same questions about the estimate :meth:`step`
+last returned: :attr:`attitude` ``(4,)``, :attr:`attitude_covariance`
+``(3, 3)`` in rad² of the body-frame small-angle error ``δθ`` with
+``q_true = q̂ ⊗ δq(δθ)`` (None if it keeps none), :attr:`bias_radps` and
+:attr:`bias_covariance` (None if it estimates no gyro bias). :meth:`track`
+collects them over a whole record.
+
+Estimators build themselves from a scenario with :meth:`from_scenario`: the
+scenario supplies the defaults (:attr:`scenario_defaults`), its
+``[estimators.NAME]`` section (``scenario.estimator_options[NAME]``) overrides
+them. The scenario is duck-typed: this package never imports ``benchmarks``.
 """
 from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,14 +48,61 @@ class AttitudeEstimator:
 
     name = "estimator"
     label = "Estimator"
+    #: Constructor keyword → the scenario attribute its default comes from.
+    scenario_defaults = {"initial_attitude": "initial_state"}
+    #: Keywords of :attr:`scenario_defaults` whose scenario field belongs to
+    #: this estimator alone: ``[estimators.NAME]`` sets that field itself (so
+    #: campaigns that vary it per run, such as the EKF's ``pc_exponent``, see it).
+    owned_fields: tuple = ()
 
     def __init__(self, *, dt: float, initial_attitude):
         self.dt = finite_number("dt", dt, strictly_positive=True)
         self.initial_attitude = nonzero_quaternion("initial_state", initial_attitude)
 
+    @classmethod
+    def settings_from_scenario(cls, scenario) -> dict:
+        """Constructor keywords taken from ``scenario`` before its
+        ``[estimators.NAME]`` options (override to derive more, e.g. noise
+        densities from the sensor models)."""
+        settings = {"dt": scenario.dt}
+        settings.update({keyword: getattr(scenario, field)
+                         for keyword, field in cls.scenario_defaults.items()})
+        return settings
+
+    @classmethod
+    def from_scenario(cls, scenario, **overrides) -> "AttitudeEstimator":
+        """This estimator as ``scenario`` configures it (``overrides`` last)."""
+        settings = cls.settings_from_scenario(scenario)
+        settings.update(getattr(scenario, "estimator_options", {}).get(cls.name, {}))
+        settings.update(overrides)
+        return cls(**settings)
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        """The settings an ``[estimators.NAME]`` section may give: the
+        constructor's keyword-only arguments but ``dt`` (the scenario's)."""
+        return tuple(name for name, parameter in inspect.signature(cls.__init__).parameters.items()
+                     if parameter.kind is inspect.Parameter.KEYWORD_ONLY and name != "dt")
+
     def reset(self) -> None:
         """Return to the initial estimate, forgetting all measurements."""
         raise NotImplementedError
+
+    @property
+    def attitude_covariance(self) -> np.ndarray | None:
+        """``(3, 3)`` rad²: covariance of the body-frame error of the last
+        estimate, or None for an estimator that keeps no covariance."""
+        return None
+
+    @property
+    def bias_radps(self) -> np.ndarray | None:
+        """``(3,)`` rad/s: the gyro bias estimate, or None if not estimated."""
+        return None
+
+    @property
+    def bias_covariance(self) -> np.ndarray | None:
+        """``(3, 3)`` (rad/s)²: covariance of the bias estimate, or None."""
+        return None
 
     def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None
              ) -> np.ndarray:
@@ -75,5 +137,45 @@ class AttitudeEstimator:
             estimates[k] = self.step(omega[k], star[k] if available[k] else None)
         return estimates
 
+    def track(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
+              available: np.ndarray) -> "EstimateTrace":
+        """Like :meth:`run`, also collecting the covariance and bias estimate
+        of every step (None where the estimator keeps none)."""
+        self.reset()
+        omega = np.asarray(omega_meas_radps, dtype=float)
+        star = np.asarray(star_tracker_quat, dtype=float)
+        available = np.asarray(available, dtype=bool)
+        n = len(omega)
+        quat = np.empty((n, 4))
+        columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
+        for k in range(n):
+            quat[k] = self.step(omega[k], star[k] if available[k] else None)
+            for key in columns:
+                value = getattr(self, key)
+                if value is None:
+                    continue
+                if columns[key] is None:
+                    columns[key] = np.empty((n,) + np.shape(value))
+                columns[key][k] = value
+        return EstimateTrace(quat=quat, **columns)
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(dt={self.dt!r})"
+
+
+@dataclass(frozen=True)
+class EstimateTrace:
+    """An estimator's outputs over a record of ``N`` steps.
+
+    Attributes
+    ----------
+    quat : (N, 4) estimates, scalar-first
+    attitude_covariance : (N, 3, 3) rad², or None
+    bias_radps : (N, 3) rad/s, or None
+    bias_covariance : (N, 3, 3) (rad/s)², or None
+    """
+
+    quat: np.ndarray
+    attitude_covariance: np.ndarray | None = None
+    bias_radps: np.ndarray | None = None
+    bias_covariance: np.ndarray | None = None

@@ -7,15 +7,26 @@ with ``f`` the normalised first-order step of :mod:`estimators.model`
 power ``p`` makes the error grow as an angle random walk: after ``t``
 seconds each axis has drifted by about ``√(p t)`` radians (Markley &
 Crassidis 2014, §6.2.2).
+
+Which step a reading belongs to: the workshop's order (the default,
+``rate_timing="workshop"``) uses :math:`\tilde\omega_k` to reach step ``k``.
+The flight gyro model of :mod:`sensors.gyro` reports :math:`\tilde\omega_k`
+as the average rate from :math:`t_k` to :math:`t_{k+1}`, as the filters use it;
+``rate_timing="step-average"`` matches that,
+:math:`\hat q_k = f(\hat q_{k-1}, \tilde\omega_{k-1})` with
+:math:`\hat q_0 = q_0`, and so avoids a constant lag of one step's rotation
+(23 arcsec at 0.0011 rad/s and 10 Hz).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from dynamics.validation import InvalidParameterError
 from estimators.base import AttitudeEstimator
 from estimators.model import propagate
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
+RATE_TIMINGS = ("workshop", "step-average")
 
 
 class DeadReckoning(AttitudeEstimator):
@@ -26,19 +37,39 @@ class DeadReckoning(AttitudeEstimator):
     dt : float
         Gyro step, seconds.
     initial_attitude : (4,) array-like
-        Starting estimate ``q̂[-1]``, scalar-first; normalised.
+        Starting estimate (``q̂[-1]``, or ``q̂[0]`` with step-average timing),
+        scalar-first; normalised.
+    rate_timing : {"workshop", "step-average"}
+        Whether ``ω̃[k]`` takes the estimate to step ``k`` (the workshop) or
+        from ``k`` to ``k + 1`` (see the module docstring).
     """
 
     name = "dead-reckoning"
     label = "Dead Reckoning"
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY):
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
+                 rate_timing: str = "workshop"):
         super().__init__(dt=dt, initial_attitude=initial_attitude)
+        if rate_timing not in RATE_TIMINGS:
+            raise InvalidParameterError("rate_timing", rate_timing,
+                                        f"must be one of {', '.join(RATE_TIMINGS)}")
+        self.rate_timing = rate_timing
         self.reset()
 
     def reset(self) -> None:
         self.attitude = self.initial_attitude.copy()
+        self._pending_rate = None
+
+    def _advance(self, omega_meas_radps) -> None:
+        """Propagate with the rate that belongs to this step under ``rate_timing``."""
+        omega = np.asarray(omega_meas_radps, float)
+        if self.rate_timing == "workshop":
+            self.attitude = propagate(self.attitude, omega, self.dt)
+            return
+        if self._pending_rate is not None:
+            self.attitude = propagate(self.attitude, self._pending_rate, self.dt)
+        self._pending_rate = omega
 
     def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        self.attitude = propagate(self.attitude, np.asarray(omega_meas_radps, float), self.dt)
+        self._advance(omega_meas_radps)
         return self.attitude.copy()

@@ -28,13 +28,15 @@ class DeadReckoningWithResets(DeadReckoning):
         Gyro step, seconds.
     initial_attitude : (4,) array-like
         Starting estimate ``q̂[-1]``, scalar-first; normalised.
+    rate_timing : {"workshop", "step-average"}
+        As for :class:`~estimators.DeadReckoning`.
     """
 
     name = "dead-reckoning-resets"
     label = "Dead Reckoning w/ Star Tracker Resets"
 
     def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        if star_tracker_quat is None:
-            return super().step(omega_meas_radps)
-        self.attitude = np.array(star_tracker_quat, dtype=float)
+        self._advance(omega_meas_radps)
+        if star_tracker_quat is not None:
+            self.attitude = np.array(star_tracker_quat, dtype=float)
         return self.attitude.copy()

@@ -33,7 +33,20 @@ about users having to discover exactly this). The state is kept as a 1-D
 
 This additive filter lets the estimate leave the unit sphere between steps
 and ignores the quaternion's norm constraint in ``P``; the multiplicative EKF
-of Markley & Crassidis (2014, §6.2) is the standard remedy.
+of Markley & Crassidis (2014, §6.2), :mod:`estimators.mekf`, is the standard
+remedy.
+
+To compare it with filters whose error state is a body-frame small angle,
+its 4x4 ``P`` is projected (:attr:`QuaternionEKF.attitude_covariance`): with
+:math:`q = \hat q \otimes \delta q(\delta\theta) \approx \hat q + \tfrac12
+\Xi(\hat q)\,\delta\theta` and :math:`\Xi^\mathsf{T}\Xi = I_3`,
+:math:`\Xi^\mathsf{T}\hat q = 0` for a unit :math:`\hat q`,
+
+.. math:: \delta\theta = 2\,\Xi(\hat q)^\mathsf{T}\,\delta q, \qquad
+          P_{\theta} = 4\,\Xi(\hat q)^\mathsf{T} P\, \Xi(\hat q),
+
+evaluated at the normalised estimate; the component of ``P`` along
+:math:`\hat q` (the norm direction, which is no attitude) drops out.
 """
 from __future__ import annotations
 
@@ -42,6 +55,7 @@ import math
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
+from dynamics.quaternion import kinematics_matrix
 from dynamics.validation import InvalidParameterError, finite_number
 from estimators.base import AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
@@ -108,6 +122,10 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
 
     name = "ekf"
     label = "EKF"
+    scenario_defaults = {"initial_state": "initial_state", "pc_exponent": "pc_exponent",
+                         "measurement_covariance": "measurement_covariance",
+                         "initial_covariance": "initial_covariance"}
+    owned_fields = ("pc_exponent", "measurement_covariance", "initial_covariance")
 
     def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
                  measurement_covariance=1.0, initial_state=IDENTITY,
@@ -129,11 +147,19 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         self.P = self.initial_covariance * _IDENTITY_4
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        self._output_x, self._output_P = self.x, self.P
 
     @property
     def attitude(self) -> np.ndarray:
-        """The current state ``x`` as a ``(4,)`` array (not renormalised)."""
-        return self.x
+        """The estimate :meth:`step` last returned, ``(4,)`` (not renormalised)."""
+        return self._output_x.copy()
+
+    @property
+    def attitude_covariance(self) -> np.ndarray:
+        """``4 Ξ(q̂)ᵀ P Ξ(q̂)`` (rad²) for the last estimate and its ``P``
+        (see the module docstring)."""
+        xi = kinematics_matrix(self._output_x / np.sqrt(self._output_x @ self._output_x))
+        return 4.0 * xi.T @ self._output_P @ xi
 
     def predict_x(self, u=np.zeros(3)) -> None:
         """Nonlinear state prediction ``x ← f(x, u)`` with ``u`` the gyro rate (rad/s);
@@ -141,13 +167,15 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
 
     def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        estimate = self.x.copy()
+        # filterpy replaces x and P with new arrays, so keeping references is a snapshot.
+        self._output_x, self._output_P = self.x, self.P
         if star_tracker_quat is not None:
             self.update(np.asarray(star_tracker_quat, dtype=float),
                         _measurement_jacobian, _measurement_function)
-            if self.output == "posterior":
-                estimate = self.x.copy()
         elif self.output == "posterior":
             self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        if self.output == "posterior":
+            self._output_x, self._output_P = self.x, self.P
+        estimate = self._output_x.copy()
         self.predict(u=omega_meas_radps)
         return estimate

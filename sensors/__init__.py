@@ -1,5 +1,11 @@
 """What the spacecraft measures: a rate gyro and a star tracker.
 
+:class:`Gyro` is the standard gyro model (angle random walk, bias random
+walk, scale factor and misalignment); the workshop's gyro is its special case
+with no bias. :class:`StarTracker` is the workshop's (additive noise on the
+quaternion); :class:`RotationStarTracker` a flight-like one (a small error
+rotation in arcseconds, dropouts, sign conventions).
+
 Noise is specified as Simulink's band-limited white noise "power" ``p``:
 sampled every ``Ts`` seconds it is a zero-mean Gaussian sequence with
 variance ``p / Ts`` per component (see :mod:`sensors.noise` for conversions
@@ -7,19 +13,40 @@ to per-sample standard deviation and angle random walk).
 """
 from sensors.gyro import Gyro
 from sensors.noise import (
+    allan_deviation,
     arw_deg_per_rthr_to_noise_power,
+    arw_deg_per_rthr_to_rad_per_rts,
+    arw_rad_per_rts_to_deg_per_rthr,
+    deg_per_hr_to_radps,
     noise_power_to_arw_deg_per_rthr,
     noise_power_to_std,
+    radps_to_deg_per_hr,
+    rrw_deg_per_hr_rthr_to_rad_per_s1p5,
+    rrw_rad_per_s1p5_to_deg_per_hr_rthr,
     std_to_noise_power,
 )
-from sensors.star_tracker import StarTracker, StarTrackerReadings
+from sensors.star_tracker import (
+    ARCSEC_PER_RAD,
+    RotationStarTracker,
+    StarTracker,
+    StarTrackerReadings,
+)
 
 __all__ = [
+    "ARCSEC_PER_RAD",
     "Gyro",
+    "RotationStarTracker",
     "StarTracker",
     "StarTrackerReadings",
+    "allan_deviation",
     "arw_deg_per_rthr_to_noise_power",
+    "arw_deg_per_rthr_to_rad_per_rts",
+    "arw_rad_per_rts_to_deg_per_rthr",
+    "deg_per_hr_to_radps",
     "noise_power_to_arw_deg_per_rthr",
     "noise_power_to_std",
+    "radps_to_deg_per_hr",
+    "rrw_deg_per_hr_rthr_to_rad_per_s1p5",
+    "rrw_rad_per_s1p5_to_deg_per_hr_rthr",
     "std_to_noise_power",
 ]

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.scenario import Scenario, field_names
+from benchmarks.scenario import WORKSHOP_FIELDS, Scenario
 from dynamics.validation import InvalidParameterError
 
 DEFAULT_FILE = Path(__file__).resolve().parents[1] / "scenarios" / "default.toml"
@@ -22,9 +22,9 @@ def test_defaults_are_the_workshop_values():
     assert s.time_s[-1] == pytest.approx(50.0)
 
 
-def test_shipped_default_file_matches_the_defaults_and_names_every_field():
+def test_shipped_default_file_matches_the_defaults_and_names_every_workshop_field():
     with DEFAULT_FILE.open("rb") as handle:
-        assert set(tomllib.load(handle)) == set(field_names())
+        assert set(tomllib.load(handle)) == set(WORKSHOP_FIELDS)
     assert Scenario.from_toml(DEFAULT_FILE).as_dict() == Scenario().as_dict()
 
 
@@ -57,3 +57,71 @@ def test_bad_values_name_the_parameter(changes, name):
 def test_quaternions_are_normalised():
     s = Scenario(initial_attitude_quat=[2.0, 0, 0, 0])
     assert np.array_equal(s.initial_attitude_quat, [1.0, 0, 0, 0])
+
+
+FLIGHT_FILE = DEFAULT_FILE.with_name("flight.toml")
+
+
+def test_flight_file_sections_reach_their_fields():
+    s = Scenario.from_toml(FLIGHT_FILE)
+    assert (s.dt, s.tstop, s.time_between_measurements) == (0.1, 3600.0, 1.0)
+    assert s.gyro_noise == 1e-13 and s.gyro_bias_random_walk == pytest.approx(10 ** 0.5 * 1e-10)
+    # [gyro] initial_bias_deg_per_hr: 0.1 deg/h is 0.1 π / (180 · 3600) rad/s.
+    assert np.allclose(s.gyro_initial_bias_radps, 0.1 * np.pi / 180 / 3600, rtol=1e-15)
+    assert s.star_tracker_model == "rotation"
+    assert np.array_equal(s.star_tracker_sigma_arcsec, [6.0, 6.0, 40.0])
+    # [estimators.ekf] keys the EKF owns set the scenario fields (campaigns vary
+    # them per run); the others are that estimator's options.
+    assert s.pc_exponent == -28.5 and s.initial_covariance == 0.1
+    assert s.estimator_options["ekf"]["output"] == "posterior"
+    assert "pc_exponent" not in s.estimator_options["ekf"]
+    assert not s.is_workshop_sensors and Scenario().is_workshop_sensors
+
+
+def test_sections_and_flat_keys_mix_and_units_convert(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text("tstop = 2.0\n[gyro]\narw_deg_per_rthr = 0.5\n"
+                    "bias_rw_deg_per_hr_rthr = 0.01\n[truth]\ninitial_rate_radps = [0, 0, 0.1]\n")
+    s = Scenario.from_toml(path)
+    assert s.tstop == 2.0 and np.array_equal(s.initial_rate_radps, [0, 0, 0.1])
+    assert s.gyro_noise == pytest.approx((0.5 * np.pi / 180 / 60) ** 2, rel=1e-15)
+    assert s.gyro_bias_random_walk == pytest.approx(0.01 * np.pi / 180 / 3600 / 60, rel=1e-15)
+
+
+@pytest.mark.parametrize("content, name, rule", [
+    ("[gyro]\nwobble = 1\n", "gyro.wobble", "is not a setting of [gyro]"),
+    ("[star_tracker]\nmodel = 'laser'\n", "star_tracker_model", "must be one of"),
+    ("[star_tracker]\nsign = 'up'\n", "star_tracker_sign", "must be one of"),
+    ("gyro_noise = 1e-5\n[gyro]\nnoise_power = 1e-6\n", "gyro.noise_power", "already set"),
+    ("[gyro]\nnoise_power = 1e-6\narw_deg_per_rthr = 1\n", "gyro.arw_deg_per_rthr",
+     "already set"),
+    ("[estimators.ukf]\nalpha = 1\n", "estimators.ukf", "is not an estimator"),
+    ("[estimators.mekf]\nwobble = 1\n", "estimators.mekf.wobble", "is not a setting of mekf"),
+    ("[estimators.mekf]\ninitial_attitude_sigma_rad = -1\n",
+     "estimators.mekf.initial_attitude_sigma_rad", "must be >= 0"),
+    ("[estimators.ekf]\noutput = 'smoothed'\n", "estimators.ekf.output", "must be"),
+    ("[estimators.ekf]\npc_exponent = 'high'\n", "pc_exponent", "must be a number"),
+    ("truth = 3\n", "truth", "must be a [section]"),
+    ("[star_tracker]\noutages_s = [[3.0, 1.0]]\n", "star_tracker_outages_s", "start < stop"),
+])
+def test_bad_sections_name_the_key_and_its_section(tmp_path, content, name, rule):
+    path = tmp_path / "s.toml"
+    path.write_text(content)
+    with pytest.raises(InvalidParameterError) as info:
+        Scenario.from_toml(path)
+    assert str(info.value).startswith(f"{name} = ") and rule in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_estimators_build_from_the_scenario_with_their_options():
+    from benchmarks.simulation import build_estimator
+    s = Scenario.from_toml(FLIGHT_FILE)
+    ekf = build_estimator("ekf", s)
+    assert ekf.pc_exponent == -28.5 and ekf.output == "posterior"
+    assert ekf.initial_attitude[0] == pytest.approx(0.92759252)
+    assert build_estimator("dead-reckoning", s).rate_timing == "step-average"
+    assert build_estimator("dead-reckoning", Scenario()).rate_timing == "workshop"
+    # A scenario as JSON and back is the same scenario (campaign manifests).
+    import json
+    again = json.loads(json.dumps(s.as_dict()))
+    assert Scenario(**again).as_dict() == s.as_dict()

@@ -148,7 +148,7 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, threads):
     """Draw each run's next block of standard normals, in the per-run path's order."""
     def fill(indices):
         for r in indices:
-            gyro_rng, star_rng = generators[r]
+            gyro_rng, star_rng = generators[r][:2]
             gyro_rng.standard_normal(out=gyro_out[r])
             if star_counts[r]:
                 star_rng.standard_normal(out=star_out[r, :star_counts[r]])
