@@ -17,6 +17,7 @@ from benchmarks.scenario import Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
 from dynamics.validation import InvalidParameterError
+from estimators import ESTIMATORS
 
 PROG = "attitude-bench"
 EXIT_USAGE = 2
@@ -84,10 +85,10 @@ def _number_list(text: str) -> list[float]:
 
 def _estimator_list(text: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
-    unknown = [name for name in names if name not in WORKSHOP_ESTIMATORS]
+    unknown = [name for name in names if name not in ESTIMATORS]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
-            f"estimators = {text!r}: must be names from {', '.join(WORKSHOP_ESTIMATORS)}, "
+            f"estimators = {text!r}: must be names from {', '.join(ESTIMATORS)}, "
             "separated by commas")
     return names
 
@@ -128,8 +129,8 @@ def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
 
 
 def _estimator_option(parser, required=True):
-    parser.add_argument("--estimator", required=required, choices=WORKSHOP_ESTIMATORS,
-                        metavar="NAME", help=f"one of {', '.join(WORKSHOP_ESTIMATORS)}")
+    parser.add_argument("--estimator", required=required, choices=tuple(ESTIMATORS),
+                        metavar="NAME", help=f"one of {', '.join(ESTIMATORS)}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -142,8 +143,11 @@ def build_parser() -> argparse.ArgumentParser:
     _estimator_option(run)
     _add_common(run)
 
-    compare = commands.add_parser("compare", help="the three estimators on the same data; "
+    compare = commands.add_parser("compare", help="estimators on the same data; "
                                   "write compare.png and summary.csv")
+    compare.add_argument("--estimators", type=_estimator_list,
+                         default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
+                         help=f"any of {', '.join(ESTIMATORS)} (default: the workshop's three)")
     _add_common(compare)
 
     sweep = commands.add_parser("sweep", help="one estimator, one setting varied; "
@@ -189,7 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "write montecarlo.csv and montecarlo.png")
     montecarlo.add_argument("--estimators", type=_estimator_list,
                             default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
-                            help=f"any of {', '.join(WORKSHOP_ESTIMATORS)} (default all)")
+                            help=f"any of {', '.join(ESTIMATORS)} (default: the workshop's "
+                            "three)")
     montecarlo.add_argument("--runs", type=_whole("runs", 1), default=100, metavar="N",
                             help="number of runs; run i uses seed S + i (default 100)")
     montecarlo.add_argument("--seed", type=_whole("seed", 0), default=0, metavar="S",
@@ -247,7 +252,7 @@ def command_run(args, scenario):
 
 
 def command_compare(args, scenario):
-    _, stats = experiments.compare(scenario, args.seed, args.out)
+    _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
 

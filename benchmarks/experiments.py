@@ -14,12 +14,14 @@ import numpy as np
 
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_csv, write_figure, write_text
-from benchmarks.plots import comparison_figure
+from benchmarks.plots import comparison_figure, flight_figure
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
+from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
 from estimators import ESTIMATORS
+from sensors.noise import radps_to_deg_per_hr
 
 TRACE_COLUMNS = ("time_s", "q_true_w", "q_true_x", "q_true_y", "q_true_z",
                  "q_est_w", "q_est_x", "q_est_y", "q_est_z", "error_deg")
@@ -61,14 +63,40 @@ def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMA
             figure_name: str = "compare.png",
             summary_name: str | None = "summary.csv") -> tuple[RunResult, dict]:
     """Run several estimators on the same data; write the comparison figure and
-    (unless ``summary_name`` is None) the summary table."""
-    result = simulate(scenario, estimators, seed=seed)
+    (unless ``summary_name`` is None) the summary table.
+
+    With the workshop's sensors the figure is the workshop's (total error of
+    each estimator); with flight sensors (a gyro bias model or the rotation
+    star tracker) it is :func:`~benchmarks.plots.flight_figure`: per-axis error
+    with each filter's ±3σ envelope, and the bias estimates against the truth.
+    """
+    workshop = scenario.is_workshop_sensors
+    result = simulate(scenario, estimators, seed=seed, traces=not workshop)
     stats = {name: error_statistics(error) for name, error in result.error_deg.items()}
     if summary_name:
         write_summary(out / summary_name, stats)
-    curves = {result.labels[name]: error for name, error in result.error_deg.items()}
-    write_figure(out / figure_name, comparison_figure(result.time_s, curves))
+    if workshop:
+        curves = {result.labels[name]: error for name, error in result.error_deg.items()}
+        figure = comparison_figure(result.time_s, curves)
+    else:
+        figure = flight_comparison_figure(result)
+    write_figure(out / figure_name, figure)
     return result, stats
+
+
+def flight_comparison_figure(result: RunResult):
+    """The per-axis figure of a run simulated with ``traces=True``."""
+    errors, sigmas, biases = {}, {}, {}
+    for name, trace in result.traces.items():
+        errors[name] = np.degrees(attitude_error_vector_rad(result.truth.q_true, trace.quat))
+        sigmas[name] = (None if trace.attitude_covariance is None else np.degrees(
+            np.sqrt(np.diagonal(trace.attitude_covariance, axis1=1, axis2=2))))
+        if trace.bias_radps is not None:
+            biases[name] = (radps_to_deg_per_hr(trace.bias_radps), radps_to_deg_per_hr(
+                np.sqrt(np.diagonal(trace.bias_covariance, axis1=1, axis2=2))))
+    return flight_figure(result.time_s, errors, sigmas,
+                         radps_to_deg_per_hr(result.sensors.gyro_bias_radps), biases,
+                         result.labels)
 
 
 def write_summary(path: Path, stats: dict) -> None:

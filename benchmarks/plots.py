@@ -118,3 +118,78 @@ class BlittingPillowWriter(PillowWriter):
         # PillowWriter keeps its frames in _frames and writes them in finish().
         self._frames.append(Image.frombuffer("RGBA", canvas.get_width_height(),
                                              bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1))
+
+
+#: Body axes as the per-axis figure names them.
+AXIS_NAMES = ("Roll (x)", "Pitch (y)", "Yaw (z)")
+_ARCSEC_PER_DEG = 3600.0
+#: Below this steady-state size per-axis errors are shown in arcsec, above in degrees.
+ARCSEC_BELOW_DEG = 0.1
+
+
+def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_deg_per_hr,
+                  bias_estimates: dict, labels: dict) -> Figure:
+    """Per-axis attitude error with ±3σ envelopes (left), bias estimates against
+    the true bias (right).
+
+    Parameters
+    ----------
+    time_s : (N,) seconds
+    error_vectors_deg : {name: (N, 3)} body-frame error δθ per axis, degrees
+    sigmas_deg : {name: (N, 3) or None} each filter's own 1σ per axis, degrees
+    bias_true_deg_per_hr : (N, 3) the gyro's true bias, deg/h
+    bias_estimates : {name: ((N, 3) estimate, (N, 3) 1σ)} in deg/h, for
+        estimators that estimate a bias
+    labels : {name: legend label}
+
+    The error axes are symmetric-log: linear within the best filter's
+    steady-state 3σ, logarithmic beyond, so a converged filter, a drifting
+    dead reckoning and a start tens of degrees off are all readable. The unit
+    (arcsec or degrees) follows the size of the steady-state errors.
+    """
+    with sns.axes_style("whitegrid"):
+        figure = Figure(figsize=(14.0, 9.0), layout="constrained")
+        axes = figure.subplots(3, 2, sharex=True, squeeze=False)
+    colors = dict(zip(error_vectors_deg, sns.color_palette("deep", len(error_vectors_deg))))
+    second_half = slice(len(time_s) // 2, None)
+    steady = [3 * np.median(sigma[second_half]) for sigma in sigmas_deg.values()
+              if sigma is not None]
+    if not steady:
+        steady = [np.median(np.abs(e[second_half])) for e in error_vectors_deg.values()]
+    typical_deg = max(min(steady), 1e-12)
+    in_arcsec = typical_deg < ARCSEC_BELOW_DEG
+    scale, unit = (_ARCSEC_PER_DEG, "arcsec") if in_arcsec else (1.0, "deg")
+    for axis in range(3):
+        ax = axes[axis, 0]
+        for name, error in error_vectors_deg.items():
+            color = colors[name]
+            ax.plot(time_s, error[:, axis] * scale, color=color, linewidth=0.8,
+                    label=labels[name])
+            sigma = sigmas_deg.get(name)
+            if sigma is not None:
+                envelope = 3 * sigma[:, axis] * scale
+                ax.fill_between(time_s, -envelope, envelope, color=color, alpha=0.15,
+                                linewidth=0, label=f"{labels[name]} ±3σ")
+        ax.set_yscale("symlog", linthresh=typical_deg * scale)
+        ax.set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
+        ax.set_xlim(time_s[0], time_s[-1])
+        ax = axes[axis, 1]
+        ax.plot(time_s, bias_true_deg_per_hr[:, axis], color="black", linestyle="--",
+                linewidth=1.5, label="True bias")
+        for name, (estimate, sigma) in bias_estimates.items():
+            ax.plot(time_s, estimate[:, axis], color=colors[name], linewidth=1.2,
+                    label=labels[name])
+            ax.fill_between(time_s, estimate[:, axis] - 3 * sigma[:, axis],
+                            estimate[:, axis] + 3 * sigma[:, axis], color=colors[name],
+                            alpha=0.15, linewidth=0, label=f"{labels[name]} ±3σ")
+        truth = bias_true_deg_per_hr[:, axis]
+        span = max(np.ptp(truth), np.abs(truth).max(), 1e-6)
+        ax.set_ylim(truth.min() - 1.5 * span, truth.max() + 1.5 * span)
+        ax.set_ylabel(f"{AXIS_NAMES[axis]} gyro bias (deg/h)")
+    axes[0, 0].set_title("Attitude error per body axis (symmetric log scale)")
+    axes[0, 1].set_title("Gyro bias: estimate against the truth")
+    axes[2, 0].set_xlabel(X_LABEL)
+    axes[2, 1].set_xlabel(X_LABEL)
+    axes[0, 0].legend(loc="upper right", fontsize="small", ncols=2)
+    axes[0, 1].legend(loc="upper right", fontsize="small")
+    return figure

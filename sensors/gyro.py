@@ -86,10 +86,14 @@ class Gyro:
         self.initial_bias_radps = finite_vector("gyro_initial_bias_radps", initial_bias_radps, 3)
         self.scale_misalignment = scale_misalignment_matrix("gyro_scale_misalignment",
                                                             scale_misalignment)
-        # σ_v²/Δt + σ_u²Δt/12: with σ_u = 0 this is exactly the workshop's p/Δt.
-        self.std_radps = math.sqrt(self.noise_power / self.dt
-                                   + self.bias_random_walk ** 2 * self.dt / 12.0)
+        self.std_radps = self.reading_std(self.noise_power, self.dt, self.bias_random_walk)
         self.bias_step_std = self.bias_random_walk * math.sqrt(self.dt)
+
+    @staticmethod
+    def reading_std(noise_power: float, dt: float, bias_random_walk: float) -> float:
+        """Per-sample white-noise σ, rad/s: ``√(σ_v²/Δt + σ_u²Δt/12)``; with
+        ``σ_u = 0`` exactly the workshop's ``√(p/Δt)``."""
+        return math.sqrt(noise_power / dt + bias_random_walk ** 2 * dt / 12.0)
 
     @property
     def normals_per_step(self) -> int:

@@ -2,6 +2,7 @@
 import csv
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -148,3 +149,27 @@ def test_outputs_are_readable_by_others(tmp_path):
     mode = stat.S_IMODE((tmp_path / "summary.csv").stat().st_mode)
     assert mode == 0o644
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temp files left
+
+
+def test_flight_compare_draws_the_per_axis_figure_with_any_estimators(tmp_path, capsys):
+    scenario = tmp_path / "short.toml"
+    flight = (Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml").read_text()
+    scenario.write_text(flight.replace("tstop = 3600.0", "tstop = 30.0"))
+    out = tmp_path / "out"
+    assert main(["compare", "--scenario", str(scenario), "--estimators",
+                 "dead-reckoning,ekf,mekf", "--out", str(out), "--quiet"]) == 0
+    rows = read_csv(out / "summary.csv")
+    assert [row["estimator"] for row in rows] == ["dead-reckoning", "ekf", "mekf"]
+    # The per-axis figure is wider than the workshop's single panel.
+    from PIL import Image
+    with Image.open(out / "compare.png") as image:
+        assert image.size[0] > 1500
+    with Image.open(out / "compare.png") as image, \
+            Image.open(Path(__file__).resolve().parents[1] / "docs" / "compare.png") as workshop:
+        assert image.size != workshop.size
+
+
+def test_compare_rejects_unknown_and_accepts_registry_names(tmp_path, capsys):
+    assert main(["compare", "--estimators", "ekf,usque", "--out", str(tmp_path / "x")]) == 2
+    assert "estimators = 'ekf,usque'" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()

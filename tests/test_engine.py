@@ -95,4 +95,58 @@ def test_bad_run_settings_rejected(settings, name):
 
 def test_unknown_estimator_rejected():
     with pytest.raises(InvalidParameterError, match="estimator"):
-        run_batch(SCENARIO, make_runs(SCENARIO, [0]), ["ukf"])
+        run_batch(SCENARIO, make_runs(SCENARIO, [0]), ["usque"])
+
+
+FLIGHT_FILE = __import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
+#: The flight scenario, shortened, with every sensor feature switched on.
+FLIGHT = Scenario.from_toml(FLIGHT_FILE).replace(
+    tstop=60.0, star_tracker_dropout_probability=0.2, star_tracker_outages_s=((12.0, 17.5),),
+    star_tracker_sign="canonical", initial_attitude_quat=[0.0, 0.6, 0.0, 0.8],
+    gyro_scale_misalignment=[[1e-3, 2e-4, 0.0], [0.0, -5e-4, 1e-4], [3e-4, 0.0, 2e-3]],
+    star_tracker_to_body_quat=[0.9, 0.1, -0.3, 0.2])
+ALL = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf")
+
+
+@pytest.fixture(scope="module")
+def flight_batch():
+    runs = make_runs(FLIGHT, seeds=[0, 5, 9], gyro_noise=[1e-13, 4e-12, 1e-13],
+                     time_between_measurements=[1.0, 0.5, 2.0], pc_exponent=[-28.5, -25.0, -30])
+    return runs, run_batch(FLIGHT, runs, ALL, keep_traces=True, block_steps=77)
+
+
+def test_flight_engine_equals_the_per_run_path_at_every_step(flight_batch):
+    runs, batch = flight_batch
+    for i in range(len(runs)):
+        case = FLIGHT.replace(gyro_noise=float(runs.gyro_noise[i]),
+                              time_between_measurements=float(runs.time_between_measurements[i]),
+                              pc_exponent=float(runs.pc_exponent[i]))
+        reference = simulate(case, ALL, seed=int(runs.seeds[i]), traces=True)
+        scheduled = len(reference.time_s[::round(case.time_between_measurements / case.dt)])
+        assert reference.sensors.available.sum() < scheduled - 5   # dropouts and the outage bite
+        for name in ALL:
+            difference = np.abs(batch.estimates[name][i] - reference.estimates[name])
+            assert difference.max() < 1e-9, (i, name, difference.max())
+        trace = reference.traces["mekf"]
+        assert np.allclose(batch.final["mekf"]["bias_radps"][i], trace.bias_radps[-1],
+                           rtol=1e-9, atol=1e-18)
+        assert np.allclose(batch.final["mekf"]["covariance"][i][:3, :3],
+                           trace.attitude_covariance[-1], rtol=1e-9, atol=0)
+        assert np.allclose(batch.final["gyro_bias_radps"][i], reference.sensors.gyro_bias_radps[-1],
+                           rtol=1e-12, atol=0)
+
+
+def test_flight_runs_are_bit_identical_whatever_their_batch(flight_batch):
+    runs, batch = flight_batch
+    alone = run_batch(FLIGHT, runs.take([1]), ALL, keep_traces=True, block_steps=1000)
+    for name in ALL:
+        assert np.array_equal(alone.estimates[name][0], batch.estimates[name][1])
+
+
+def test_mekf_on_workshop_sensors_equals_the_per_run_path():
+    runs = make_runs(SCENARIO, seeds=[2, 3], star_tracker_noise=[1e-6, 4e-6])
+    batch = run_batch(SCENARIO, runs, ["mekf"], keep_traces=True)
+    for i in range(2):
+        case = SCENARIO.replace(star_tracker_noise=float(runs.star_tracker_noise[i]))
+        reference = simulate(case, ["mekf"], seed=int(runs.seeds[i]))
+        assert np.abs(batch.estimates["mekf"][i] - reference.estimates["mekf"]).max() < 1e-9

@@ -27,7 +27,8 @@ from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, sensor_generators, simulate_truth
 from dynamics.validation import InvalidParameterError
-from sensors.star_tracker import steps_between_readings
+from estimators import ESTIMATORS
+from sensors.star_tracker import RotationStarTracker, steps_between_readings
 
 #: Steps advanced per kernel call. It bounds the noise buffer (B × 2500 × 3
 #: floats, 61 MB at B = 1024) whatever the run length; larger blocks mean
@@ -106,6 +107,9 @@ class BatchResult:
     estimators: tuple
     statistics: dict
     estimates: dict | None = None
+    #: The last step's true gyro bias ``(B, 3)`` and, for the MEKF, its
+    #: output bias estimate ``(B, 3)`` and 6x6 covariance ``(B, 6, 6)``.
+    final: dict | None = None
 
     def frame(self) -> pd.DataFrame:
         """Tidy: one row per (run, estimator) with the run's settings and statistics."""
@@ -144,14 +148,16 @@ def histogram_median(hist: np.ndarray, count: int) -> np.ndarray:
     return np.where(index == 0, 0.0, low + fraction * (high - low))
 
 
-def _fill_normals(generators, gyro_out, star_out, star_counts, threads):
-    """Draw each run's next block of standard normals, in the per-run path's order."""
+def _fill_normals(generators, gyro_out, star_out, star_counts, uniforms_out, threads):
+    """Draw each run's next block of random numbers, in the per-run path's order."""
     def fill(indices):
         for r in indices:
-            gyro_rng, star_rng = generators[r][:2]
+            gyro_rng, star_rng, dropout_rng = generators[r]
             gyro_rng.standard_normal(out=gyro_out[r])
             if star_counts[r]:
                 star_rng.standard_normal(out=star_out[r, :star_counts[r]])
+                if uniforms_out.shape[1]:
+                    dropout_rng.random(out=uniforms_out[r, :star_counts[r]])
 
     if threads <= 1 or len(generators) < 2 * threads:
         fill(range(len(generators)))
@@ -160,18 +166,50 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, threads):
         list(pool.map(fill, np.array_split(np.arange(len(generators)), threads)))
 
 
+#: Every estimator with a kernel, in the kernel's slot order.
+ENGINE_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf")
+
+
+@dataclass(frozen=True)
+class _Estimators:
+    """The settings the kernel needs, read off the per-run classes themselves
+    (built with ``from_scenario``), so the two paths cannot disagree on them."""
+
+    dead_reckoning: object
+    resets: object
+    ekf: object
+    mekf: list      # one MultiplicativeEKF per run (shared where settings repeat)
+
+
+def _reference_estimators(scenario: Scenario, runs: RunTable, with_mekf: bool) -> _Estimators:
+    cache = {}
+    mekf = []
+    for i in range(len(runs) if with_mekf else 0):
+        key = tuple(float(getattr(runs, name)[i]) for name in
+                    ("gyro_noise", "star_tracker_noise", "time_between_measurements"))
+        if key not in cache:
+            case = scenario.replace(gyro_noise=key[0], star_tracker_noise=key[1],
+                                    time_between_measurements=key[2])
+            cache[key] = ESTIMATORS["mekf"].from_scenario(case)
+        mekf.append(cache[key])
+    return _Estimators(dead_reckoning=ESTIMATORS["dead-reckoning"].from_scenario(scenario),
+                       resets=ESTIMATORS["dead-reckoning-resets"].from_scenario(scenario),
+                       ekf=ESTIMATORS["ekf"].from_scenario(scenario), mekf=mekf)
+
+
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
               keep_traces: bool = False, block_steps: int = BLOCK_STEPS,
               threads: int | None = None) -> BatchResult:
-    """Run ``estimators`` (workshop names) on every run of ``runs``.
+    """Run ``estimators`` (names from :data:`ENGINE_ESTIMATORS`) on every run of ``runs``.
 
     Parameters
     ----------
     scenario : Scenario
-        Truth, time grid, EKF ``R``, initial state and covariance (shared).
+        Truth, time grid, sensor models and every estimator's settings (its
+        ``from_scenario``), shared by the runs.
     runs : RunTable
         From :func:`make_runs`.
-    estimators : names from ``estimators.ESTIMATORS``
+    estimators : names from :data:`ENGINE_ESTIMATORS`
     keep_traces : bool
         Keep ``(B, N, 4)`` estimates per estimator; the median is then exact.
     block_steps : int
@@ -182,42 +220,78 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     from benchmarks.engine import kernels
     from numba import get_num_threads
 
-    unknown = [name for name in estimators if name not in WORKSHOP_ESTIMATORS]
+    unknown = [name for name in estimators if name not in ENGINE_ESTIMATORS]
     if unknown:
         raise InvalidParameterError("estimator", unknown[0],
-                                    f"must be one of {', '.join(WORKSHOP_ESTIMATORS)}")
-    estimators = tuple(name for name in WORKSHOP_ESTIMATORS if name in estimators)
+                                    f"must be one of {', '.join(ENGINE_ESTIMATORS)}")
+    estimators = tuple(name for name in ENGINE_ESTIMATORS if name in estimators)
     truth = simulate_truth(scenario)
     n_runs, n_steps, dt = len(runs), scenario.n_steps, scenario.dt
     threads = get_num_threads() if threads is None else threads
-    enabled = np.array([name in estimators for name in WORKSHOP_ESTIMATORS])
+    enabled = np.array([name in estimators for name in ENGINE_ESTIMATORS])
+    reference = _reference_estimators(scenario, runs, "mekf" in estimators)
 
-    # The per-run path's arithmetic, value by value: √(p/dt) and math.exp.
-    gyro_std = np.array([math.sqrt(p / dt) for p in runs.gyro_noise])
+    # The per-run path's arithmetic, value by value: √(p/dt + σ_u²dt/12) and math.exp.
+    gyro = scenario.build_gyro()
+    gyro_std = np.array([gyro.reading_std(p, dt, gyro.bias_random_walk) for p in runs.gyro_noise])
+    star_tracker = scenario.build_star_tracker()
+    rotation_model = isinstance(star_tracker, RotationStarTracker)
     star_std = np.array([math.sqrt(p / dt) for p in runs.star_tracker_noise])
     steps_between = np.array([steps_between_readings(t, dt)
                               for t in runs.time_between_measurements], dtype=np.int64)
     q_variance = np.array([math.exp(pc) for pc in runs.pc_exponent])
     generators = [sensor_generators(int(seed)) for seed in runs.seeds]
 
-    x0 = scenario.initial_state
-    q_dr = np.tile(x0, (n_runs, 1))
-    q_resets = q_dr.copy()
-    x_ekf = q_dr.copy()
-    P_ekf = np.tile(scenario.initial_covariance * np.eye(4), (n_runs, 1, 1))
-    R = np.ascontiguousarray(scenario.measurement_covariance)
-    stats = np.zeros((3, n_runs, kernels.N_ACCUMULATORS))
-    hist = np.zeros((3, n_runs, HISTOGRAM_BINS), dtype=np.uint32)
-    traces = (np.zeros((3, n_runs, n_steps, 4)) if keep_traces
-              else np.zeros((3, 0, 0, 4)))
+    bias_true = np.tile(gyro.initial_bias_radps, (n_runs, 1))
+    bias_last = bias_true.copy()
+    scale = (np.zeros((3, 3)) if gyro.scale_misalignment is None
+             else np.ascontiguousarray(gyro.scale_misalignment))
+    if rotation_model:
+        star_settings = (np.ascontiguousarray(star_tracker.sigma_rad),
+                         np.ascontiguousarray(star_tracker.sensor_to_body),
+                         star_tracker.sign == "canonical",
+                         star_tracker.in_outage(truth.time_s),
+                         float(star_tracker.dropout_probability))
+    else:
+        star_settings = (np.zeros(3), np.eye(3), False, np.zeros(n_steps, dtype=bool), 0.0)
+
+    dr, resets, ekf = reference.dead_reckoning, reference.resets, reference.ekf
+    q_dr = np.tile(dr.initial_attitude, (n_runs, 1))
+    q_resets = np.tile(resets.initial_attitude, (n_runs, 1))
+    previous_rate = np.zeros((n_runs, 3))
+    x_ekf = np.tile(ekf.initial_attitude, (n_runs, 1))
+    P_ekf = np.tile(ekf.initial_covariance * np.eye(4), (n_runs, 1, 1))
+    R = np.ascontiguousarray(ekf.R)
+    mekf = reference.mekf
+    q_mekf = np.array([m.initial_attitude for m in mekf]).reshape(-1, 4)
+    beta_mekf = np.array([m.initial_bias_radps for m in mekf]).reshape(-1, 3)
+    P_mekf = np.array([m.initial_covariance for m in mekf]).reshape(-1, 6, 6)
+    mekf_noise = np.array([m.gyro_noise for m in mekf], dtype=float)
+    mekf_bias_rw = np.array([m.gyro_bias_random_walk for m in mekf], dtype=float)
+    R_mekf = np.array([m.R for m in mekf]).reshape(-1, 3, 3)
+    beta_mekf_last = beta_mekf.copy()
+    P_mekf_last = P_mekf.copy()
+    state = (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf,
+             P_mekf, mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last)
+    options = (dr.rate_timing == "step-average", resets.rate_timing == "step-average",
+               ekf.output == "posterior", bool(mekf) and mekf[0].output == "posterior")
+
+    slots = len(ENGINE_ESTIMATORS)
+    stats = np.zeros((slots, n_runs, kernels.N_ACCUMULATORS))
+    hist = np.zeros((slots, n_runs, HISTOGRAM_BINS), dtype=np.uint32)
+    traces = (np.zeros((slots, n_runs, n_steps, 4)) if keep_traces
+              else np.zeros((slots, 0, 0, 4)))
     q_true = np.ascontiguousarray(truth.q_true)
     omega_true = np.ascontiguousarray(truth.omega_true_radps)
 
-    block_steps = max(1, min(int(block_steps), n_steps))
+    # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
+    columns = gyro.normals_per_step
+    block_steps = max(1, min(int(block_steps) * 3 // columns, n_steps))
     blocks = [(k0, min(k0 + block_steps, n_steps)) for k0 in range(0, n_steps, block_steps)]
     max_readings = -(-block_steps // int(steps_between.min())) + 1
-    gyro_buffer = np.empty((n_runs, block_steps, 3))
-    star_buffer = np.empty((n_runs, max_readings, 4))
+    gyro_buffer = np.empty((n_runs, block_steps, columns))
+    star_buffer = np.empty((n_runs, max_readings, 3 if rotation_model else 4))
+    uniforms = np.empty((n_runs, max_readings if star_settings[4] > 0 else 0))
 
     # Draw a block's noise on every core, then advance every run through it.
     for k0, stop in blocks:
@@ -225,13 +299,18 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         # (-1) // m = -1, so the reading at k = 0 is counted too.
         star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
         block_gyro = gyro_buffer[:, :stop - k0]
-        _fill_normals(generators, block_gyro, star_buffer, star_counts, threads)
-        kernels.advance(k0, q_true, omega_true, dt, gyro_std, star_std, steps_between,
-                        block_gyro, star_buffer, enabled, q_dr, q_resets, x_ekf, P_ekf,
-                        q_variance, R, stats, hist, _FIRST_BITS, traces, keep_traces)
+        _fill_normals(generators, block_gyro, star_buffer, star_counts, uniforms, threads)
+        gyro_args = (gyro_std, block_gyro, gyro.bias_step_std, scale,
+                     gyro.scale_misalignment is not None, gyro.has_bias_model, bias_true,
+                     bias_last)
+        star_args = (rotation_model, star_std, steps_between, star_buffer, star_settings[0],
+                     star_settings[1], star_settings[2], star_settings[3], star_settings[4],
+                     uniforms)
+        kernels.advance(k0, n_steps - 1, q_true, omega_true, dt, gyro_args, star_args, state,
+                        enabled, options, stats, hist, _FIRST_BITS, traces, keep_traces)
 
     statistics, estimates = {}, ({} if keep_traces else None)
-    for slot, name in enumerate(WORKSHOP_ESTIMATORS):
+    for slot, name in enumerate(ENGINE_ESTIMATORS):
         if name not in estimators:
             continue
         mean, m2 = stats[slot, :, kernels.MEAN], stats[slot, :, kernels.M2]
@@ -251,8 +330,11 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
             "max_deg": stats[slot, :, kernels.MAX].copy(),
             "final_deg": stats[slot, :, kernels.FINAL].copy(),
         }
+    final = {"gyro_bias_radps": bias_last}
+    if "mekf" in estimators:
+        final["mekf"] = {"bias_radps": beta_mekf_last, "covariance": P_mekf_last}
     return BatchResult(runs=runs, estimators=estimators, statistics=statistics,
-                       estimates=estimates)
+                       estimates=estimates, final=final)
 
 
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,

@@ -1,5 +1,6 @@
-r"""Compiled kernels of the batched engine: the three workshop estimators,
-advanced over a block of steps for many runs at once.
+r"""Compiled kernels of the batched engine: the estimators of the registry,
+advanced over a block of steps for many runs at once, with the sensors that
+feed them.
 
 Why a compiled kernel: the estimators' arithmetic is tiny (4-vectors, 4x4
 covariances), so on the per-run path nearly all the time goes to the Python
@@ -15,8 +16,12 @@ path, which stays the readable definition:
 * :class:`estimators.DeadReckoning`, :class:`estimators.DeadReckoningWithResets`;
 * :class:`estimators.QuaternionEKF` (filterpy's update with ``H = I``,
   Joseph form, then the nonlinear predict);
-* :class:`sensors.Gyro` and :class:`sensors.StarTracker` — readings from the
-  same standard normals;
+* :class:`estimators.MultiplicativeEKF` (:func:`estimators.mekf.discrete_error_model`,
+  filterpy's Joseph update with ``H = [I 0]``, the reset, the exact
+  quaternion step);
+* :class:`sensors.Gyro` (with its bias random walk, scale and misalignment),
+  :class:`sensors.StarTracker` and :class:`sensors.RotationStarTracker`
+  (dropouts, outages, sign) — readings from the same standard normals;
 * :func:`dynamics.quaternion.attitude_error_rad` — the error metric (its
   arccos within 1 ulp of the C library's, see :func:`_acos`).
 
@@ -34,7 +39,8 @@ import numpy as np
 from numba import njit, prange
 
 #: Estimator slots, in the order of ``estimators.ESTIMATORS``.
-DEAD_RECKONING, RESETS, EKF = 0, 1, 2
+DEAD_RECKONING, RESETS, EKF, MEKF = 0, 1, 2, 3
+N_SLOTS = 4
 #: Per-run streaming accumulators: Welford mean and M2, max, final value.
 MEAN, M2, MAX, FINAL = 0, 1, 2, 3
 N_ACCUMULATORS = 4
@@ -54,6 +60,8 @@ _QS2 = 2.02094576023350569471e+00
 _QS3 = -6.88283971605453293030e-01
 _QS4 = 7.70381505559019352791e-02
 _HIGH_WORD_MASK = np.int64(-4294967296)   # clears the low 32 bits of a double
+#: The MEKF's switch to Taylor series (estimators.mekf.SERIES_BELOW).
+MEKF_SERIES_BELOW = 0.1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -152,6 +160,31 @@ def _matmul4(a, b, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _gauss_jordan(S, inverse, n):
+    """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
+    partial pivoting; S is positive definite."""
+    for col in range(n):
+        pivot = col
+        for row in range(col + 1, n):
+            if abs(S[row, col]) > abs(S[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for j in range(n):
+                S[col, j], S[pivot, j] = S[pivot, j], S[col, j]
+                inverse[col, j], inverse[pivot, j] = inverse[pivot, j], inverse[col, j]
+        diagonal = S[col, col]
+        for j in range(n):
+            S[col, j] /= diagonal
+            inverse[col, j] /= diagonal
+        for row in range(n):
+            if row != col:
+                factor = S[row, col]
+                for j in range(n):
+                    S[row, j] -= factor * S[col, j]
+                    inverse[row, j] -= factor * inverse[col, j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _ekf_update(x, P, z, R, scratch):
     """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
     P = (I - K) P (I - K)ᵀ + K R Kᵀ."""
@@ -164,26 +197,7 @@ def _ekf_update(x, P, z, R, scratch):
         for j in range(4):
             S[i, j] = P[i, j] + R[i, j]
             inverse[i, j] = 1.0 if i == j else 0.0
-    # Gauss–Jordan with partial pivoting on the 4x4 S (positive definite).
-    for col in range(4):
-        pivot = col
-        for row in range(col + 1, 4):
-            if abs(S[row, col]) > abs(S[pivot, col]):
-                pivot = row
-        if pivot != col:
-            for j in range(4):
-                S[col, j], S[pivot, j] = S[pivot, j], S[col, j]
-                inverse[col, j], inverse[pivot, j] = inverse[pivot, j], inverse[col, j]
-        diagonal = S[col, col]
-        for j in range(4):
-            S[col, j] /= diagonal
-            inverse[col, j] /= diagonal
-        for row in range(4):
-            if row != col:
-                factor = S[row, col]
-                for j in range(4):
-                    S[row, j] -= factor * S[col, j]
-                    inverse[row, j] -= factor * inverse[col, j]
+    _gauss_jordan(S, inverse, 4)
     _matmul4(P, inverse, K)
     y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
     for i in range(4):
@@ -224,27 +238,206 @@ def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
         P[i, i] += q_variance
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(k0, q_true, omega_true, dt, gyro_std, star_std, steps_between, gyro_normals,
-            star_normals, enabled, q_dr, q_resets, x_ekf, P_ekf, q_variance, R,
-            stats, hist, hist_first_bits, traces, keep_traces):
-    """Advance every run by ``gyro_normals.shape[1]`` steps starting at step ``k0``.
+@njit(cache=True, inline="always", error_model="numpy")
+def _quat_exp(t0, t1, t2, out):
+    """out = δq(θ), the exponential map of dynamics.quaternion.quat_from_rotvec."""
+    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if angle < 1e-4:
+        half_sinc = 0.5 - angle * angle / 48.0
+    else:
+        half_sinc = math.sin(0.5 * angle) / angle
+    out[0] = math.cos(0.5 * angle)
+    out[1] = half_sinc * t0
+    out[2] = half_sinc * t1
+    out[3] = half_sinc * t2
 
-    Shapes: q_true (N, 4) and omega_true (N, 3) shared; per run r: gyro_std,
-    star_std, steps_between, q_variance (B,); gyro_normals (B, T, 3);
-    star_normals (B, readings in this block, 4), consumed in order; states
-    q_dr, q_resets, x_ekf (B, 4), P_ekf (B, 4, 4); stats (3, B, 4);
-    hist (3, B, bins); traces (3, B, N, 4) when keep_traces.
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _quat_times_normalized(q, d, out):
+    """out = (q ⊗ d) / |q ⊗ d| (Hamilton product); out may be q."""
+    w = q[0] * d[0] - q[1] * d[1] - q[2] * d[2] - q[3] * d[3]
+    x = q[0] * d[1] + q[1] * d[0] + q[2] * d[3] - q[3] * d[2]
+    y = q[0] * d[2] - q[1] * d[3] + q[2] * d[0] + q[3] * d[1]
+    z = q[0] * d[3] + q[1] * d[2] - q[2] * d[1] + q[3] * d[0]
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _transition_coefficients(w, dt):
+    """estimators.mekf.transition_coefficients, formula for formula."""
+    x = w * dt
+    if x < MEKF_SERIES_BELOW:
+        x2 = x * x
+        dt2 = dt * dt
+        return (dt * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0))),
+                dt2 * (0.5 - x2 / 24.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0))),
+                dt2 * dt * (1.0 / 6.0 - x2 / 120.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))),
+                dt2 * dt2 * dt * (1.0 / 60.0 - x2 / 2520.0 * (1.0 - x2 / 72.0
+                                                               * (1.0 - x2 / 110.0))),
+                dt2 * dt2 * (1.0 / 24.0 - x2 / 720.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0))))
+    sn, cs = math.sin(x), math.cos(x)
+    w2 = w * w
+    return (sn / w, (1.0 - cs) / w2, (x - sn) / (w2 * w),
+            (x * x * x / 3.0 + 2.0 * sn - 2.0 * x) / (w2 * w2 * w),
+            (0.5 * x * x + cs - 1.0) / (w2 * w2))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
+    """q ⊗ δq(ω̂Δt), P = Φ P Φᵀ + Q with Φ = [[A, B], [0, I]] (estimators.mekf)."""
+    o0, o1, o2 = w_meas[0] - beta[0], w_meas[1] - beta[1], w_meas[2] - beta[2]
+    rate = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    s1, c2, s3, q5, q4 = _transition_coefficients(rate, dt)
+    W = scratch[0]
+    W2 = scratch[1]
+    A = scratch[2]
+    Bm = scratch[3]
+    Q11 = scratch[4]
+    Q12 = scratch[5]
+    W[0, 0], W[0, 1], W[0, 2] = 0.0, -o2, o1
+    W[1, 0], W[1, 1], W[1, 2] = o2, 0.0, -o0
+    W[2, 0], W[2, 1], W[2, 2] = -o1, o0, 0.0
+    su2 = bias_rw * bias_rw
+    for i in range(3):
+        for j in range(3):
+            W2[i, j] = W[i, 0] * W[0, j] + W[i, 1] * W[1, j] + W[i, 2] * W[2, j]
+    for i in range(3):
+        for j in range(3):
+            eye = 1.0 if i == j else 0.0
+            A[i, j] = eye - s1 * W[i, j] + c2 * W2[i, j]
+            Bm[i, j] = -(dt * eye - c2 * W[i, j] + s3 * W2[i, j])
+            Q11[i, j] = noise * dt * eye + su2 * (dt * dt * dt / 3.0 * eye + q5 * W2[i, j])
+            Q12[i, j] = -su2 * (0.5 * dt * dt * eye - s3 * W[i, j] + q4 * W2[i, j])
+    # FP = Φ P: the top three rows A P_top + B P_bottom, the bottom three P's own.
+    FP = scratch[6]
+    for i in range(3):
+        for j in range(6):
+            FP[i, j] = (A[i, 0] * P[0, j] + A[i, 1] * P[1, j] + A[i, 2] * P[2, j]
+                        + Bm[i, 0] * P[3, j] + Bm[i, 1] * P[4, j] + Bm[i, 2] * P[5, j])
+    for i in range(3, 6):
+        for j in range(6):
+            FP[i, j] = P[i, j]
+    # P = FP Φᵀ + Q, upper triangle mirrored (P is symmetric).
+    for i in range(6):
+        for j in range(i, 6):
+            if j < 3:
+                value = (FP[i, 0] * A[j, 0] + FP[i, 1] * A[j, 1] + FP[i, 2] * A[j, 2]
+                         + FP[i, 3] * Bm[j, 0] + FP[i, 4] * Bm[j, 1] + FP[i, 5] * Bm[j, 2])
+            else:
+                value = FP[i, j]
+            if i < 3 and j < 3:
+                value += Q11[i, j]
+            elif i < 3:
+                value += Q12[i, j - 3]
+            elif j >= 3:
+                value += su2 * dt if i == j else 0.0
+            P[i, j] = value
+            P[j, i] = value
+    _quat_exp(o0 * dt, o1 * dt, o2 * dt, dq)
+    _quat_times_normalized(q, dq, q)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _mekf_update(q, beta, P, z, R, scratch, dq):
+    """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
+    sign = 1.0 if q[0] * z[0] + q[1] * z[1] + q[2] * z[2] + q[3] * z[3] >= 0 else -1.0
+    z0, z1, z2, z3 = sign * z[0], sign * z[1], sign * z[2], sign * z[3]
+    # δq = q̂* ⊗ z
+    w = q[0] * z0 + q[1] * z1 + q[2] * z2 + q[3] * z3
+    v0 = q[0] * z1 - q[1] * z0 - q[2] * z3 + q[3] * z2
+    v1 = q[0] * z2 + q[1] * z3 - q[2] * z0 - q[3] * z1
+    v2 = q[0] * z3 - q[1] * z2 + q[2] * z1 - q[3] * z0
+    if w < 0:
+        w, v0, v1, v2 = -w, -v0, -v1, -v2
+    vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if vector_norm < 1e-12:
+        scale = 2.0 / max(w, 1e-300)
+    else:
+        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
+    y0, y1, y2 = scale * v0, scale * v1, scale * v2
+    S = scratch[0]
+    inverse = scratch[1]
+    K = scratch[2]
+    IK = scratch[3]
+    T = scratch[4]
+    KR = scratch[5]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = P[i, j] + R[i, j]
+            inverse[i, j] = 1.0 if i == j else 0.0
+    _gauss_jordan(S, inverse, 3)
+    # K = P Hᵀ S⁻¹ (6x3): P's first three columns times S⁻¹.
+    for i in range(6):
+        for j in range(3):
+            K[i, j] = P[i, 0] * inverse[0, j] + P[i, 1] * inverse[1, j] + P[i, 2] * inverse[2, j]
+    dx = scratch[6, 0]
+    for i in range(6):
+        dx[i] = K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2
+    # I - K H: the identity less K in the first three columns.
+    for i in range(6):
+        for j in range(6):
+            IK[i, j] = (1.0 if i == j else 0.0) - (K[i, j] if j < 3 else 0.0)
+    for i in range(6):
+        for j in range(6):
+            total = 0.0
+            for m in range(6):
+                total += IK[i, m] * P[m, j]
+            T[i, j] = total
+        for j in range(3):
+            KR[i, j] = K[i, 0] * R[0, j] + K[i, 1] * R[1, j] + K[i, 2] * R[2, j]
+    for i in range(6):
+        for j in range(6):
+            first = 0.0
+            for m in range(6):
+                first += T[i, m] * IK[j, m]
+            P[i, j] = first + (KR[i, 0] * K[j, 0] + KR[i, 1] * K[j, 1] + KR[i, 2] * K[j, 2])
+    _quat_exp(dx[0], dx[1], dx[2], dq)
+    _quat_times_normalized(q, dq, q)
+    beta[0] += dx[3]
+    beta[1] += dx[4]
+    beta[2] += dx[5]
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, options,
+            stats, hist, hist_first_bits, traces, keep_traces):
+    """Advance every run by one block of steps starting at step ``k0``.
+
+    ``gyro`` = (std (B,), normals (B, T, 3 or 6), bias_step_std, K (3, 3),
+    has_scale, has_bias, bias (B, 3) the true bias β_k, bias_last (B, 3)).
+    ``star`` = (rotation_model, std (B,), steps_between (B,), normals
+    (B, readings in this block, 3 or 4) consumed in order, sigma_rad (3,),
+    R_bs (3, 3), canonical, outage (N,), dropout_probability, uniforms
+    (B, readings in this block)).
+    ``state`` = (q_dr, q_resets, previous_rate (B, 3) for step-average
+    timing, x_ekf, P_ekf, q_variance (B,), R (4, 4), q_mekf, beta_mekf,
+    P_mekf, mekf_noise (B,), mekf_bias_rw (B,), R_mekf (B, 3, 3), and the
+    MEKF's output bias and covariance at ``last_step``: beta_mekf_last (B, 3),
+    P_mekf_last (B, 6, 6)).
+    ``options`` = (dead reckoning step-average, resets step-average, EKF
+    posterior, MEKF posterior). Statistics ``(slots, B, 4)``, histograms
+    ``(slots, B, bins)``, traces ``(slots, B, N, 4)`` when kept.
     """
+    (gyro_std, gyro_normals, bias_step_std, scale_matrix, has_scale, has_bias, bias_true,
+     bias_last) = gyro
+    (rotation_model, star_std, steps_between, star_normals, sigma_rad, sensor_to_body,
+     canonical, outage, dropout_probability, dropout_uniforms) = star
+    (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf, P_mekf,
+     mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last) = state
+    dr_average, resets_average, ekf_posterior, mekf_posterior = options
     n_runs = gyro_std.shape[0]
     n_steps = gyro_normals.shape[1]
     half_dt = 0.5 * dt
     for run in prange(n_runs):
         w = np.empty(3)
         z = np.empty(4)
+        dq = np.empty(4)
         prior = np.empty(4)
+        out_mekf = np.empty(4)
         F = np.empty((4, 4))
         scratch = np.empty((5, 4, 4))
+        scratch6 = np.empty((7, 6, 6))
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
         x = x_ekf[run]
@@ -256,36 +449,103 @@ def advance(k0, q_true, omega_true, dt, gyro_std, star_std, steps_between, gyro_
         for j in range(n_steps):
             k = k0 + j
             inv_count = 1.0 / (k + 1)     # Welford's 1/n, shared by the estimators
+            # The gyro: ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v.
             for i in range(3):
-                w[i] = omega_true[k, i] + gyro_std[run] * gyro_normals[run, j, i]
-            available = until_reading == 0
-            until_reading = steps_between[run] - 1 if available else until_reading - 1
-            if available:
-                for i in range(4):
-                    z[i] = q_true[k, i] + star_std[run] * star_normals[run, reading, i]
-                norm = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2] + z[3] * z[3])
-                for i in range(4):
-                    z[i] = z[i] / norm
+                w[i] = omega_true[k, i]
+            if has_scale:
+                o0, o1, o2 = omega_true[k, 0], omega_true[k, 1], omega_true[k, 2]
+                for i in range(3):
+                    w[i] = w[i] + (o0 * scale_matrix[i, 0] + o1 * scale_matrix[i, 1]
+                                   + o2 * scale_matrix[i, 2])
+            if has_bias:
+                if k == last_step:
+                    for i in range(3):
+                        bias_last[run, i] = bias_true[run, i]
+                for i in range(3):
+                    following = bias_true[run, i] + bias_step_std * gyro_normals[run, j, 3 + i]
+                    w[i] = w[i] + 0.5 * (bias_true[run, i] + following)
+                    bias_true[run, i] = following
+            for i in range(3):
+                w[i] = w[i] + gyro_std[run] * gyro_normals[run, j, i]
+            due = until_reading == 0
+            until_reading = steps_between[run] - 1 if due else until_reading - 1
+            available = False
+            if due:
+                if rotation_model:
+                    t0 = sigma_rad[0] * star_normals[run, reading, 0]
+                    t1 = sigma_rad[1] * star_normals[run, reading, 1]
+                    t2 = sigma_rad[2] * star_normals[run, reading, 2]
+                    _quat_exp(sensor_to_body[0, 0] * t0 + sensor_to_body[0, 1] * t1
+                              + sensor_to_body[0, 2] * t2,
+                              sensor_to_body[1, 0] * t0 + sensor_to_body[1, 1] * t1
+                              + sensor_to_body[1, 2] * t2,
+                              sensor_to_body[2, 0] * t0 + sensor_to_body[2, 1] * t1
+                              + sensor_to_body[2, 2] * t2, dq)
+                    _quat_times_normalized(q_true[k], dq, z)
+                    if canonical and z[0] < 0:
+                        for i in range(4):
+                            z[i] = -z[i]
+                    available = not outage[k]
+                    if dropout_probability > 0.0 and \
+                            dropout_uniforms[run, reading] < dropout_probability:
+                        available = False
+                else:
+                    for i in range(4):
+                        z[i] = q_true[k, i] + star_std[run] * star_normals[run, reading, i]
+                    norm = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2] + z[3] * z[3])
+                    for i in range(4):
+                        z[i] = z[i] / norm
+                    available = True
                 reading += 1
             if enabled[DEAD_RECKONING]:
                 q = q_dr[run]
-                _propagate(q, w, half_dt, q, F, False)
-                _record(DEAD_RECKONING, run, k, inv_count, q_true[k], q, stats, hist, hist_first_bits,
-                        traces, keep_traces, bits, bits_int)
+                if not dr_average:
+                    _propagate(q, w, half_dt, q, F, False)
+                elif k > 0:
+                    _propagate(q, previous_rate[run], half_dt, q, F, False)
+                _record(DEAD_RECKONING, run, k, inv_count, q_true[k], q, stats, hist,
+                        hist_first_bits, traces, keep_traces, bits, bits_int)
             if enabled[RESETS]:
                 q = q_resets[run]
                 if available:
                     for i in range(4):
                         q[i] = z[i]
-                else:
+                elif not resets_average:
                     _propagate(q, w, half_dt, q, F, False)
+                elif k > 0:
+                    _propagate(q, previous_rate[run], half_dt, q, F, False)
                 _record(RESETS, run, k, inv_count, q_true[k], q, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int)
+            if dr_average or resets_average:
+                for i in range(3):
+                    previous_rate[run, i] = w[i]
             if enabled[EKF]:
                 for i in range(4):
                     prior[i] = x[i]
-                _record(EKF, run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
-                        traces, keep_traces, bits, bits_int)
                 if available:
                     _ekf_update(x, P, z, R, scratch)
+                if ekf_posterior:
+                    for i in range(4):
+                        prior[i] = x[i]
+                _record(EKF, run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
+                        traces, keep_traces, bits, bits_int)
                 _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
+            if enabled[MEKF]:
+                qm = q_mekf[run]
+                for i in range(4):
+                    out_mekf[i] = qm[i]
+                if k == last_step and not mekf_posterior:
+                    beta_mekf_last[run, :] = beta_mekf[run]
+                    P_mekf_last[run, :, :] = P_mekf[run]
+                if available:
+                    _mekf_update(qm, beta_mekf[run], P_mekf[run], z, R_mekf[run], scratch6, dq)
+                if mekf_posterior:
+                    for i in range(4):
+                        out_mekf[i] = qm[i]
+                    if k == last_step:
+                        beta_mekf_last[run, :] = beta_mekf[run]
+                        P_mekf_last[run, :, :] = P_mekf[run]
+                _record(MEKF, run, k, inv_count, q_true[k], out_mekf, stats, hist,
+                        hist_first_bits, traces, keep_traces, bits, bits_int)
+                _mekf_propagate(qm, beta_mekf[run], P_mekf[run], w, dt, mekf_noise[run],
+                                mekf_bias_rw[run], scratch6, dq)
