@@ -276,11 +276,12 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     options = (dr.rate_timing == "step-average", resets.rate_timing == "step-average",
                ekf.output == "posterior", bool(mekf) and mekf[0].output == "posterior")
 
-    slots = len(ENGINE_ESTIMATORS)
-    stats = np.zeros((slots, n_runs, kernels.N_ACCUMULATORS))
-    hist = np.zeros((slots, n_runs, HISTOGRAM_BINS), dtype=np.uint32)
-    traces = (np.zeros((slots, n_runs, n_steps, 4)) if keep_traces
-              else np.zeros((slots, 0, 0, 4)))
+    # Accumulators only for the estimators that run: row[slot] is each one's row.
+    rows = np.cumsum(enabled) - 1
+    stats = np.zeros((len(estimators), n_runs, kernels.N_ACCUMULATORS))
+    hist = np.zeros((len(estimators), n_runs, HISTOGRAM_BINS), dtype=np.uint32)
+    traces = (np.zeros((len(estimators), n_runs, n_steps, 4)) if keep_traces
+              else np.zeros((len(estimators), 0, 0, 4)))
     q_true = np.ascontiguousarray(truth.q_true)
     omega_true = np.ascontiguousarray(truth.omega_true_radps)
 
@@ -307,12 +308,10 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
                      star_settings[1], star_settings[2], star_settings[3], star_settings[4],
                      uniforms)
         kernels.advance(k0, n_steps - 1, q_true, omega_true, dt, gyro_args, star_args, state,
-                        enabled, options, stats, hist, _FIRST_BITS, traces, keep_traces)
+                        enabled, rows, options, stats, hist, _FIRST_BITS, traces, keep_traces)
 
     statistics, estimates = {}, ({} if keep_traces else None)
-    for slot, name in enumerate(ENGINE_ESTIMATORS):
-        if name not in estimators:
-            continue
+    for slot, name in zip(rows[enabled], estimators):
         mean, m2 = stats[slot, :, kernels.MEAN], stats[slot, :, kernels.M2]
         std = np.sqrt(m2 / (n_steps - 1)) if n_steps > 1 else np.zeros(n_runs)
         if keep_traces:

@@ -283,7 +283,7 @@ def _transition_coefficients(w, dt):
             (0.5 * x * x + cs - 1.0) / (w2 * w2))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
     """q ⊗ δq(ω̂Δt), P = Φ P Φᵀ + Q with Φ = [[A, B], [0, I]] (estimators.mekf)."""
     o0, o1, o2 = w_meas[0] - beta[0], w_meas[1] - beta[1], w_meas[2] - beta[2]
@@ -338,7 +338,7 @@ def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
     _quat_times_normalized(q, dq, q)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _mekf_update(q, beta, P, z, R, scratch, dq):
     """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
     sign = 1.0 if q[0] * z[0] + q[1] * z[1] + q[2] * z[2] + q[3] * z[3] >= 0 else -1.0
@@ -399,8 +399,30 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
     beta[2] += dx[5]
 
 
+@njit(cache=True, error_model="numpy")
+def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias_step_std,
+                 bias, bias_last, last):
+    """w = ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias β (sensors.gyro)."""
+    for i in range(3):
+        w[i] = omega[i]
+    if has_scale:
+        for i in range(3):
+            w[i] = w[i] + (omega[0] * scale_matrix[i, 0] + omega[1] * scale_matrix[i, 1]
+                           + omega[2] * scale_matrix[i, 2])
+    if has_bias:
+        if last:
+            for i in range(3):
+                bias_last[i] = bias[i]
+        for i in range(3):
+            following = bias[i] + bias_step_std * normals[3 + i]
+            w[i] = w[i] + 0.5 * (bias[i] + following)
+            bias[i] = following
+    for i in range(3):
+        w[i] = w[i] + std * normals[i]
+
+
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, options,
+def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, rows, options,
             stats, hist, hist_first_bits, traces, keep_traces):
     """Advance every run by one block of steps starting at step ``k0``.
 
@@ -450,23 +472,13 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, o
             k = k0 + j
             inv_count = 1.0 / (k + 1)     # Welford's 1/n, shared by the estimators
             # The gyro: ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v.
-            for i in range(3):
-                w[i] = omega_true[k, i]
-            if has_scale:
-                o0, o1, o2 = omega_true[k, 0], omega_true[k, 1], omega_true[k, 2]
+            if not (has_scale or has_bias):
                 for i in range(3):
-                    w[i] = w[i] + (o0 * scale_matrix[i, 0] + o1 * scale_matrix[i, 1]
-                                   + o2 * scale_matrix[i, 2])
-            if has_bias:
-                if k == last_step:
-                    for i in range(3):
-                        bias_last[run, i] = bias_true[run, i]
-                for i in range(3):
-                    following = bias_true[run, i] + bias_step_std * gyro_normals[run, j, 3 + i]
-                    w[i] = w[i] + 0.5 * (bias_true[run, i] + following)
-                    bias_true[run, i] = following
-            for i in range(3):
-                w[i] = w[i] + gyro_std[run] * gyro_normals[run, j, i]
+                    w[i] = omega_true[k, i] + gyro_std[run] * gyro_normals[run, j, i]
+            else:
+                _flight_gyro(w, omega_true[k], gyro_std[run], gyro_normals[run, j], scale_matrix,
+                             has_scale, has_bias, bias_step_std, bias_true[run], bias_last[run],
+                             k == last_step)
             due = until_reading == 0
             until_reading = steps_between[run] - 1 if due else until_reading - 1
             available = False
@@ -503,7 +515,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, o
                     _propagate(q, w, half_dt, q, F, False)
                 elif k > 0:
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
-                _record(DEAD_RECKONING, run, k, inv_count, q_true[k], q, stats, hist,
+                _record(rows[DEAD_RECKONING], run, k, inv_count, q_true[k], q, stats, hist,
                         hist_first_bits, traces, keep_traces, bits, bits_int)
             if enabled[RESETS]:
                 q = q_resets[run]
@@ -514,7 +526,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, o
                     _propagate(q, w, half_dt, q, F, False)
                 elif k > 0:
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
-                _record(RESETS, run, k, inv_count, q_true[k], q, stats, hist, hist_first_bits,
+                _record(rows[RESETS], run, k, inv_count, q_true[k], q, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int)
             if dr_average or resets_average:
                 for i in range(3):
@@ -527,7 +539,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, o
                 if ekf_posterior:
                     for i in range(4):
                         prior[i] = x[i]
-                _record(EKF, run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
+                _record(rows[EKF], run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int)
                 _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
             if enabled[MEKF]:
@@ -545,7 +557,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, o
                     if k == last_step:
                         beta_mekf_last[run, :] = beta_mekf[run]
                         P_mekf_last[run, :, :] = P_mekf[run]
-                _record(MEKF, run, k, inv_count, q_true[k], out_mekf, stats, hist,
+                _record(rows[MEKF], run, k, inv_count, q_true[k], out_mekf, stats, hist,
                         hist_first_bits, traces, keep_traces, bits, bits_int)
                 _mekf_propagate(qm, beta_mekf[run], P_mekf[run], w, dt, mekf_noise[run],
                                 mekf_bias_rw[run], scratch6, dq)
