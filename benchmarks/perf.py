@@ -2,12 +2,13 @@
 
 From one run on this machine:
 
-1. the per-run (filterpy) path: seconds for one 50-s run of each workshop
-   estimator and its run-steps per second;
+1. the per-run (filterpy) path: seconds for one 50-s run of each estimator
+   (the workshop's three and the MEKF) and its run-steps per second;
 2. the batched engine at batch sizes 1, 64 and 1024 — the EKF alone and all
-   three estimators together — in run-steps per second (one run-step is one
-   run advanced one step, noise drawing included), and its ratio to the
-   filterpy EKF;
+   three estimators together, and the MEKF — in run-steps per second (one
+   run-step is one run advanced one step, noise drawing included), and its
+   ratio to the filterpy EKF; the MEKF also on the flight scenario's sensors
+   (bias random walk, rotation star tracker);
 3. the wall time of a 73-value × 100-seed loss landscape (its computation);
 4. the peak resident memory and wall time of a 10,000-run statistics-only
    campaign of the default scenario, run as a separate ``attitude-bench
@@ -25,6 +26,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -35,6 +37,9 @@ from benchmarks.simulation import (
     simulate_sensors,
     simulate_truth,
 )
+from estimators import ESTIMATORS
+
+FLIGHT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 
 
 def _median_seconds(func, repeats: int) -> float:
@@ -47,11 +52,11 @@ def _median_seconds(func, repeats: int) -> float:
 
 
 def per_run_seconds(scenario: Scenario, repeats: int = 5) -> dict[str, float]:
-    """Median seconds of one ``run`` of each workshop estimator on ``scenario``."""
+    """Median seconds of one ``run`` of each estimator on ``scenario``."""
     truth = simulate_truth(scenario)
     data = simulate_sensors(scenario, truth, seed=0)
     results = {}
-    for name in WORKSHOP_ESTIMATORS:
+    for name in ESTIMATORS:
         estimator = build_estimator(name, scenario)
         results[name] = _median_seconds(
             lambda: estimator.run(data.omega_meas_radps, data.star_tracker_quat, data.available),
@@ -98,7 +103,7 @@ def main(argv=None) -> int:
     steps = scenario.n_steps
 
     print(f"scenario: {scenario.tstop:g} s at {1 / scenario.dt:g} Hz ({steps} steps per run)")
-    print("\nper-run path (filterpy EKF, hand-written dead reckoning):")
+    print("\nper-run path (filterpy EKF and MEKF, hand-written dead reckoning):")
     per_run = per_run_seconds(scenario, max(args.repeats, 3))
     for name, seconds in per_run.items():
         print(f"  {name:<22} {seconds:.3f} s per run   {steps / seconds:>12,.0f} run-steps/s")
@@ -110,11 +115,17 @@ def main(argv=None) -> int:
     print(f"\nbatched engine (kernel compile or cache load: {time.perf_counter() - start:.1f} s):")
     rates = {}
     for batch in (1, 64, 1024):
-        for label, estimators in (("ekf", ("ekf",)), ("all three", WORKSHOP_ESTIMATORS)):
+        for label, estimators in (("ekf", ("ekf",)), ("all three", WORKSHOP_ESTIMATORS),
+                                  ("mekf", ("mekf",))):
             rates[batch, label] = engine_steps_per_second(scenario, batch, estimators,
                                                           args.repeats)
             print(f"  batch {batch:>4}  {label:<9} {rates[batch, label]:>14,.0f} run-steps/s")
     print(f"  ratio, batch 1024 EKF to filterpy EKF: {rates[1024, 'ekf'] / filterpy_rate:.0f}x")
+    print(f"  ratio, batch 1024 MEKF to batch 1024 EKF: "
+          f"{rates[1024, 'mekf'] / rates[1024, 'ekf']:.2f}")
+    short_flight = Scenario.from_toml(FLIGHT_SCENARIO).replace(tstop=500.0)
+    flight_rate = engine_steps_per_second(short_flight, 1024, ("mekf",), args.repeats)
+    print(f"  flight sensors, batch 1024 mekf {flight_rate:>14,.0f} run-steps/s")
 
     print(f"\nlandscape, 73 pc values x 100 seeds: {landscape_seconds(scenario):.1f} s")
     peak_mib, wall = campaign_peak_memory(args.campaign_runs)
