@@ -74,19 +74,20 @@ def _measurement_function(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def covariance_matrix(name: str, value) -> np.ndarray:
-    """A 4x4 symmetric positive definite matrix from a scalar (times I₄), a
-    diagonal of 4, or a 4x4 matrix."""
+def covariance_matrix(name: str, value, size: int = 4) -> np.ndarray:
+    """A ``size`` x ``size`` symmetric positive definite matrix from a scalar
+    (times the identity), a diagonal of ``size`` values, or the matrix itself."""
+    rule = f"must be a number, {size} numbers or a {size}x{size} matrix"
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, "must be a number, 4 numbers or a 4x4 matrix") from None
+        raise InvalidParameterError(name, value, rule) from None
     if array.ndim == 0:
-        array = array * _IDENTITY_4
-    elif array.shape == (4,):
+        array = array * np.eye(size)
+    elif array.shape == (size,):
         array = np.diag(array)
-    if array.shape != (4, 4):
-        raise InvalidParameterError(name, value, "must be a number, 4 numbers or a 4x4 matrix")
+    if array.shape != (size, size):
+        raise InvalidParameterError(name, value, rule)
     if not np.all(np.isfinite(array)):
         raise InvalidParameterError(name, value, "must be finite")
     if not np.allclose(array, array.T):

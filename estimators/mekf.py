@@ -110,6 +110,7 @@ from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotvec_from_qua
 from dynamics.validation import InvalidParameterError, finite_number, finite_vector
 from estimators.base import AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
+from estimators.ekf import covariance_matrix
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -169,29 +170,6 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
-def attitude_covariance_matrix(name: str, value) -> np.ndarray:
-    """A 3x3 symmetric positive definite matrix (rad²) from a number (times
-    I₃), 3 diagonal values, or a 3x3 matrix."""
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, "must be a number, 3 numbers or a 3x3 "
-                                    "matrix") from None
-    if array.ndim == 0:
-        array = array * _I3
-    elif array.shape == (3,):
-        array = np.diag(array)
-    if array.shape != (3, 3):
-        raise InvalidParameterError(name, value, "must be a number, 3 numbers or a 3x3 matrix")
-    if not np.all(np.isfinite(array)):
-        raise InvalidParameterError(name, value, "must be finite")
-    if not np.allclose(array, array.T, rtol=1e-12, atol=0.0):
-        raise InvalidParameterError(name, value, "must be symmetric")
-    if np.linalg.eigvalsh(array)[0] <= 0:
-        raise InvalidParameterError(name, value, "must be positive definite")
-    return array
-
-
 def _sigmas(name: str, value) -> np.ndarray:
     """One standard deviation per axis (a number means the same on all three), >= 0."""
     if np.ndim(value) == 0:
@@ -242,7 +220,7 @@ class MultiplicativeEKF(KalmanFilter, AttitudeEstimator):
         self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
         self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
                                                    gyro_bias_random_walk, minimum=0.0)
-        self.R = attitude_covariance_matrix("measurement_covariance", measurement_covariance)
+        self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
         self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
         attitude_sigma = _sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
         bias_sigma = _sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
