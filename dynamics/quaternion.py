@@ -155,3 +155,31 @@ def attitude_error_vector_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarr
     are the roll, pitch and yaw errors about the body axes.
     """
     return rotvec_from_quat(quat_multiply(quat_conjugate(q_est), q_true))
+
+
+#: The generalised Rodrigues parameters of Crassidis & Markley (2003):
+#: a = 1, f = 2 (a + 1) = 4 make |p| = 4 tan(θ/4), the rotation angle θ to first order.
+GRP_A = 1.0
+GRP_F = 4.0
+
+
+def grp_from_quat(dq: np.ndarray, a: float = GRP_A, f: float = GRP_F) -> np.ndarray:
+    r"""Generalised Rodrigues parameters :math:`p = f\,\varrho / (a + w)` of a unit
+    quaternion ``[w, ϱ]`` (Crassidis & Markley 2003, eq. 31), sign-aligned to
+    ``w >= 0`` first (``q`` and ``-q`` are one rotation). ``(..., 4)`` → ``(..., 3)``."""
+    dq = np.asarray(dq, dtype=float)
+    dq = np.where(dq[..., :1] < 0, -dq, dq)
+    return f * dq[..., 1:] / (a + dq[..., :1])
+
+
+def quat_from_grp(p: np.ndarray, a: float = GRP_A, f: float = GRP_F) -> np.ndarray:
+    r"""The unit quaternion of generalised Rodrigues parameters (Crassidis &
+    Markley 2003, eq. 32):
+
+    .. math:: w = \frac{-a|p|^2 + f\sqrt{f^2 + (1 - a^2)|p|^2}}{f^2 + |p|^2},
+              \qquad \varrho = \frac{a + w}{f}\,p.
+    """
+    p = np.asarray(p, dtype=float)
+    norm2 = np.sum(p * p, axis=-1, keepdims=True)
+    w = (-a * norm2 + f * np.sqrt(f * f + (1.0 - a * a) * norm2)) / (f * f + norm2)
+    return np.concatenate([w, (a + w) / f * p], axis=-1)

@@ -7,6 +7,7 @@ name                           class
 ``dead-reckoning-resets``      :class:`DeadReckoningWithResets`
 ``ekf``                        :class:`QuaternionEKF` (filterpy EKF)
 ``mekf``                       :class:`MultiplicativeEKF` (filterpy KF)
+``usque``                      :class:`USQUE` (filterpy UKF)
 =============================  ==========================================
 
 Each takes keyword-only settings, steps on 1-D arrays and returns ``(4,)``
@@ -17,11 +18,12 @@ from estimators.dead_reckoning import DeadReckoning
 from estimators.dead_reckoning_resets import DeadReckoningWithResets
 from estimators.ekf import QuaternionEKF
 from estimators.mekf import MultiplicativeEKF
+from estimators.usque import USQUE
 
 #: Command-line name → class: the workshop's three in the order it introduces
 #: them, then the flight filters. Adding an estimator is one line here.
 ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
-                                        MultiplicativeEKF)}
+                                        MultiplicativeEKF, USQUE)}
 
 __all__ = ["ESTIMATORS", "AttitudeEstimator", "DeadReckoning", "DeadReckoningWithResets",
-           "EstimateTrace", "MultiplicativeEKF", "QuaternionEKF"]
+           "EstimateTrace", "MultiplicativeEKF", "QuaternionEKF", "USQUE"]

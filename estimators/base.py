@@ -104,6 +104,22 @@ class AttitudeEstimator:
         """``(3, 3)`` (rad/s)²: covariance of the bias estimate, or None."""
         return None
 
+    @property
+    def innovation_nis(self) -> float | None:
+        """The normalised innovation squared ``yᵀ S⁻¹ y`` of the last
+        star-tracker update, or None. Filters built on filterpy keep ``y``
+        and ``S`` after each update; others return None."""
+        y, S = getattr(self, "y", None), getattr(self, "S", None)
+        if y is None or S is None or np.ndim(S) != 2:
+            return None
+        y = np.ravel(y)
+        return float(y @ np.linalg.solve(S, y))
+
+    @property
+    def innovation_dof(self) -> int:
+        """Degrees of freedom of :attr:`innovation_nis` (the reading's dimension)."""
+        return int(np.size(getattr(self, "y", ())))
+
     def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None
              ) -> np.ndarray:
         """Consume step ``k``'s measurements and return ``q̂[k]`` as a ``(4,)`` array.
@@ -148,8 +164,14 @@ class AttitudeEstimator:
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
+        nis = None
         for k in range(n):
             quat[k] = self.step(omega[k], star[k] if available[k] else None)
+            innovation = self.innovation_nis if available[k] else None
+            if innovation is not None:
+                if nis is None:
+                    nis = np.full(n, np.nan)
+                nis[k] = innovation
             for key in columns:
                 value = getattr(self, key)
                 if value is None:
@@ -157,7 +179,8 @@ class AttitudeEstimator:
                 if columns[key] is None:
                     columns[key] = np.empty((n,) + np.shape(value))
                 columns[key][k] = value
-        return EstimateTrace(quat=quat, **columns)
+        return EstimateTrace(quat=quat, **columns, nis=nis,
+                             nis_dof=None if nis is None else self.innovation_dof)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(dt={self.dt!r})"
@@ -173,9 +196,14 @@ class EstimateTrace:
     attitude_covariance : (N, 3, 3) rad², or None
     bias_radps : (N, 3) rad/s, or None
     bias_covariance : (N, 3, 3) (rad/s)², or None
+    nis : (N,) the normalised innovation squared at reading steps (NaN
+        elsewhere), or None
+    nis_dof : its degrees of freedom, or None
     """
 
     quat: np.ndarray
     attitude_covariance: np.ndarray | None = None
     bias_radps: np.ndarray | None = None
     bias_covariance: np.ndarray | None = None
+    nis: np.ndarray | None = None
+    nis_dof: int | None = None

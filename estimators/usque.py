@@ -1,0 +1,214 @@
+r"""USQUE: the unscented quaternion estimator, on filterpy's ``UnscentedKalmanFilter``.
+
+Crassidis & Markley, "Unscented Filtering for Spacecraft Attitude
+Estimation", *J. Guidance, Control, and Dynamics* 26(4), 2003 (USQUE);
+Markley & Crassidis 2014, §6.3. The filter's state is
+
+.. math:: x = \begin{bmatrix}\delta p \\ \beta\end{bmatrix}, \qquad
+          q = \hat q \otimes \delta q(\delta p),
+
+with :math:`\delta p` the generalised Rodrigues parameters (GRP) of the error
+rotation from the reference quaternion :math:`\hat q` (body frame, as in
+:mod:`estimators.mekf`), :math:`\beta` the gyro bias (rad/s), and
+
+.. math:: \delta p = \frac{f\,\delta\varrho}{a + \delta w}, \qquad a = 1,\ f = 2(a+1) = 4
+
+(Crassidis & Markley 2003, eqs. 31–32; :func:`dynamics.quaternion.grp_from_quat`),
+so that :math:`|\delta p| = 4\tan(\theta/4) \approx \theta`: three unconstrained
+components that stay well defined up to a half turn and beyond, where
+sigma points tens of degrees apart still map to distinct attitudes.
+
+**Sigma points** (filterpy's :class:`~filterpy.kalman.MerweScaledSigmaPoints`,
+:math:`2n + 1 = 13` of them) are drawn on :math:`x` around the current mean
+with :math:`\hat q` as the reference, :math:`\delta p = 0` at the mean (the
+reset below keeps it there).
+
+**Propagation** (``fx``): each sigma point becomes a quaternion
+:math:`q^{(i)} = \hat q \otimes \delta q(\delta p^{(i)})`, is propagated
+through the exact kinematics with its *own* bias-corrected rate,
+:math:`q^{(i)+} = q^{(i)} \otimes \delta q\bigl((\tilde\omega - \beta^{(i)})\Delta t\bigr)`,
+and returns to GRPs about the propagated mean quaternion
+:math:`\hat q^{+} = \hat q \otimes \delta q((\tilde\omega - \hat\beta)\Delta t)`:
+
+.. math:: \delta p^{(i)+} = \operatorname{GRP}\bigl((\hat q^{+})^{-1} \otimes q^{(i)+}\bigr),
+          \qquad \beta^{(i)+} = \beta^{(i)}
+
+(eqs. 33–36). filterpy's unscented transform recombines them,
+:math:`P^- = \sum_i W_c^{(i)} (\chi^{(i)} - \bar x)(\chi^{(i)} - \bar x)^\mathsf{T} + Q`,
+with :math:`Q` the exact discrete process noise of the MEKF's linear model
+(:func:`estimators.mekf.discrete_error_model`, §6.2.4) at the mean rate.
+(USQUE also adds :math:`\bar Q` to :math:`P` before drawing the sigma points;
+we keep filterpy's standard form, which makes USQUE and the MEKF the same
+filter to first order.)
+
+**Measurement** (``hx``): the star tracker reading :math:`z`, aligned in sign
+with :math:`\hat q`, as GRPs about :math:`\hat q`,
+:math:`y = \operatorname{GRP}(\hat q^{-1} \otimes z)`, with
+:math:`h(x) = \delta p` and :math:`R` the tracker's body-frame covariance
+(rad²; GRPs equal the rotation vector to first order).
+
+**Reset**: after each update (or, without a reading, before the next
+propagation) the mean's :math:`\delta p` moves into the reference,
+:math:`\hat q \leftarrow \hat q \otimes \delta q(\delta p)`,
+:math:`\delta p \leftarrow 0` (eq. 45), keeping :math:`P`.
+
+Where filterpy could not express a step: none of the filter's arithmetic is
+replaced. The class only supplies ``fx``, ``hx`` and ``residual_x``/``residual_z``
+(plain differences: all sigma points share one reference), keeps the
+reference quaternion beside filterpy's ``x``, and does the reset.
+filterpy 2.0 redraws the sigma points from :math:`(x^-, P^-)` after ``predict``
+for the update (1.4.5 reused the propagated ones); both are valid unscented
+updates, and the tests run on the version this project resolves.
+"""
+from __future__ import annotations
+
+import numpy as np
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+from dynamics.quaternion import grp_from_quat, quat_from_grp, quat_from_rotvec, quat_multiply
+from dynamics.validation import InvalidParameterError, finite_number, finite_vector
+from estimators.base import AttitudeEstimator
+from estimators.dead_reckoning import IDENTITY
+from estimators.ekf import covariance_matrix
+from estimators.mekf import _sigmas, discrete_error_model
+
+_CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _unit(q: np.ndarray) -> np.ndarray:
+    return q / np.sqrt(q @ q)
+
+
+class USQUE(UnscentedKalmanFilter, AttitudeEstimator):
+    """Unscented quaternion estimator (Crassidis & Markley 2003) on filterpy's UKF.
+
+    Parameters
+    ----------
+    dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
+    measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
+    initial_bias_sigma_radps, output
+        As for :class:`~estimators.MultiplicativeEKF`.
+    alpha, beta, kappa : float
+        The scaled sigma points' spread, prior-knowledge and secondary
+        scaling parameters (Van der Merwe): ``λ = α² (n + κ) − n``.
+        The defaults (1, 2, 0) put the points ``√6 σ`` from the mean.
+    """
+
+    name = "usque"
+    label = "USQUE (UKF)"
+    scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
+                         "gyro_bias_random_walk": "gyro_bias_random_walk",
+                         "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
+
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
+                 gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
+                 initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
+                 initial_bias_sigma_radps=1e-4, alpha: float = 1.0, beta: float = 2.0,
+                 kappa: float = 0.0, output: str = "posterior"):
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude)
+        alpha = finite_number("alpha", alpha, strictly_positive=True)
+        beta = finite_number("beta", beta, minimum=0.0)
+        kappa = finite_number("kappa", kappa)
+        if alpha * alpha * (6 + kappa) <= 0:
+            raise InvalidParameterError("kappa", kappa, "must make alpha^2 (n + kappa) > 0, n = 6")
+        points = MerweScaledSigmaPoints(6, alpha=alpha, beta=beta, kappa=kappa)
+        UnscentedKalmanFilter.__init__(self, dim_x=6, dim_z=3, dt=self.dt, hx=self._hx,
+                                       fx=self._fx, points=points)
+        self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
+        self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
+                                                   gyro_bias_random_walk, minimum=0.0)
+        self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
+        self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
+        attitude_sigma = _sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
+        bias_sigma = _sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
+        self.initial_covariance = np.diag(np.concatenate([attitude_sigma, bias_sigma]) ** 2)
+        if output not in ("prior", "posterior"):
+            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
+        self.output = output
+        self.reset()
+
+    def reset(self) -> None:
+        self.q_hat = self.initial_attitude.copy()
+        self.x = np.concatenate([np.zeros(3), self.initial_bias_radps])
+        self.P = self.initial_covariance.copy()
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        # An update before the first predict needs sigma points about (x₀, P₀),
+        # which filterpy only draws in predict.
+        self.sigmas_f = self.points_fn.sigma_points(self.x, self.P)
+        self._record()
+
+    def _record(self) -> None:
+        q = self.q_hat if not np.any(self.x[:3]) else _unit(
+            quat_multiply(self.q_hat, quat_from_grp(self.x[:3])))
+        self._output = (q, self.x[3:].copy(), self.P)
+
+    @property
+    def attitude(self) -> np.ndarray:
+        return self._output[0].copy()
+
+    @property
+    def bias_radps(self) -> np.ndarray:
+        return self._output[1].copy()
+
+    @property
+    def attitude_covariance(self) -> np.ndarray:
+        """``P``'s GRP block: the body-frame small-angle covariance to first order (rad²)."""
+        return self._output[2][:3, :3].copy()
+
+    @property
+    def bias_covariance(self) -> np.ndarray:
+        return self._output[2][3:, 3:].copy()
+
+    # The model, as filterpy calls it: fx on each sigma point, hx on each.
+    def _fx(self, x, dt, omega_meas_radps, q_reference_next):
+        q = quat_multiply(self.q_hat, quat_from_grp(x[:3]))
+        q = quat_multiply(q, quat_from_rotvec((omega_meas_radps - x[3:]) * dt))
+        error = quat_multiply(q_reference_next * _CONJUGATE, _unit(q))
+        return np.concatenate([grp_from_quat(error), x[3:]])
+
+    @staticmethod
+    def _hx(x):
+        return x[:3]
+
+    def _reset(self) -> None:
+        """Fold the mean's δp into the reference quaternion."""
+        self.q_hat = _unit(quat_multiply(self.q_hat, quat_from_grp(self.x[:3])))
+        self.x = np.concatenate([np.zeros(3), self.x[3:]])
+
+    def measured_grp(self, star_tracker_quat: np.ndarray) -> np.ndarray:
+        """The reading as GRPs about the reference, sign-aligned first."""
+        z = np.asarray(star_tracker_quat, dtype=float)
+        if self.q_hat @ z < 0:
+            z = -z
+        return grp_from_quat(quat_multiply(self.q_hat * _CONJUGATE, z))
+
+    def correct(self, star_tracker_quat: np.ndarray) -> None:
+        """filterpy's unscented update with one reading, then the reset."""
+        self.update(self.measured_grp(star_tracker_quat))
+        self._reset()
+
+    def propagate(self, omega_meas_radps: np.ndarray) -> None:
+        """Sigma points through the exact kinematics; P⁻ = UT + Q."""
+        omega = np.asarray(omega_meas_radps, dtype=float)
+        omega_hat = omega - self.x[3:]
+        q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt)))
+        _, self.Q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
+                                         self.gyro_bias_random_walk)
+        self.predict(omega_meas_radps=omega, q_reference_next=q_next)
+        # The prior mean's δp stays in x until the next update or reset: the
+        # sigma points filterpy drew for the update are relative to q_next.
+        self.q_hat = q_next
+
+    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+        if self.output == "prior":
+            self._record()
+        if star_tracker_quat is not None:
+            self.correct(star_tracker_quat)
+        else:
+            self._reset()
+        if self.output == "posterior":
+            self._record()
+        estimate = self._output[0].copy()
+        self.propagate(omega_meas_radps)
+        return estimate

@@ -1,0 +1,94 @@
+"""Consistency statistics: they pass a correct filter and catch a mistuned one."""
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from scipy.stats import chi2
+
+from benchmarks import Scenario, simulate
+from benchmarks.consistency import (
+    anees_band,
+    fraction_inside_3sigma,
+    monte_carlo,
+    nees,
+    tidy_frame,
+    verdict,
+)
+
+N_RUNS = 50
+STEPS = 200
+DT = 0.1
+Q_SPECTRAL = 0.5      # white-acceleration density of the toy's truth
+
+
+def toy_runs(q_scale):
+    """A constant-velocity target measured in position: N runs of the truth
+    (which follows the model exactly) and a filterpy KalmanFilter whose Q is
+    ``q_scale`` times the truth's. Returns NEES (N, steps) of the 2-D state."""
+    F = np.array([[1.0, DT], [0.0, 1.0]])
+    Q = Q_SPECTRAL * np.array([[DT ** 3 / 3, DT ** 2 / 2], [DT ** 2 / 2, DT]])
+    R = np.array([[0.04]])
+    rng = np.random.default_rng(20261122)
+    out = np.empty((N_RUNS, STEPS))
+    for run in range(N_RUNS):
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.F, kf.Q, kf.R, kf.H = F, q_scale * Q, R, np.array([[1.0, 0.0]])
+        kf.x = np.zeros(2)
+        kf.P = np.eye(2)
+        truth = rng.multivariate_normal(np.zeros(2), np.eye(2))
+        for k in range(STEPS):
+            truth = F @ truth + rng.multivariate_normal(np.zeros(2), Q)
+            kf.predict()
+            kf.update(truth[:1] + rng.normal(0, 0.2, 1))
+            out[run, k] = nees(truth - kf.x, kf.P)
+    return out
+
+
+def test_nees_of_a_correct_linear_gaussian_filter_is_inside_its_band():
+    # A consistent filter's ANEES at each time is χ²(2N)/N; the time average
+    # of those has the same mean and no larger a variance: the 95 % band.
+    anees = toy_runs(1.0).mean(axis=0)
+    band = anees_band(N_RUNS, 2)
+    assert verdict(anees.mean(), band) == "consistent"
+    # And most single times are inside too (95 % expected; 85 % allowed, a
+    # binomial bound far below what 200 correlated samples could produce by chance).
+    assert np.mean((anees > band[0]) & (anees < band[1])) > 0.85
+
+
+def test_nees_catches_a_filter_whose_q_is_ten_times_too_small():
+    anees = toy_runs(0.1).mean(axis=0)
+    band = anees_band(N_RUNS, 2)
+    assert verdict(anees[20:].mean(), band) == "optimistic"
+    assert anees[20:].mean() > 1.5 * band[1]
+
+
+def test_band_is_the_chi_square_quantile_over_n():
+    low, high = anees_band(10, 3, level=0.99)
+    assert (low, high) == pytest.approx((chi2.ppf(0.005, 30) / 10, chi2.ppf(0.995, 30) / 10))
+    assert verdict(2.9, (low, high)) == "consistent"
+    assert verdict(high * 1.01, (low, high)) == "optimistic"
+    assert verdict(low * 0.99, (low, high)) == "pessimistic"
+
+
+def test_fraction_inside_3_sigma_per_axis(rng):
+    covariance = np.diag([1.0, 4.0, 9.0])
+    errors = rng.multivariate_normal(np.zeros(3), covariance, 100_000)
+    inside = fraction_inside_3sigma(errors, np.broadcast_to(covariance, (100_000, 3, 3)))
+    # 0.9973 for a Gaussian; binomial σ = √(0.0027 · 0.9973 / 1e5) = 1.6e-4, 5σ.
+    assert np.all(np.abs(inside - 0.9973) < 8e-4)
+    assert fraction_inside_3sigma(errors, np.broadcast_to(covariance / 4, (100_000, 3, 3)))[0] < 0.9
+
+
+def test_monte_carlo_summary_on_the_flight_filters():
+    scenario = Scenario.from_toml(
+        __import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
+    ).replace(tstop=120.0)
+    results = [simulate(scenario, ["dead-reckoning", "mekf"], seed=seed, traces=True)
+               for seed in range(6)]
+    assert monte_carlo(results, "dead-reckoning") is None     # it reports no covariance
+    summary = monte_carlo(results, "mekf", settle_steps=100)
+    assert summary["verdict"] == "consistent"
+    assert summary["nis_dof"] == 3 and np.isfinite(summary["anis_time_average"])
+    assert summary["inside_3sigma"].shape == (3,) and np.all(summary["inside_3sigma"] > 0.95)
+    frame = tidy_frame(results[0].time_s, {"mekf": summary, "dead-reckoning": None})
+    assert set(frame["estimator"]) == {"mekf"} and len(frame) == len(results[0].time_s)
+    assert {"anees", "anees_low", "anees_high", "anis", "bias_anees"} <= set(frame.columns)
