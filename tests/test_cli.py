@@ -170,6 +170,6 @@ def test_flight_compare_draws_the_per_axis_figure_with_any_estimators(tmp_path, 
 
 
 def test_compare_rejects_unknown_and_accepts_registry_names(tmp_path, capsys):
-    assert main(["compare", "--estimators", "ekf,usque", "--out", str(tmp_path / "x")]) == 2
-    assert "estimators = 'ekf,usque'" in capsys.readouterr().err
+    assert main(["compare", "--estimators", "ekf,ukf", "--out", str(tmp_path / "x")]) == 2
+    assert "estimators = 'ekf,ukf'" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()

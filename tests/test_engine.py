@@ -95,7 +95,7 @@ def test_bad_run_settings_rejected(settings, name):
 
 def test_unknown_estimator_rejected():
     with pytest.raises(InvalidParameterError, match="estimator"):
-        run_batch(SCENARIO, make_runs(SCENARIO, [0]), ["usque"])
+        run_batch(SCENARIO, make_runs(SCENARIO, [0]), ["ukf"])
 
 
 FLIGHT_FILE = __import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
