@@ -150,3 +150,27 @@ def test_mekf_on_workshop_sensors_equals_the_per_run_path():
         case = SCENARIO.replace(star_tracker_noise=float(runs.star_tracker_noise[i]))
         reference = simulate(case, ["mekf"], seed=int(runs.seeds[i]))
         assert np.abs(batch.estimates["mekf"][i] - reference.estimates["mekf"]).max() < 1e-9
+
+
+def test_engine_streams_the_per_run_nees_and_nis(flight_batch):
+    from benchmarks.consistency import nees
+    runs, _ = flight_batch
+    batch = run_batch(FLIGHT, runs, ["dead-reckoning", "ekf", "mekf"], consistency=True,
+                      nees_every=7, settle_steps=50)
+    assert set(batch.consistency) == {"ekf", "mekf"}
+    for i in range(len(runs)):
+        case = FLIGHT.replace(gyro_noise=float(runs.gyro_noise[i]),
+                              time_between_measurements=float(runs.time_between_measurements[i]),
+                              pc_exponent=float(runs.pc_exponent[i]))
+        reference = simulate(case, ["ekf", "mekf"], seed=int(runs.seeds[i]), traces=True)
+        for name in ("ekf", "mekf"):
+            trace = reference.traces[name]
+            from dynamics.quaternion import attitude_error_vector_rad
+            expected = nees(attitude_error_vector_rad(reference.truth.q_true, trace.quat),
+                            trace.attitude_covariance)
+            streamed = batch.consistency[name]
+            assert np.allclose(streamed["nees_samples"][i], expected[::7], rtol=1e-6)
+            assert streamed["nees_time_average"][i] == pytest.approx(expected[50:].mean(),
+                                                                     rel=1e-6)
+            assert streamed["nis_mean"][i] == pytest.approx(np.nanmean(trace.nis), rel=1e-6)
+            assert streamed["nis_dof"] == trace.nis_dof

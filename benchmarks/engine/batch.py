@@ -110,6 +110,10 @@ class BatchResult:
     #: The last step's true gyro bias ``(B, 3)`` and, for the MEKF, its
     #: output bias estimate ``(B, 3)`` and 6x6 covariance ``(B, 6, 6)``.
     final: dict | None = None
+    #: With ``consistency=True``: per estimator, ``time_s`` (S,) of the NEES
+    #: samples, ``nees_samples`` (B, S), ``nees_time_average`` (B,),
+    #: ``nis_mean`` (B,) and ``nis_dof``.
+    consistency: dict | None = None
 
     def frame(self) -> pd.DataFrame:
         """Tidy: one row per (run, estimator) with the run's settings and statistics."""
@@ -197,9 +201,14 @@ def _reference_estimators(scenario: Scenario, runs: RunTable, with_mekf: bool) -
                        ekf=ESTIMATORS["ekf"].from_scenario(scenario), mekf=mekf)
 
 
+#: Estimators whose kernels stream NEES and NIS (they report a covariance).
+CONSISTENCY_ESTIMATORS = ("ekf", "mekf")
+
+
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
               keep_traces: bool = False, block_steps: int = BLOCK_STEPS,
-              threads: int | None = None) -> BatchResult:
+              threads: int | None = None, consistency: bool = False,
+              nees_every: int = 1, settle_steps: int = 0) -> BatchResult:
     """Run ``estimators`` (names from :data:`ENGINE_ESTIMATORS`) on every run of ``runs``.
 
     Parameters
@@ -216,6 +225,12 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         Steps per kernel call (results do not depend on it).
     threads : int, optional
         Threads drawing random numbers (default: one per core).
+    consistency : bool
+        Stream the attitude NEES of the estimators in
+        :data:`CONSISTENCY_ESTIMATORS` (sampled every ``nees_every`` steps,
+        and its per-run average from ``settle_steps`` on) and their
+        star-tracker NIS (per-run average); see ``BatchResult.consistency``.
+        No traces are needed.
     """
     from benchmarks.engine import kernels
     from numba import get_num_threads
@@ -284,6 +299,13 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
               else np.zeros((len(estimators), 0, 0, 4)))
     q_true = np.ascontiguousarray(truth.q_true)
     omega_true = np.ascontiguousarray(truth.omega_true_radps)
+    nees_every = max(1, int(nees_every))
+    settle_steps = min(max(0, int(settle_steps)), n_steps - 1)
+    n_samples = -(-n_steps // nees_every) if consistency else 0
+    consistency_arrays = (bool(consistency), nees_every, settle_steps,
+                          np.zeros((len(estimators), n_runs, n_samples)),
+                          np.zeros((len(estimators), n_runs)), np.zeros((len(estimators), n_runs)),
+                          np.zeros((len(estimators), n_runs)))
 
     # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
     columns = gyro.normals_per_step
@@ -308,7 +330,8 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
                      star_settings[1], star_settings[2], star_settings[3], star_settings[4],
                      uniforms)
         kernels.advance(k0, n_steps - 1, q_true, omega_true, dt, gyro_args, star_args, state,
-                        enabled, rows, options, stats, hist, _FIRST_BITS, traces, keep_traces)
+                        enabled, rows, options, stats, hist, _FIRST_BITS, traces, keep_traces,
+                        consistency_arrays)
 
     statistics, estimates = {}, ({} if keep_traces else None)
     for slot, name in zip(rows[enabled], estimators):
@@ -329,11 +352,23 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
             "max_deg": stats[slot, :, kernels.MAX].copy(),
             "final_deg": stats[slot, :, kernels.FINAL].copy(),
         }
+    checked = {}
+    if consistency:
+        _, _, _, samples, nees_sum, nis_sum, nis_count = consistency_arrays
+        for slot, name in zip(rows[enabled], estimators):
+            if name not in CONSISTENCY_ESTIMATORS:
+                continue
+            checked[name] = {
+                "time_s": truth.time_s[::nees_every],
+                "nees_samples": samples[slot],
+                "nees_time_average": nees_sum[slot] / (n_steps - settle_steps),
+                "nis_mean": nis_sum[slot] / np.maximum(nis_count[slot], 1),
+                "nis_dof": (reference.ekf if name == "ekf" else mekf[0]).dim_z}
     final = {"gyro_bias_radps": bias_last}
     if "mekf" in estimators:
         final["mekf"] = {"bias_radps": beta_mekf_last, "covariance": P_mekf_last}
     return BatchResult(runs=runs, estimators=estimators, statistics=statistics,
-                       estimates=estimates, final=final)
+                       estimates=estimates, final=final, consistency=checked or None)
 
 
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,

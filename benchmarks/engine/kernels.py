@@ -200,6 +200,11 @@ def _ekf_update(x, P, z, R, scratch):
     _gauss_jordan(S, inverse, 4)
     _matmul4(P, inverse, K)
     y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
+    nis = 0.0
+    y = (y0, y1, y2, y3)
+    for i in range(4):
+        for j in range(4):
+            nis += y[i] * inverse[i, j] * y[j]
     for i in range(4):
         x[i] = x[i] + (K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2 + K[i, 3] * y3)
     for i in range(4):
@@ -217,6 +222,7 @@ def _ekf_update(x, P, z, R, scratch):
                 first += T[i, m] * IK[j, m]
                 second += KR[i, m] * K[j, m]
             P[i, j] = first + second
+    return nis
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -367,6 +373,11 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
             S[i, j] = P[i, j] + R[i, j]
             inverse[i, j] = 1.0 if i == j else 0.0
     _gauss_jordan(S, inverse, 3)
+    nis = 0.0
+    y = (y0, y1, y2)
+    for i in range(3):
+        for j in range(3):
+            nis += y[i] * inverse[i, j] * y[j]
     # K = P Hᵀ S⁻¹ (6x3): P's first three columns times S⁻¹.
     for i in range(6):
         for j in range(3):
@@ -397,6 +408,7 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
     beta[0] += dx[3]
     beta[1] += dx[4]
     beta[2] += dx[5]
+    return nis
 
 
 @njit(cache=True, error_model="numpy")
@@ -421,9 +433,69 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias
         w[i] = w[i] + std * normals[i]
 
 
+@njit(cache=True, error_model="numpy")
+def _nees(q_true_k, q, C, scratch):
+    """eᵀ C⁻¹ e with e = log(q̂⁻¹ ⊗ q) the body-frame error of estimate ``q``
+    and ``C`` its 3x3 covariance (benchmarks.consistency.nees)."""
+    w = q[0] * q_true_k[0] + q[1] * q_true_k[1] + q[2] * q_true_k[2] + q[3] * q_true_k[3]
+    v0 = q[0] * q_true_k[1] - q[1] * q_true_k[0] - q[2] * q_true_k[3] + q[3] * q_true_k[2]
+    v1 = q[0] * q_true_k[2] + q[1] * q_true_k[3] - q[2] * q_true_k[0] - q[3] * q_true_k[1]
+    v2 = q[0] * q_true_k[3] - q[1] * q_true_k[2] + q[2] * q_true_k[1] - q[3] * q_true_k[0]
+    if w < 0:
+        w, v0, v1, v2 = -w, -v0, -v1, -v2
+    norm_q = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, v0, v1, v2 = w / norm_q, v0 / norm_q, v1 / norm_q, v2 / norm_q
+    vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if vector_norm < 1e-12:
+        scale = 2.0 / max(w, 1e-300)
+    else:
+        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
+    e = (scale * v0, scale * v1, scale * v2)
+    S = scratch[0]
+    inverse = scratch[1]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = C[i, j]
+            inverse[i, j] = 1.0 if i == j else 0.0
+    _gauss_jordan(S, inverse, 3)
+    total = 0.0
+    for i in range(3):
+        for j in range(3):
+            total += e[i] * inverse[i, j] * e[j]
+    return total
+
+
+@njit(cache=True, error_model="numpy")
+def _projected_covariance(x, P, out):
+    """4 Ξ(q̂)ᵀ P Ξ(q̂) at the normalised q̂ (estimators.QuaternionEKF.attitude_covariance)."""
+    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    w, a, b, c = x[0] / norm, x[1] / norm, x[2] / norm, x[3] / norm
+    xi = ((-a, -b, -c), (w, -c, b), (c, w, -a), (-b, a, w))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for m in range(4):
+                inner = 0.0
+                for n in range(4):
+                    inner += P[m, n] * xi[n][j]
+                total += xi[m][i] * inner
+            out[i, j] = 4.0 * total
+
+
+@njit(cache=True, error_model="numpy")
+def _fold_consistency(row, run, k, value, consistency):
+    """Add a NEES value to the run's time average (from the settle step) and
+    keep it at the sampled steps."""
+    (active, every, settle, samples, nees_sum, nis_sum, nis_count) = consistency
+    if k >= settle:
+        nees_sum[row, run] += value
+    if k % every == 0 and k // every < samples.shape[2]:
+        samples[row, run, k // every] = value
+
+
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, rows, options,
-            stats, hist, hist_first_bits, traces, keep_traces):
+            stats, hist, hist_first_bits, traces, keep_traces, consistency):
     """Advance every run by one block of steps starting at step ``k0``.
 
     ``gyro`` = (std (B,), normals (B, T, 3 or 6), bias_step_std, K (3, 3),
@@ -448,6 +520,8 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
     (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf, P_mekf,
      mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last) = state
     dr_average, resets_average, ekf_posterior, mekf_posterior = options
+    check = consistency[0]
+    nis_sum, nis_count = consistency[5], consistency[6]
     n_runs = gyro_std.shape[0]
     n_steps = gyro_normals.shape[1]
     half_dt = 0.5 * dt
@@ -460,6 +534,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
         F = np.empty((4, 4))
         scratch = np.empty((5, 4, 4))
         scratch6 = np.empty((7, 6, 6))
+        projected = np.empty((3, 3))
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
         x = x_ekf[run]
@@ -534,11 +609,22 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
             if enabled[EKF]:
                 for i in range(4):
                     prior[i] = x[i]
+                if check and not ekf_posterior:
+                    _projected_covariance(x, P, projected)
+                    _fold_consistency(rows[EKF], run, k, _nees(q_true[k], x, projected, scratch6),
+                                      consistency)
                 if available:
-                    _ekf_update(x, P, z, R, scratch)
+                    nis = _ekf_update(x, P, z, R, scratch)
+                    if check:
+                        nis_sum[rows[EKF], run] += nis
+                        nis_count[rows[EKF], run] += 1
                 if ekf_posterior:
                     for i in range(4):
                         prior[i] = x[i]
+                    if check:
+                        _projected_covariance(x, P, projected)
+                        _fold_consistency(rows[EKF], run, k,
+                                          _nees(q_true[k], x, projected, scratch6), consistency)
                 _record(rows[EKF], run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int)
                 _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
@@ -549,14 +635,25 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                 if k == last_step and not mekf_posterior:
                     beta_mekf_last[run, :] = beta_mekf[run]
                     P_mekf_last[run, :, :] = P_mekf[run]
+                if check and not mekf_posterior:
+                    _fold_consistency(rows[MEKF], run, k,
+                                      _nees(q_true[k], qm, P_mekf[run], scratch6), consistency)
                 if available:
-                    _mekf_update(qm, beta_mekf[run], P_mekf[run], z, R_mekf[run], scratch6, dq)
+                    nis = _mekf_update(qm, beta_mekf[run], P_mekf[run], z, R_mekf[run],
+                                       scratch6, dq)
+                    if check:
+                        nis_sum[rows[MEKF], run] += nis
+                        nis_count[rows[MEKF], run] += 1
                 if mekf_posterior:
                     for i in range(4):
                         out_mekf[i] = qm[i]
                     if k == last_step:
                         beta_mekf_last[run, :] = beta_mekf[run]
                         P_mekf_last[run, :, :] = P_mekf[run]
+                    if check:
+                        _fold_consistency(rows[MEKF], run, k,
+                                          _nees(q_true[k], qm, P_mekf[run], scratch6),
+                                          consistency)
                 _record(rows[MEKF], run, k, inv_count, q_true[k], out_mekf, stats, hist,
                         hist_first_bits, traces, keep_traces, bits, bits_int)
                 _mekf_propagate(qm, beta_mekf[run], P_mekf[run], w, dt, mekf_noise[run],
