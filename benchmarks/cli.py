@@ -210,6 +210,26 @@ def build_parser() -> argparse.ArgumentParser:
                             help="finish an interrupted campaign in --out")
     _add_common(montecarlo, seed=False)
 
+    consistency = commands.add_parser(
+        "consistency", help="do the filters know their error? NEES against chi-square bands, "
+        "efficiency against the best achievable; write consistency.csv and consistency.png")
+    consistency.add_argument("--estimators", type=_estimator_list,
+                             default=tuple(ESTIMATORS), metavar="A,B,...",
+                             help=f"any of {', '.join(ESTIMATORS)} (default all)")
+    consistency.add_argument("--runs", type=_whole("runs", 1), default=100, metavar="N",
+                             help="runs (seeds S … S+N-1) of each estimator (default 100)")
+    consistency.add_argument("--seed", type=_whole("seed", 0), default=0, metavar="S",
+                             help="base seed (default 0)")
+    consistency.add_argument("--settle", type=_number, metavar="SECONDS",
+                             help="time left out of the averages (default a tenth of tstop)")
+    consistency.add_argument("--per-run-limit", type=_whole("per-run-limit", 1),
+                             default=20, metavar="N",
+                             help="at most N runs for estimators without an engine kernel "
+                             "(default 20)")
+    consistency.add_argument("--workers", type=_whole("workers", 1), metavar="N",
+                             help="run those per-run simulations on a local Dask cluster")
+    _add_common(consistency, seed=False)
+
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
     _add_common(workshop, seed=False)
@@ -342,9 +362,32 @@ def command_workshop(args, scenario):
     print(f"wrote {report}")
 
 
+def command_consistency(args, scenario):
+    from benchmarks import consistency
+    from benchmarks.engine.batch import ENGINE_ESTIMATORS
+    from benchmarks.output import write_figure, write_text
+    from benchmarks.progress import progress
+    if args.settle is not None and not 0 <= args.settle < scenario.tstop:
+        raise UsageError(f"settle = {args.settle!r}: must be >= 0 and below tstop = "
+                         f"{scenario.tstop:g}")
+    engine = [name for name in args.estimators if name in ENGINE_ESTIMATORS]
+    total = args.runs * len(engine) + min(args.runs, args.per_run_limit) * (
+        len(args.estimators) - len(engine))
+    with progress(total=total, desc="consistency", unit="run", quiet=args.quiet) as bar:
+        result = consistency.run_consistency(
+            scenario, args.estimators, args.runs, base_seed=args.seed, settle_s=args.settle,
+            per_run_limit=args.per_run_limit, workers=args.workers or 0, progress_bar=bar)
+    print(consistency.format_summary(result.summary))
+    frame = consistency.consistency_frame(result)
+    write_text(args.out / "consistency.csv", frame.to_csv(index=False))
+    write_figure(args.out / "consistency.png", consistency.figure(result))
+    print(f"wrote {args.out / 'consistency.csv'} and {args.out / 'consistency.png'}")
+
+
 COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
             "tune": command_tune, "landscape": command_landscape, "animate": command_animate,
-            "montecarlo": command_montecarlo, "workshop": command_workshop}
+            "montecarlo": command_montecarlo, "consistency": command_consistency,
+            "workshop": command_workshop}
 
 
 def main(argv=None) -> int:

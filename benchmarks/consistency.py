@@ -25,6 +25,8 @@ single-time band is a conservative band for the time average.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 from scipy.stats import chi2
@@ -127,3 +129,204 @@ def tidy_frame(time_s: np.ndarray, summaries: dict) -> pd.DataFrame:
             part["bias_anees"] = summary["bias_anees"]
         parts.append(part)
     return pd.concat(parts, ignore_index=True)
+
+
+# --- Campaigns: the engine where an estimator has a kernel, the per-run path otherwise ---
+
+#: Runs of estimators without a kernel, unless asked for more (each is a full
+#: per-run simulation: USQUE costs about 0.8 ms a step).
+PER_RUN_LIMIT = 20
+#: NEES samples kept per run (the time series is decimated to about this many).
+NEES_SAMPLES = 1000
+
+
+@dataclass
+class ConsistencyResult:
+    """A consistency campaign: per estimator, its summary and its ANEES over time."""
+
+    scenario: object
+    time_s: np.ndarray                  # the sampled times of the ANEES series
+    summary: dict                       # name → {runs, rms_deg, bound_rms_deg, …}
+    anees: dict                         # name → (S,) ANEES at time_s, or None
+    bound_rms_deg: np.ndarray           # (S,) the bound's RMS angle at time_s (posterior)
+    samples: dict                       # name → RunResult of the base seed's run (traces)
+
+
+def per_run_consistency(scenario, name: str, seed: int, every: int, settle_steps: int) -> dict:
+    """One per-run simulation of ``name``: its RMS error and NEES figures."""
+    from benchmarks.simulation import simulate
+    result = simulate(scenario, [name], seed=seed, traces=True)
+    out = {"rms_deg": float(np.sqrt(np.mean(result.error_deg[name] ** 2)))}
+    errors = run_errors(result, name)
+    if errors["attitude_covariance"] is not None:
+        values = nees(errors["attitude"], errors["attitude_covariance"])
+        out["nees_samples"] = values[::every]
+        out["nees_time_average"] = float(values[settle_steps:].mean())
+    if errors["nis"] is not None:
+        out["nis_mean"] = float(np.nanmean(errors["nis"]))
+        out["nis_dof"] = errors["nis_dof"]
+    return out
+
+
+def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
+                    settle_s: float | None = None, per_run_limit: int = PER_RUN_LIMIT,
+                    workers: int = 0, progress_bar=None,
+                    level: float = BAND_LEVEL) -> ConsistencyResult:
+    """Run ``runs`` seeds (``base_seed + i``) of each estimator and judge them.
+
+    Estimators with an engine kernel run on the engine, streaming NEES;
+    the others run per run (at most ``per_run_limit`` seeds), on a local Dask
+    cluster of ``workers`` processes if asked. ``settle_s`` (default a tenth of
+    the run) is left out of the time averages.
+    """
+    from benchmarks.bounds import posterior_crb
+    from benchmarks.engine.batch import CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch
+    from benchmarks.simulation import build_estimator, simulate
+
+    n_steps = scenario.n_steps
+    every = max(1, n_steps // NEES_SAMPLES)
+    settle_steps = round((scenario.tstop / 10 if settle_s is None else settle_s) / scenario.dt)
+    settle_steps = min(max(settle_steps, 0), n_steps - 1)
+    bound = posterior_crb(scenario)
+    engine_names = [name for name in estimators if name in ENGINE_ESTIMATORS]
+    other_names = [name for name in estimators if name not in ENGINE_ESTIMATORS]
+    per_run = {}
+    if engine_names:
+        parts = []
+        for start in range(0, runs, CHUNK_RUNS):
+            seeds = np.arange(base_seed + start, base_seed + min(runs, start + CHUNK_RUNS))
+            parts.append(run_batch(scenario, make_runs(scenario, seeds), engine_names,
+                                   consistency=True, nees_every=every,
+                                   settle_steps=settle_steps))
+            if progress_bar is not None:
+                progress_bar.update(len(seeds) * len(engine_names))
+        for name in engine_names:
+            record = {"rms_deg": np.concatenate([p.statistics[name]["rms_deg"] for p in parts])}
+            if parts[0].consistency and name in parts[0].consistency:
+                for key in ("nees_samples", "nees_time_average", "nis_mean"):
+                    record[key] = np.concatenate([p.consistency[name][key] for p in parts])
+                record["nis_dof"] = parts[0].consistency[name]["nis_dof"]
+            per_run[name] = record
+    for name in other_names:
+        seeds = range(base_seed, base_seed + min(runs, per_run_limit))
+        arguments = [(scenario, name, seed, every, settle_steps) for seed in seeds]
+        outcomes = _map(per_run_consistency, arguments, workers, progress_bar)
+        record = {"rms_deg": np.array([o["rms_deg"] for o in outcomes])}
+        if "nees_samples" in outcomes[0]:
+            record["nees_samples"] = np.array([o["nees_samples"] for o in outcomes])
+            record["nees_time_average"] = np.array([o["nees_time_average"] for o in outcomes])
+        if "nis_mean" in outcomes[0]:
+            record["nis_mean"] = np.array([o["nis_mean"] for o in outcomes])
+            record["nis_dof"] = outcomes[0]["nis_dof"]
+        per_run[name] = record
+
+    summary, anees = {}, {}
+    for name in estimators:
+        record = per_run[name]
+        output = getattr(build_estimator(name, scenario), "output", "posterior")
+        n_runs = len(record["rms_deg"])
+        row = {"runs": n_runs, "rms_deg": float(np.sqrt(np.mean(record["rms_deg"] ** 2))),
+               "bound_rms_deg": bound.rms_deg(output)}
+        row["efficiency"] = row["rms_deg"] / row["bound_rms_deg"]
+        if "nees_samples" in record:
+            band = anees_band(n_runs, 3, level)
+            row.update(anees=float(np.mean(record["nees_time_average"])), anees_low=band[0],
+                       anees_high=band[1])
+            row["verdict"] = verdict(row["anees"], band)
+            anees[name] = record["nees_samples"].mean(axis=0)
+        else:
+            row.update(anees=np.nan, anees_low=np.nan, anees_high=np.nan, verdict="no covariance")
+            anees[name] = None
+        if "nis_mean" in record:
+            row["anis"] = float(np.mean(record["nis_mean"]))
+            row["nis_dof"] = record["nis_dof"]
+        summary[name] = row
+    # One traced run (the base seed) of each estimator for the per-axis figure.
+    samples = {name: simulate(scenario, [name], seed=base_seed, traces=True)
+               for name in estimators}
+    time_s = bound.time_s[::every]
+    bound_rms = np.degrees(np.sqrt(np.trace(bound.posterior[::every], axis1=1, axis2=2)))
+    return ConsistencyResult(scenario=scenario, time_s=time_s, summary=summary, anees=anees,
+                             bound_rms_deg=bound_rms, samples=samples)
+
+
+def _map(function, arguments, workers: int, progress_bar):
+    """``function(*a)`` for each ``a``, in order; on a local Dask cluster with ``workers``."""
+    if not workers:
+        out = []
+        for args in arguments:
+            out.append(function(*args))
+            if progress_bar is not None:
+                progress_bar.update(1)
+        return out
+    from benchmarks.engine.campaign import _dask_client
+    client, cluster = _dask_client(workers, None)
+    try:
+        futures = [client.submit(function, *args, pure=False) for args in arguments]
+        out = []
+        for future in futures:
+            out.append(future.result())
+            if progress_bar is not None:
+                progress_bar.update(1)
+        return out
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+SUMMARY_COLUMNS = ("runs", "rms_deg", "bound_rms_deg", "efficiency", "anees", "anees_low",
+                   "anees_high", "verdict")
+
+
+def format_summary(summary: dict) -> str:
+    """The printed table: estimator, runs, RMS error, bound, efficiency, ANEES, band, verdict."""
+    header = (f"{'estimator':<22} {'runs':>5} {'rms':>12} {'bound':>12} {'efficiency':>10} "
+              f"{'ANEES':>8} {'95% band':>15}  verdict")
+    lines = [header]
+    for name, row in summary.items():
+        unit, scale = ("arcsec", 3600.0) if row["bound_rms_deg"] < 0.1 else ("deg", 1.0)
+        band = ("" if np.isnan(row["anees"]) else
+                f"[{row['anees_low']:.2f}, {row['anees_high']:.2f}]")
+        anees_text = "" if np.isnan(row["anees"]) else f"{row['anees']:.2f}"
+        lines.append(f"{name:<22} {row['runs']:>5} {row['rms_deg'] * scale:>8.4g} {unit:<3}"
+                     f" {row['bound_rms_deg'] * scale:>8.4g} {unit:<3} {row['efficiency']:>10.3f}"
+                     f" {anees_text:>8} {band:>15}  {row['verdict']}")
+    return "\n".join(lines)
+
+
+def consistency_frame(result: ConsistencyResult) -> pd.DataFrame:
+    """Tidy: one row per (estimator, sampled time) with ANEES, its band, the
+    bound's RMS angle, and the estimator's summary figures."""
+    parts = []
+    for name, row in result.summary.items():
+        part = pd.DataFrame({"estimator": name, "time_s": result.time_s,
+                             "anees": (result.anees[name] if result.anees[name] is not None
+                                       else np.nan),
+                             "anees_low": row["anees_low"], "anees_high": row["anees_high"],
+                             "bound_rms_deg": result.bound_rms_deg, "runs": row["runs"],
+                             "rms_deg": row["rms_deg"], "efficiency": row["efficiency"],
+                             "anis": row.get("anis", np.nan), "verdict": row["verdict"]})
+        parts.append(part)
+    return pd.concat(parts, ignore_index=True)
+
+
+def figure(result: ConsistencyResult):
+    """The consistency figure of a campaign (see :func:`benchmarks.plots.consistency_figure`)."""
+    from benchmarks.bounds import posterior_crb
+    from benchmarks.plots import consistency_figure
+    errors, sigmas, labels, time_s = {}, {}, {}, None
+    for name, sample in result.samples.items():
+        trace = sample.traces[name]
+        labels[name] = sample.labels[name]
+        time_s = sample.time_s
+        if trace.attitude_covariance is None:
+            continue          # the per-axis panels are about envelopes
+        errors[name] = np.degrees(attitude_error_vector_rad(sample.truth.q_true, trace.quat))
+        sigmas[name] = np.degrees(np.sqrt(np.diagonal(trace.attitude_covariance, axis1=1,
+                                                      axis2=2)))
+    bound = posterior_crb(result.scenario)
+    bound_sigma = np.degrees(np.sqrt(np.diagonal(bound.posterior, axis1=1, axis2=2)))
+    bands = {name: (row["anees_low"], row["anees_high"]) for name, row in result.summary.items()}
+    return consistency_figure(result.time_s, result.anees, bands, errors, sigmas, bound_sigma,
+                              time_s, labels)

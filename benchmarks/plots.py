@@ -193,3 +193,59 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
     axes[0, 0].legend(loc="upper right", fontsize="small", ncols=2)
     axes[0, 1].legend(loc="upper right", fontsize="small")
     return figure
+
+
+def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict,
+                       sample_sigmas_deg: dict, bound_sigma_deg: np.ndarray, sample_time_s,
+                       labels: dict) -> Figure:
+    """ANEES over time against its χ² band per estimator (top left), and the
+    per-axis error of a sample run with each filter's ±3σ and the bound's ±3σ
+    ("best achievable", dashed) on the other three panels.
+
+    Parameters
+    ----------
+    time_s : (S,) the ANEES sample times
+    anees : {name: (S,) or None}; bands : {name: (low, high)}
+    sample_errors_deg : {name: (N, 3)}; sample_sigmas_deg : {name: (N, 3) or None}
+    bound_sigma_deg : (N, 3) the bound's 1σ per axis; sample_time_s : (N,)
+    """
+    with sns.axes_style("whitegrid"):
+        figure = Figure(figsize=(14.0, 8.5), layout="constrained")
+        axes = figure.subplots(2, 2, squeeze=False).ravel()
+    colors = dict(zip(labels, sns.color_palette("deep", len(labels))))
+    ax = axes[0]
+    for name, series in anees.items():
+        if series is None:
+            continue
+        ax.plot(time_s, series, color=colors[name], linewidth=1.0, label=labels[name])
+        low, high = bands[name]
+        ax.axhspan(low, high, color=colors[name], alpha=0.12, linewidth=0)
+    ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", label="3 (consistent mean)")
+    ax.set_yscale("log")
+    ax.set_xlim(time_s[0], time_s[-1])
+    ax.set_xlabel(X_LABEL)
+    ax.set_ylabel("ANEES (3 degrees of freedom)")
+    ax.set_title("Average NEES over runs, with its 95 % χ² band")
+    ax.legend(loc="upper right", fontsize="small")
+    steady = max(3 * float(np.median(bound_sigma_deg[len(bound_sigma_deg) // 2:])), 1e-12)
+    scale, unit = ((_ARCSEC_PER_DEG, "arcsec") if steady < ARCSEC_BELOW_DEG else (1.0, "deg"))
+    for axis, ax in enumerate(axes[1:]):
+        for name, error in sample_errors_deg.items():
+            ax.plot(sample_time_s, error[:, axis] * scale, color=colors[name], linewidth=0.7,
+                    label=labels[name])
+            sigma = sample_sigmas_deg.get(name)
+            if sigma is not None:
+                ax.fill_between(sample_time_s, -3 * sigma[:, axis] * scale,
+                                3 * sigma[:, axis] * scale, color=colors[name], alpha=0.12,
+                                linewidth=0)
+        envelope = 3 * bound_sigma_deg[:, axis] * scale
+        ax.plot(sample_time_s, envelope, color="black", linestyle="--", linewidth=1.0,
+                label="best achievable ±3σ")
+        ax.plot(sample_time_s, -envelope, color="black", linestyle="--", linewidth=1.0)
+        ax.set_yscale("symlog", linthresh=steady * scale)
+        ax.set_xlim(sample_time_s[0], sample_time_s[-1])
+        ax.set_xlabel(X_LABEL)
+        ax.set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
+    axes[1].set_title("One run's per-axis error, each filter's ±3σ (shaded)")
+    axes[1].legend(loc="upper right", fontsize="small", ncols=2)
+    return figure

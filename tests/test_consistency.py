@@ -92,3 +92,39 @@ def test_monte_carlo_summary_on_the_flight_filters():
     frame = tidy_frame(results[0].time_s, {"mekf": summary, "dead-reckoning": None})
     assert set(frame["estimator"]) == {"mekf"} and len(frame) == len(results[0].time_s)
     assert {"anees", "anees_low", "anees_high", "anis", "bias_anees"} <= set(frame.columns)
+
+
+def test_consistency_command_prints_the_table_and_writes_csv_and_figure(tmp_path, capsys):
+    from benchmarks.cli import main
+    short = tmp_path / "short.toml"
+    flight = (__import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios"
+              / "flight.toml").read_text()
+    short.write_text(flight.replace("tstop = 3600.0", "tstop = 60.0"))
+    out = tmp_path / "out"
+    assert main(["consistency", "--scenario", str(short), "--runs", "30", "--per-run-limit", "2",
+                 "--settle", "10", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    for name in ("dead-reckoning", "ekf", "mekf", "usque"):
+        assert name in printed
+    assert "no covariance" in printed and "efficiency" in printed
+    import pandas as pd
+    frame = pd.read_csv(out / "consistency.csv")
+    assert set(frame["estimator"]) == {"dead-reckoning", "dead-reckoning-resets", "ekf", "mekf",
+                                       "usque"}
+    mekf = frame[frame["estimator"] == "mekf"]
+    assert (mekf["runs"] == 30).all() and (frame[frame["estimator"] == "usque"]["runs"] == 2).all()
+    assert mekf["anees_low"].iloc[0] < 3 < mekf["anees_high"].iloc[0]
+    assert (out / "consistency.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["--runs", "0"], "runs = '0'"),
+    (["--settle", "-1"], "settle = -1.0"),
+    (["--estimators", "ekf,kalman"], "estimators = 'ekf,kalman'"),
+])
+def test_bad_consistency_input_fails_cleanly(tmp_path, capsys, argv, text):
+    from benchmarks.cli import main
+    assert main(["consistency", "--out", str(tmp_path / "x"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert text in err and "Traceback" not in err and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
