@@ -60,6 +60,8 @@ class Landscape:
     time_s : (N,) seconds
     ekf_curves : (P, N) EKF error of the first seed at each grid value, degrees
     reference_curves : {label: (N,)} dead reckoning and resets, first seed
+    bound_mean_deg : the mean error angle of the best achievable filter
+        (:mod:`benchmarks.bounds`), drawn as "best achievable"
     """
 
     pc_values: np.ndarray
@@ -69,6 +71,7 @@ class Landscape:
     time_s: np.ndarray
     ekf_curves: np.ndarray
     reference_curves: dict
+    bound_mean_deg: float | None = None
 
     @property
     def best_index(self) -> int:
@@ -106,7 +109,15 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
     table["runs"] = records.groupby("pc_exponent", sort=False).size()
     return Landscape(pc_values=pc_values, seeds=seeds, runs=records,
                      table=table.reset_index(), time_s=truth.time_s, ekf_curves=ekf_curves,
-                     reference_curves=reference_curves)
+                     reference_curves=reference_curves, bound_mean_deg=bound_mean_deg(scenario))
+
+
+def bound_mean_deg(scenario: Scenario) -> float:
+    """The bound's mean error angle for the EKF as the scenario builds it (its
+    output, prior or posterior, picks the bound's)."""
+    from benchmarks.bounds import posterior_crb
+    output = ESTIMATORS["ekf"].from_scenario(scenario).output
+    return posterior_crb(scenario).mean_deg(output)
 
 
 def _draw(landscape: Landscape, index: int):
@@ -122,6 +133,9 @@ def _draw(landscape: Landscape, index: int):
     for column, label in PANEL_STATISTICS:
         right.plot(landscape.table["pc_exponent"], landscape.table[column], label=label,
                    linewidth=1.8)
+    if landscape.bound_mean_deg is not None:
+        right.axhline(landscape.bound_mean_deg, color="grey", linestyle=":", linewidth=1.8,
+                      label=f"best achievable mean ({landscape.bound_mean_deg:.3f}°)")
     vertical = right.axvline(landscape.pc_values[index], color="black", linestyle="--",
                              linewidth=1.2, label="pc exponent shown")
     right.set_xlabel("pc exponent (Q = exp(pc) I)")
