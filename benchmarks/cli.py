@@ -232,6 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
+    workshop.add_argument("--part", choices=("exercise", "flight"), default="exercise",
+                          help="the exercise (default), or the study after it: additive "
+                          "against multiplicative filters and the best achievable")
     _add_common(workshop, seed=False)
     return parser
 
@@ -357,8 +360,12 @@ def command_montecarlo(args, scenario):
 
 
 def command_workshop(args, scenario):
-    from benchmarks.workshop import run_workshop
-    report = run_workshop(scenario, args.out, quiet=args.quiet)
+    if args.part == "flight":
+        from benchmarks.flight_study import run_flight_study
+        report = run_flight_study(scenario, args.out, quiet=args.quiet)
+    else:
+        from benchmarks.workshop import run_workshop
+        report = run_workshop(scenario, args.out, quiet=args.quiet)
     print(f"wrote {report}")
 
 

@@ -127,3 +127,22 @@ def test_notebook_script_runs_as_plain_python(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "pc_exponent =" in done.stdout
     assert (tmp_path / "compare.png").is_file() and (tmp_path / "landscape.png").is_file()
+
+
+def test_flight_study_report_has_its_sections_figures_and_numbers(tmp_path, monkeypatch):
+    from benchmarks import flight_study
+    # The study's own sizes take about a minute; the same code on small ones.
+    monkeypatch.setattr(flight_study, "STUDY_TSTOP_S", 30.0)
+    monkeypatch.setattr(flight_study, "WORKSHOP_SEEDS", 8)
+    monkeypatch.setattr(flight_study, "FLIGHT_ENGINE_RUNS", 10)
+    monkeypatch.setattr(flight_study, "FLIGHT_PER_RUN_RUNS", 2)
+    monkeypatch.setattr(flight_study, "PC_GRID", np.array([-9.0, -8.5, -8.0]))
+    assert main(["workshop", "--part", "flight", "--out", str(tmp_path), "--tstop", "5",
+                 "--quiet"]) == 0
+    report = (tmp_path / "report.md").read_text()
+    for heading in ("## 1.", "## 2.", "## 3."):
+        assert heading in report
+    for linked in ("compare.png", "consistency.png"):
+        assert (tmp_path / linked).is_file()
+    assert "| mekf | 10 |" in report and "| usque | 2 |" in report
+    assert "efficiency of" in report and "µs" in report
