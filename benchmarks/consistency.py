@@ -288,7 +288,7 @@ def format_summary(summary: dict) -> str:
         unit, scale = ("arcsec", 3600.0) if row["bound_rms_deg"] < 0.1 else ("deg", 1.0)
         band = ("" if np.isnan(row["anees"]) else
                 f"[{row['anees_low']:.2f}, {row['anees_high']:.2f}]")
-        anees_text = "" if np.isnan(row["anees"]) else f"{row['anees']:.2f}"
+        anees_text = "" if np.isnan(row["anees"]) else f"{row['anees']:.3g}"
         lines.append(f"{name:<22} {row['runs']:>5} {row['rms_deg'] * scale:>8.4g} {unit:<3}"
                      f" {row['bound_rms_deg'] * scale:>8.4g} {unit:<3} {row['efficiency']:>10.3f}"
                      f" {anees_text:>8} {band:>15}  {row['verdict']}")

@@ -21,7 +21,7 @@ from benchmarks.metrics import attitude_error_deg
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free
 from dynamics.validation import InvalidParameterError
-from estimators import ESTIMATORS, AttitudeEstimator, EstimateTrace
+from estimators import ESTIMATORS, AttitudeEstimator
 from sensors.star_tracker import RotationStarTracker
 
 #: The workshop's estimators in the order it introduces them.

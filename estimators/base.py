@@ -186,6 +186,30 @@ class AttitudeEstimator:
         return f"{type(self).__name__}(dt={self.dt!r})"
 
 
+class AttitudeAndBiasEstimator(AttitudeEstimator):
+    """Base of the six-state filters (attitude error and gyro bias, e.g. the
+    MEKF and USQUE): at each output they keep ``_output = (q̂, β̂, P)`` with
+    ``P`` 6x6, its attitude block first, and answer the interface from it."""
+
+    _output: tuple
+
+    @property
+    def attitude(self) -> np.ndarray:
+        return self._output[0].copy()
+
+    @property
+    def bias_radps(self) -> np.ndarray:
+        return self._output[1].copy()
+
+    @property
+    def attitude_covariance(self) -> np.ndarray:
+        return self._output[2][:3, :3].copy()
+
+    @property
+    def bias_covariance(self) -> np.ndarray:
+        return self._output[2][3:, 3:].copy()
+
+
 @dataclass(frozen=True)
 class EstimateTrace:
     """An estimator's outputs over a record of ``N`` steps.

@@ -108,7 +108,7 @@ from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotvec_from_quat, skew
 from dynamics.validation import InvalidParameterError, finite_number, finite_vector
-from estimators.base import AttitudeEstimator
+from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
 from estimators.ekf import covariance_matrix
 
@@ -180,7 +180,7 @@ def _sigmas(name: str, value) -> np.ndarray:
     return array
 
 
-class MultiplicativeEKF(KalmanFilter, AttitudeEstimator):
+class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
     Parameters
@@ -243,23 +243,6 @@ class MultiplicativeEKF(KalmanFilter, AttitudeEstimator):
     def _record(self) -> None:
         """Keep the estimate being output and its covariance (new arrays each step)."""
         self._output = (self.q_hat, self.beta_hat, self.P)
-
-    # The estimate step() last returned, and what the filter knows of its error.
-    @property
-    def attitude(self) -> np.ndarray:
-        return self._output[0].copy()
-
-    @property
-    def bias_radps(self) -> np.ndarray:
-        return self._output[1].copy()
-
-    @property
-    def attitude_covariance(self) -> np.ndarray:
-        return self._output[2][:3, :3].copy()
-
-    @property
-    def bias_covariance(self) -> np.ndarray:
-        return self._output[2][3:, 3:].copy()
 
     def innovation(self, star_tracker_quat: np.ndarray) -> np.ndarray:
         """The measured small angle ``y = log(q̂⁻¹ ⊗ z)`` (rad), ``z`` sign-aligned first."""

@@ -67,7 +67,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from dynamics.quaternion import grp_from_quat, quat_from_grp, quat_from_rotvec, quat_multiply
 from dynamics.validation import InvalidParameterError, finite_number, finite_vector
-from estimators.base import AttitudeEstimator
+from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
 from estimators.ekf import covariance_matrix
 from estimators.mekf import _sigmas, discrete_error_model
@@ -79,7 +79,7 @@ def _unit(q: np.ndarray) -> np.ndarray:
     return q / np.sqrt(q @ q)
 
 
-class USQUE(UnscentedKalmanFilter, AttitudeEstimator):
+class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
     """Unscented quaternion estimator (Crassidis & Markley 2003) on filterpy's UKF.
 
     Parameters
@@ -139,26 +139,11 @@ class USQUE(UnscentedKalmanFilter, AttitudeEstimator):
         self._record()
 
     def _record(self) -> None:
+        """Keep the estimate being output; ``P``'s GRP block is the body-frame
+        small-angle covariance to first order (rad²)."""
         q = self.q_hat if not np.any(self.x[:3]) else _unit(
             quat_multiply(self.q_hat, quat_from_grp(self.x[:3])))
         self._output = (q, self.x[3:].copy(), self.P)
-
-    @property
-    def attitude(self) -> np.ndarray:
-        return self._output[0].copy()
-
-    @property
-    def bias_radps(self) -> np.ndarray:
-        return self._output[1].copy()
-
-    @property
-    def attitude_covariance(self) -> np.ndarray:
-        """``P``'s GRP block: the body-frame small-angle covariance to first order (rad²)."""
-        return self._output[2][:3, :3].copy()
-
-    @property
-    def bias_covariance(self) -> np.ndarray:
-        return self._output[2][3:, 3:].copy()
 
     # The model, as filterpy calls it: fx on each sigma point, hx on each.
     def _fx(self, x, dt, omega_meas_radps, q_reference_next):

@@ -13,7 +13,7 @@ from dynamics.quaternion import (
     quat_from_rotvec,
 )
 from dynamics.validation import InvalidParameterError
-from estimators import USQUE, MultiplicativeEKF
+from estimators import USQUE
 
 FLIGHT = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 
