@@ -103,7 +103,7 @@ def main(argv=None) -> int:
     steps = scenario.n_steps
 
     print(f"scenario: {scenario.tstop:g} s at {1 / scenario.dt:g} Hz ({steps} steps per run)")
-    print("\nper-run path (filterpy EKF and MEKF, hand-written dead reckoning):")
+    print("\nper-run path (filterpy EKF, MEKF and UKF; hand-written dead reckoning):")
     per_run = per_run_seconds(scenario, max(args.repeats, 3))
     for name, seconds in per_run.items():
         print(f"  {name:<22} {seconds:.3f} s per run   {steps / seconds:>12,.0f} run-steps/s")
