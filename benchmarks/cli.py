@@ -16,7 +16,7 @@ from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.scenario import Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import MAX_SEED, InvalidParameterError
 from estimators import ESTIMATORS
 
 PROG = "attitude-bench"
@@ -52,15 +52,15 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _whole(name: str, minimum: int):
+def _whole(name: str, minimum: int, maximum: int = MAX_SEED):
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = None
-        if value is None or value < minimum:
+        if value is None or not minimum <= value <= maximum:
             raise argparse.ArgumentTypeError(
-                f"{name} = {text!r}: must be a whole number >= {minimum}")
+                f"{name} = {text!r}: must be a whole number from {minimum} to {maximum}")
         return value
     return parse
 
@@ -84,7 +84,12 @@ def _number_list(text: str) -> list[float]:
 
 
 def _estimator_list(text: str) -> tuple[str, ...]:
-    names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    given = [part.strip() for part in text.split(",") if part.strip()]
+    names = tuple(dict.fromkeys(given))
+    if len(names) != len(given):
+        twice = next(name for name in names if given.count(name) > 1)
+        raise argparse.ArgumentTypeError(
+            f"estimators = {text!r}: names {twice} more than once; name each estimator once")
     unknown = [name for name in names if name not in ESTIMATORS]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
@@ -328,7 +333,14 @@ def command_animate(args, scenario):
     print(f"wrote {path} and {path.with_suffix('.png')} ({name})")
 
 
+def _check_seed_range(args) -> None:
+    if args.seed + args.runs - 1 > MAX_SEED:
+        raise UsageError(f"seed = {args.seed}: with --runs {args.runs} the last seed would "
+                         f"pass 2^63 - 1 = {MAX_SEED}; choose a smaller --seed or fewer runs")
+
+
 def command_montecarlo(args, scenario):
+    _check_seed_range(args)
     from benchmarks.engine.campaign import CAMPAIGN_COLUMNS, Campaign, run_campaign
     from benchmarks.output import write_csv, write_figure
     from benchmarks.plots import distribution_figure
@@ -370,6 +382,7 @@ def command_workshop(args, scenario):
 
 
 def command_consistency(args, scenario):
+    _check_seed_range(args)
     from benchmarks import consistency
     from benchmarks.engine.batch import ENGINE_ESTIMATORS
     from benchmarks.output import write_figure, write_text

@@ -45,6 +45,7 @@ from dynamics.validation import (
     finite_vector,
     inertia_tensor,
     nonzero_quaternion,
+    process_exponent,
 )
 from estimators.ekf import covariance_matrix
 from estimators import ESTIMATORS
@@ -170,10 +171,7 @@ class Scenario:
         set_("time_between_measurements", finite_number(
             "time_between_measurements", self.time_between_measurements, strictly_positive=True))
         steps_between_readings(self.time_between_measurements, self.dt)
-        set_("pc_exponent", finite_number("pc_exponent", self.pc_exponent))
-        if math.exp(self.pc_exponent) == 0.0:
-            raise InvalidParameterError("pc_exponent", self.pc_exponent,
-                                        "must be > -745 so that exp(pc_exponent) > 0")
+        set_("pc_exponent", process_exponent("pc_exponent", self.pc_exponent))
         set_("measurement_covariance", covariance_matrix("measurement_covariance",
                                                          self.measurement_covariance))
         set_("initial_state", nonzero_quaternion("initial_state", self.initial_state))

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import re
 
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import MAX_SEED, InvalidParameterError
 
 _RULE = "must be N, N-M or N,M,... of whole numbers >= 0 (e.g. 0, 0-19, 1,5,9)"
 _PART = re.compile(r"^(\d+)(?:-(\d+))?$")
@@ -25,6 +25,8 @@ def parse_seeds(text: str, name: str = "seeds") -> tuple[int, ...]:
             raise InvalidParameterError(name, text, _RULE)
         first = int(match.group(1))
         last = int(match.group(2)) if match.group(2) is not None else first
+        if last > MAX_SEED:
+            raise InvalidParameterError(name, text, f"seeds must be at most 2^63 - 1 = {MAX_SEED}")
         if last < first:
             raise InvalidParameterError(name, text, f"range {part} runs backwards; {_RULE}")
         if len(seeds) + last - first + 1 > MAX_SEEDS:

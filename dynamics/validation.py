@@ -94,3 +94,41 @@ def inertia_tensor(name: str, value) -> np.ndarray:
             name, value,
             "principal moments must satisfy the triangle inequality I_max <= I_mid + I_min")
     return array
+
+
+#: exp(x) overflows a double above this (ln of the largest double, 709.78).
+MAX_EXPONENT = 709.0
+#: Seeds are stored as int64 and fed to numpy's SeedSequence.
+MAX_SEED = 2 ** 63 - 1
+
+
+def process_exponent(name: str, value) -> float:
+    """A natural exponent ``x`` with ``exp(x)`` a positive, finite double."""
+    number = finite_number(name, value)
+    if number > MAX_EXPONENT:
+        raise InvalidParameterError(name, value, f"must be <= {MAX_EXPONENT:g} so that "
+                                    "exp(pc_exponent) is finite")
+    if math.exp(number) == 0.0:
+        raise InvalidParameterError(name, value, "must be > -745 so that exp(pc_exponent) > 0")
+    return number
+
+
+def seed_values(name: str, value) -> np.ndarray:
+    """Whole-number seeds in [0, 2⁶³ - 1] as an int64 array (any shape)."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(name, value, "must be whole numbers >= 0") from None
+    if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer)
+                                   or np.issubdtype(array.dtype, np.floating)
+                                   or array.dtype == object):
+        raise InvalidParameterError(name, value, "must be whole numbers >= 0")
+    items = array.ravel().tolist()
+    for item in items:
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or \
+                (isinstance(item, float) and not item.is_integer()):
+            raise InvalidParameterError(name, item, "must be a whole number >= 0")
+        if not 0 <= item <= MAX_SEED:
+            raise InvalidParameterError(name, item, f"must be a whole number from 0 to "
+                                        f"2^63 - 1 = {MAX_SEED}")
+    return np.array([int(item) for item in items], dtype=np.int64).reshape(array.shape)

@@ -26,11 +26,21 @@ them. The scenario is duck-typed: this package never imports ``benchmarks``.
 from __future__ import annotations
 
 import inspect
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics.validation import finite_number, nonzero_quaternion
+from dynamics.validation import InvalidParameterError, finite_number, nonzero_quaternion
+
+#: What an estimator does with a measurement that cannot be used (a
+#: non-finite rate, a non-finite or zero reading).
+ON_INVALID = ("raise", "skip")
+
+
+class InvalidMeasurementError(InvalidParameterError):
+    """A measurement an estimator cannot use; the message names the step,
+    the value and the rule."""
 
 
 class AttitudeEstimator:
@@ -55,9 +65,21 @@ class AttitudeEstimator:
     #: campaigns that vary it per run, such as the EKF's ``pc_exponent``, see it).
     owned_fields: tuple = ()
 
-    def __init__(self, *, dt: float, initial_attitude):
+    def __init__(self, *, dt: float, initial_attitude, on_invalid: str = "raise"):
         self.dt = finite_number("dt", dt, strictly_positive=True)
         self.initial_attitude = nonzero_quaternion("initial_state", initial_attitude)
+        if on_invalid not in ON_INVALID:
+            raise InvalidParameterError("on_invalid", on_invalid,
+                                        f"must be one of {', '.join(ON_INVALID)}")
+        self.on_invalid = on_invalid
+        self._restart_count()
+
+    def _restart_count(self) -> None:
+        #: Steps taken since construction or the last run/track.
+        self.step_index = 0
+        #: Measurements skipped under ``on_invalid="skip"``: rates and readings.
+        self.skipped = {"rate": 0, "reading": 0}
+        self._last_rate = np.zeros(3)
 
     @classmethod
     def settings_from_scenario(cls, scenario) -> dict:
@@ -124,6 +146,13 @@ class AttitudeEstimator:
              ) -> np.ndarray:
         """Consume step ``k``'s measurements and return ``q̂[k]`` as a ``(4,)`` array.
 
+        Measurements are checked here, where they enter: a rate that is not 3
+        finite numbers, or a reading that is not 4 finite numbers of non-zero
+        norm, raises :class:`InvalidMeasurementError` naming the step and the
+        value, or, with ``on_invalid="skip"``, is treated as missing (the
+        last good rate is held; the reading is ignored) and counted in
+        :attr:`skipped`. Subclasses implement :meth:`_step`.
+
         Parameters
         ----------
         omega_meas_radps : (3,) array
@@ -132,6 +161,31 @@ class AttitudeEstimator:
             The star tracker's reading if one was taken at step ``k``
             (``available[k]``), else None.
         """
+        omega = np.asarray(omega_meas_radps, dtype=float)
+        if omega.shape != (3,) or not math.isfinite(omega[0] + omega[1] + omega[2]):
+            omega = self._invalid("rate", "omega_meas_radps", omega_meas_radps,
+                                  "must be 3 finite numbers (rad/s)", self._last_rate)
+        else:
+            self._last_rate = omega
+        if star_tracker_quat is not None:
+            reading = np.asarray(star_tracker_quat, dtype=float)
+            norm2 = reading @ reading if reading.shape == (4,) else math.nan
+            if not (math.isfinite(norm2) and norm2 > 1e-24):
+                star_tracker_quat = self._invalid(
+                    "reading", "star_tracker_quat", star_tracker_quat,
+                    "must be 4 finite numbers of non-zero norm", None)
+        self.step_index += 1
+        return self._step(omega, star_tracker_quat)
+
+    def _invalid(self, kind, name, value, rule, replacement):
+        if self.on_invalid == "raise":
+            raise InvalidMeasurementError(f"{name} at step {self.step_index}", value, rule)
+        self.skipped[kind] += 1
+        return replacement
+
+    def _step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None
+              ) -> np.ndarray:
+        """The estimator's own step, on checked measurements."""
         raise NotImplementedError
 
     def run(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
@@ -145,6 +199,7 @@ class AttitudeEstimator:
         available : (N,) bool array, True where a new reading was taken
         """
         self.reset()
+        self._restart_count()
         omega = np.asarray(omega_meas_radps, dtype=float)
         star = np.asarray(star_tracker_quat, dtype=float)
         available = np.asarray(available, dtype=bool)
@@ -158,6 +213,7 @@ class AttitudeEstimator:
         """Like :meth:`run`, also collecting the covariance and bias estimate
         of every step (None where the estimator keeps none)."""
         self.reset()
+        self._restart_count()
         omega = np.asarray(omega_meas_radps, dtype=float)
         star = np.asarray(star_tracker_quat, dtype=float)
         available = np.asarray(available, dtype=bool)

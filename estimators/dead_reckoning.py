@@ -42,14 +42,17 @@ class DeadReckoning(AttitudeEstimator):
     rate_timing : {"workshop", "step-average"}
         Whether ``ω̃[k]`` takes the estimate to step ``k`` (the workshop) or
         from ``k`` to ``k + 1`` (see the module docstring).
+    on_invalid : {"raise", "skip"}
+        What to do with an unusable measurement (see
+        :meth:`~estimators.AttitudeEstimator.step`).
     """
 
     name = "dead-reckoning"
     label = "Dead Reckoning"
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
-                 rate_timing: str = "workshop"):
-        super().__init__(dt=dt, initial_attitude=initial_attitude)
+                 rate_timing: str = "workshop", on_invalid: str = "raise"):
+        super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         if rate_timing not in RATE_TIMINGS:
             raise InvalidParameterError("rate_timing", rate_timing,
                                         f"must be one of {', '.join(RATE_TIMINGS)}")
@@ -70,6 +73,6 @@ class DeadReckoning(AttitudeEstimator):
             self.attitude = propagate(self.attitude, self._pending_rate, self.dt)
         self._pending_rate = omega
 
-    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         self._advance(omega_meas_radps)
         return self.attitude.copy()

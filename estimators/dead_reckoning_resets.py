@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimators.dead_reckoning import DeadReckoning
+from estimators.dead_reckoning import IDENTITY, DeadReckoning
 
 
 class DeadReckoningWithResets(DeadReckoning):
@@ -30,13 +30,29 @@ class DeadReckoningWithResets(DeadReckoning):
         Starting estimate ``q̂[-1]``, scalar-first; normalised.
     rate_timing : {"workshop", "step-average"}
         As for :class:`~estimators.DeadReckoning`.
+    align_sign : bool
+        Flip a reading to the sign nearest the current estimate (default).
+    on_invalid : {"raise", "skip"}
+        As for :class:`~estimators.DeadReckoning`.
     """
 
     name = "dead-reckoning-resets"
     label = "Dead Reckoning w/ Star Tracker Resets"
 
-    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
+                 rate_timing: str = "workshop", align_sign: bool = True,
+                 on_invalid: str = "raise"):
+        super().__init__(dt=dt, initial_attitude=initial_attitude, rate_timing=rate_timing,
+                         on_invalid=on_invalid)
+        self.align_sign = bool(align_sign)
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         self._advance(omega_meas_radps)
         if star_tracker_quat is not None:
-            self.attitude = np.array(star_tracker_quat, dtype=float)
+            reading = np.array(star_tracker_quat, dtype=float)
+            # q and -q are one attitude: keep the representative nearest the
+            # estimate, so the held state never jumps across the sphere.
+            if self.align_sign and reading @ self.attitude < 0:
+                reading = -reading
+            self.attitude = reading
         return self.attitude.copy()

@@ -56,7 +56,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import kinematics_matrix
-from dynamics.validation import InvalidParameterError, finite_number
+from dynamics.validation import InvalidParameterError, finite_number, process_exponent
 from estimators.base import AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
 from estimators.model import propagate_with_jacobian
@@ -115,6 +115,17 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
     output : {"prior", "posterior"}
         Which estimate :meth:`step` returns: the workshop's prior
         ``x̂[k|k-1]`` (default) or the corrected ``x̂[k|k]``.
+    align_sign : bool
+        Flip a reading ``z`` to ``-z`` when ``x̂ · z < 0`` before the update
+        (default). ``q`` and ``-q`` are one attitude, but ``h(q) = q`` is not
+        sign-invariant: a star tracker that reports the ``w >= 0``
+        representative makes the raw innovation ``z - x̂`` nearly ``-2 x̂``
+        where the true ``w`` crosses zero. The workshop's readings always lie
+        on the prediction's side, so its numbers are unchanged (tested);
+        ``align_sign=False`` shows the failure.
+    on_invalid : {"raise", "skip"}
+        What to do with an unusable measurement (see
+        :meth:`~estimators.AttitudeEstimator.step`).
 
     After each :meth:`step` the filterpy attributes are there to inspect:
     ``x_prior``/``P_prior`` (after the predict), ``x_post``/``P_post``
@@ -130,10 +141,13 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
 
     def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
                  measurement_covariance=1.0, initial_state=IDENTITY,
-                 initial_covariance: float = 1e-12, output: str = "prior"):
+                 initial_covariance: float = 1e-12, output: str = "prior",
+                 align_sign: bool = True, on_invalid: str = "raise"):
         ExtendedKalmanFilter.__init__(self, dim_x=4, dim_z=4)
-        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_state)
-        self.pc_exponent = finite_number("pc_exponent", pc_exponent)
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_state,
+                                   on_invalid=on_invalid)
+        self.align_sign = bool(align_sign)
+        self.pc_exponent = process_exponent("pc_exponent", pc_exponent)
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
         if output not in ("prior", "posterior"):
@@ -167,12 +181,14 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         also sets ``F`` to the exact Jacobian at the pre-step ``x``."""
         self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
 
-    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         # filterpy replaces x and P with new arrays, so keeping references is a snapshot.
         self._output_x, self._output_P = self.x, self.P
         if star_tracker_quat is not None:
-            self.update(np.asarray(star_tracker_quat, dtype=float),
-                        _measurement_jacobian, _measurement_function)
+            reading = np.asarray(star_tracker_quat, dtype=float)
+            if self.align_sign and reading @ self.x < 0:
+                reading = -reading
+            self.update(reading, _measurement_jacobian, _measurement_function)
         elif self.output == "posterior":
             self.x_post, self.P_post = self.x.copy(), self.P.copy()
         if self.output == "posterior":

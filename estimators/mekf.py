@@ -203,6 +203,10 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         Standard deviation of the initial bias error per axis, rad/s.
     output : {"posterior", "prior"}
         Which estimate :meth:`step` returns.
+    on_invalid : {"raise", "skip"}
+        What to do with an unusable measurement (see
+        :meth:`~estimators.AttitudeEstimator.step`). Readings are always
+        aligned in sign with the prediction (the innovation is a rotation).
     """
 
     name = "mekf"
@@ -214,9 +218,11 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
-                 initial_bias_sigma_radps=1e-4, output: str = "posterior"):
+                 initial_bias_sigma_radps=1e-4, output: str = "posterior",
+                 on_invalid: str = "raise"):
         KalmanFilter.__init__(self, dim_x=6, dim_z=3)
-        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude)
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
+                                   on_invalid=on_invalid)
         self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
         self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
                                                    gyro_bias_random_walk, minimum=0.0)
@@ -270,7 +276,7 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)
 
-    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         if self.output == "prior":
             self._record()
         if star_tracker_quat is not None:

@@ -86,7 +86,7 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
     ----------
     dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
-    initial_bias_sigma_radps, output
+    initial_bias_sigma_radps, output, on_invalid
         As for :class:`~estimators.MultiplicativeEKF`.
     alpha, beta, kappa : float
         The scaled sigma points' spread, prior-knowledge and secondary
@@ -104,8 +104,10 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, alpha: float = 1.0, beta: float = 2.0,
-                 kappa: float = 0.0, output: str = "posterior"):
-        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude)
+                 kappa: float = 0.0, output: str = "posterior",
+                 on_invalid: str = "raise"):
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
+                                   on_invalid=on_invalid)
         alpha = finite_number("alpha", alpha, strictly_positive=True)
         beta = finite_number("beta", beta, minimum=0.0)
         kappa = finite_number("kappa", kappa)
@@ -185,7 +187,7 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         # sigma points filterpy drew for the update are relative to q_next.
         self.q_hat = q_next
 
-    def step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         if self.output == "prior":
             self._record()
         if star_tracker_quat is not None:

@@ -26,7 +26,7 @@ import pandas as pd
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, sensor_generators, simulate_truth
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS
 from sensors.star_tracker import RotationStarTracker, steps_between_readings
 
@@ -82,14 +82,12 @@ def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
         raise InvalidParameterError(name, settings[name],
                                     f"is not a per-run setting; known: {', '.join(PER_RUN_SETTINGS)}")
     columns = {name: settings.get(name, getattr(scenario, name)) for name in PER_RUN_SETTINGS}
-    seeds, *values = np.broadcast_arrays(np.asarray(seeds, dtype=np.int64),
+    seeds, *values = np.broadcast_arrays(seed_values("seed", seeds),
                                          *(np.asarray(columns[n], dtype=float)
                                            for n in PER_RUN_SETTINGS))
     for name, column in zip(PER_RUN_SETTINGS, values):
         for value in np.unique(column):
             scenario.replace(**{name: float(value)})
-    if np.any(seeds < 0):
-        raise InvalidParameterError("seed", int(seeds.min()), "must be a whole number >= 0")
     return RunTable(np.ascontiguousarray(seeds),
                     *(np.ascontiguousarray(column, dtype=float) for column in values))
 
@@ -289,7 +287,8 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     state = (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf,
              P_mekf, mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last)
     options = (dr.rate_timing == "step-average", resets.rate_timing == "step-average",
-               ekf.output == "posterior", bool(mekf) and mekf[0].output == "posterior")
+               ekf.output == "posterior", bool(mekf) and mekf[0].output == "posterior",
+               resets.align_sign, ekf.align_sign)
 
     # Accumulators only for the estimators that run: row[slot] is each one's row.
     rows = np.cumsum(enabled) - 1

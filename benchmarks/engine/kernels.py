@@ -510,7 +510,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
     MEKF's output bias and covariance at ``last_step``: beta_mekf_last (B, 3),
     P_mekf_last (B, 6, 6)).
     ``options`` = (dead reckoning step-average, resets step-average, EKF
-    posterior, MEKF posterior). Statistics ``(slots, B, 4)``, histograms
+    posterior, MEKF posterior, resets align sign, EKF align sign). Statistics ``(slots, B, 4)``, histograms
     ``(slots, B, bins)``, traces ``(slots, B, N, 4)`` when kept.
     """
     (gyro_std, gyro_normals, bias_step_std, scale_matrix, has_scale, has_bias, bias_true,
@@ -519,7 +519,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
      canonical, outage, dropout_probability, dropout_uniforms) = star
     (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf, P_mekf,
      mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last) = state
-    dr_average, resets_average, ekf_posterior, mekf_posterior = options
+    dr_average, resets_average, ekf_posterior, mekf_posterior, resets_align, ekf_align = options
     check = consistency[0]
     nis_sum, nis_count = consistency[5], consistency[6]
     n_runs = gyro_std.shape[0]
@@ -530,6 +530,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
         z = np.empty(4)
         dq = np.empty(4)
         prior = np.empty(4)
+        aligned = np.empty(4)
         out_mekf = np.empty(4)
         F = np.empty((4, 4))
         scratch = np.empty((5, 4, 4))
@@ -595,8 +596,10 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
             if enabled[RESETS]:
                 q = q_resets[run]
                 if available:
+                    flip = resets_align and (q[0] * z[0] + q[1] * z[1] + q[2] * z[2]
+                                             + q[3] * z[3]) < 0
                     for i in range(4):
-                        q[i] = z[i]
+                        q[i] = -z[i] if flip else z[i]
                 elif not resets_average:
                     _propagate(q, w, half_dt, q, F, False)
                 elif k > 0:
@@ -614,7 +617,11 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     _fold_consistency(rows[EKF], run, k, _nees(q_true[k], x, projected, scratch6),
                                       consistency)
                 if available:
-                    nis = _ekf_update(x, P, z, R, scratch)
+                    flip = ekf_align and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2]
+                                          + x[3] * z[3]) < 0
+                    for i in range(4):
+                        aligned[i] = -z[i] if flip else z[i]
+                    nis = _ekf_update(x, P, aligned, R, scratch)
                     if check:
                         nis_sum[rows[EKF], run] += nis
                         nis_count[rows[EKF], run] += 1
