@@ -13,6 +13,7 @@ from pathlib import Path
 from benchmarks import experiments
 from benchmarks.experiments import SWEEP_PARAMETERS
 from benchmarks.metrics import STAT_COLUMNS
+from benchmarks.output import check_output_folder
 from benchmarks.scenario import Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
@@ -410,14 +411,52 @@ COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_swe
             "workshop": command_workshop}
 
 
+#: Commands that run on the streaming engine (they keep only the truth).
+ENGINE_COMMANDS = ("montecarlo", "tune", "landscape")
+
+
+def check_resources(args, scenario) -> None:
+    """Refuse, before any work, a run whose memory cannot fit (see benchmarks.resources)."""
+    from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
+    n_steps = scenario.n_steps
+    streaming = engine_bytes(n_steps)
+    if args.command in ENGINE_COMMANDS:
+        check_memory(scenario, streaming)
+        return
+    estimators = len(getattr(args, "estimators", ()) or ()) or 3
+    traced = args.command in ("consistency", "compare", "workshop")
+    check_memory(scenario, per_run_bytes(n_steps, estimators, traced),
+                 streaming_bytes=None if args.command == "montecarlo" else streaming)
+
+
+#: The files each command writes into --out (checked before any work).
+OUTPUT_FILES = {
+    "run": (), "compare": ("compare.png", "summary.csv"), "sweep": ("sweep.png", "sweep.csv"),
+    "tune": ("tune.json", "tune.png"), "landscape": ("landscape.csv", "landscape.png",
+                                                    "landscape.gif"),
+    "animate": (), "montecarlo": ("montecarlo.csv", "montecarlo.png", "campaign.json"),
+    "consistency": ("consistency.csv", "consistency.png"), "workshop": ("report.md",),
+}
+EXIT_IO = 1
+
+
 def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         scenario = scenario_from_args(args)
+        check_output_folder(args.out, OUTPUT_FILES[args.command])
+        check_resources(args, scenario)
         COMMANDS[args.command](args, scenario)
     except (UsageError, InvalidParameterError) as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as err:
+        # A file system failure after the checks (full disk, a mount gone
+        # read-only): one line; atomic writes leave no half-written file.
+        where = f" ({err.filename})" if err.filename else ""
+        print(f"{PROG}: error: cannot write the results{where}: {err.strerror or err}",
+              file=sys.stderr)
+        return EXIT_IO
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

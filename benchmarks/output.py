@@ -34,6 +34,34 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+def check_output_folder(out, files=()) -> Path:
+    """Refuse, before any work, an output folder that cannot take the results.
+
+    ``out`` must be a folder or creatable as one (its nearest existing
+    ancestor a writable folder), and writable; none of ``files`` (names in
+    it) may be a folder. Raises ``ValueError`` with one line naming ``out``.
+    """
+    from dynamics.validation import InvalidParameterError
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidParameterError("out", str(out), "is a file, not a folder; choose a folder")
+    existing = out
+    while not existing.exists():
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InvalidParameterError("out", str(out), f"cannot be created: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InvalidParameterError("out", str(out), f"cannot be written: {existing} is not "
+                                    "writable")
+    for name in files:
+        if (out / name).is_dir():
+            raise InvalidParameterError("out", str(out), f"holds a folder named {name} where "
+                                        "the results file goes; move it or choose another folder")
+    return out
+
+
 def write_text(path, text: str) -> None:
     _atomic_write_bytes(Path(path), text.encode("utf-8"))
 

@@ -64,6 +64,10 @@ from sensors.star_tracker import (
 )
 
 STAR_TRACKER_MODELS = ("workshop", "rotation")
+#: Body rates above this (rad/s, about 1600 revolutions a minute) are refused:
+#: no attitude sensor suite is built for them, and the truth's integrator
+#: would need billions of steps.
+MAX_RATE_RADPS = 100.0
 
 
 def _diag(*values):
@@ -165,6 +169,10 @@ class Scenario:
         set_("initial_attitude_quat", nonzero_quaternion("initial_attitude_quat",
                                                          self.initial_attitude_quat))
         set_("initial_rate_radps", finite_vector("initial_rate_radps", self.initial_rate_radps, 3))
+        if np.abs(self.initial_rate_radps).max() > MAX_RATE_RADPS:
+            raise InvalidParameterError("initial_rate_radps", self.initial_rate_radps,
+                                        f"each component must be within ±{MAX_RATE_RADPS:g} rad/s "
+                                        "(a spacecraft, not a centrifuge)")
         set_("gyro_noise", finite_number("gyro_noise", self.gyro_noise, minimum=0.0))
         set_("star_tracker_noise", finite_number("star_tracker_noise", self.star_tracker_noise,
                                                  minimum=0.0))

@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from benchmarks.metrics import attitude_error_deg
+from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free
 from dynamics.validation import InvalidParameterError
@@ -136,6 +137,9 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         (:meth:`~estimators.AttitudeEstimator.track`), in ``RunResult.traces``.
     """
     scenario = scenario or Scenario()
+    estimators = list(estimators)
+    check_memory(scenario, per_run_bytes(scenario.n_steps, len(estimators), traces),
+                 streaming_bytes=engine_bytes(scenario.n_steps))
     truth = simulate_truth(scenario)
     sensors = simulate_sensors(scenario, truth, seed)
     estimates, errors, labels, kept = {}, {}, {}, {}

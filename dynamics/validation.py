@@ -60,10 +60,12 @@ def finite_vector(name: str, value, length: int) -> np.ndarray:
 def nonzero_quaternion(name: str, value) -> np.ndarray:
     """Return ``value`` normalised to a unit quaternion; reject a zero one."""
     q = finite_vector(name, value, 4)
-    norm = float(np.linalg.norm(q))
+    largest = float(np.abs(q).max())
+    # Scale by the largest component first: |q| of [1e300, 1e300, 0, 0] overflows.
+    norm = largest * float(np.linalg.norm(q / largest)) if largest > 0 else 0.0
     if norm < 1e-12:
         raise InvalidParameterError(name, value, "must be a non-zero quaternion [w, x, y, z]")
-    return q / norm
+    return (q / largest) / (norm / largest)
 
 
 def inertia_tensor(name: str, value) -> np.ndarray:

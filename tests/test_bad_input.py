@@ -55,3 +55,45 @@ def test_seed_and_estimator_lists_refused_before_anything_is_written(tmp_path, c
 def test_largest_seed_still_runs():
     runs = make_runs(Scenario(tstop=1.0), [2 ** 63 - 1])
     assert runs.seeds.dtype == np.int64 and runs.seeds[0] == 2 ** 63 - 1
+
+
+def test_output_folder_is_checked_before_any_work(tmp_path, capsys):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    assert main(["compare", "--out", str(a_file)]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    assert main(["compare", "--out", str(a_file / "below")]) == 2
+    assert "cannot be created" in capsys.readouterr().err
+    (tmp_path / "o" / "summary.csv").mkdir(parents=True)
+    assert main(["compare", "--out", str(tmp_path / "o")]) == 2
+    assert "holds a folder named summary.csv" in capsys.readouterr().err
+    assert a_file.read_text() == "keep me"
+    assert list((tmp_path / "o").iterdir()) == [tmp_path / "o" / "summary.csv"]
+
+
+def test_a_run_that_cannot_fit_in_memory_is_refused_naming_tstop(tmp_path, capsys):
+    scenario = tmp_path / "s.toml"
+    scenario.write_text("tstop = 1e12\n")
+    for command in ("compare", "montecarlo", "landscape"):
+        assert main([command, "--scenario", str(scenario), "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("attitude-bench: error: tstop = 1000000000000.0: needs about")
+        assert "at most about tstop" in err and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_memory_check_suggests_the_streaming_engine_where_it_fits():
+    from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
+    scenario = Scenario(tstop=1000.0)
+    need = per_run_bytes(scenario.n_steps, 3, traced=True)
+    with pytest.raises(InvalidParameterError, match="streaming engine .*montecarlo"):
+        check_memory(scenario, need, streaming_bytes=engine_bytes(scenario.n_steps),
+                     limit_bytes=need // 2)
+    check_memory(scenario, need, limit_bytes=need)          # exactly fits: accepted
+
+
+def test_huge_quaternions_normalise_and_huge_rates_are_refused():
+    q = Scenario(initial_attitude_quat=[1e300, 1e300, 0, 0]).initial_attitude_quat
+    assert np.allclose(q, [2 ** -0.5, 2 ** -0.5, 0, 0], atol=1e-15)
+    with pytest.raises(InvalidParameterError, match="initial_rate_radps = .*within"):
+        Scenario(initial_rate_radps=[1e300, 0, 0])

@@ -1,0 +1,62 @@
+"""What a run will hold in memory, estimated before any work starts.
+
+The per-run path keeps, for every step, the truth (and the integrator's copy
+of it), the sensor readings and each estimator's output; with traces also its
+covariances and bias. The batched engine streams its statistics in blocks and
+keeps only the truth. A run that cannot fit is refused with one line naming
+the parameter and the limit, and the streaming path is suggested where it
+would fit.
+"""
+from __future__ import annotations
+
+import os
+
+from dynamics.validation import InvalidParameterError
+
+#: Bytes a per-run simulation keeps per step: truth with the integrator's own
+#: copy (~150), sensor readings with the true bias (~90); per estimator its
+#: estimate and error (~40), with traces its 3x3 covariances, bias and NIS (~200).
+PER_RUN_BYTES_PER_STEP = 240
+ESTIMATOR_BYTES_PER_STEP = 40
+TRACED_ESTIMATOR_BYTES_PER_STEP = 240
+#: The engine keeps the truth (~150 bytes per step) and streams the rest.
+ENGINE_BYTES_PER_STEP = 150
+#: Use at most this share of the machine's memory.
+MEMORY_SHARE = 0.8
+
+
+def machine_memory_bytes() -> int:
+    """Physical memory of this machine."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def per_run_bytes(n_steps: int, estimators: int, traced: bool = False) -> int:
+    each = TRACED_ESTIMATOR_BYTES_PER_STEP if traced else ESTIMATOR_BYTES_PER_STEP
+    return n_steps * (PER_RUN_BYTES_PER_STEP + estimators * each)
+
+
+def engine_bytes(n_steps: int) -> int:
+    return n_steps * ENGINE_BYTES_PER_STEP
+
+
+def check_memory(scenario, needed_bytes: int, *, streaming_bytes: int | None = None,
+                 limit_bytes: int | None = None) -> None:
+    """Refuse a run that needs more than the machine can give.
+
+    ``streaming_bytes`` is what the engine would need for the same scenario;
+    the message suggests ``montecarlo`` when that fits.
+    """
+    limit = int(MEMORY_SHARE * machine_memory_bytes()) if limit_bytes is None else limit_bytes
+    if needed_bytes <= limit:
+        return
+    per_step = needed_bytes / scenario.n_steps
+    longest = limit / per_step * scenario.dt
+    hint = ""
+    if streaming_bytes is not None and streaming_bytes <= limit:
+        hint = ("; the streaming engine (attitude-bench montecarlo) needs about "
+                f"{streaming_bytes / 2**30:.1f} GiB for it")
+    raise InvalidParameterError(
+        "tstop", scenario.tstop,
+        f"needs about {needed_bytes / 2**30:,.1f} GiB ({scenario.n_steps:,} steps) and this "
+        f"machine allows {limit / 2**30:.1f} GiB: at most about tstop = {longest:,.0f} s here"
+        f"{hint}")
