@@ -40,7 +40,7 @@ SWEEP_PARAMETERS = {
     "gyro-noise": SweepParameter("gyro_noise", "Noise = {value:g}"),
     "star-tracker-noise": SweepParameter("star_tracker_noise", "ST noise = {value:g}"),
     "time-between-measurements": SweepParameter("time_between_measurements",
-                                                "ST every {value:.1f} s"),
+                                                "ST every {value:g} s"),
     "pc-exponent": SweepParameter("pc_exponent", "{label}, pc exponent = {value:g}"),
 }
 
@@ -107,6 +107,11 @@ def write_summary(path: Path, stats: dict) -> None:
 def sweep_scenarios(scenario: Scenario, param: str, values) -> list[Scenario]:
     """One validated scenario per value of ``param`` (a :data:`SWEEP_PARAMETERS` key)."""
     field = SWEEP_PARAMETERS[param].field
+    values = [float(value) for value in values]
+    repeated = [value for value in values if values.count(value) > 1]
+    if repeated:
+        raise InvalidParameterError("values", values, f"names {repeated[0]:g} more than once; "
+                                    "give each value once")
     return [scenario.replace(**{field: value}) for value in values]
 
 

@@ -16,6 +16,7 @@ from benchmarks.output import write_text
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.tuning import format_iteration_table, tune_pc_exponent
+from dynamics.validation import InvalidParameterError
 
 #: The exercise's values for its activities.
 ACTIVITY_1_GYRO_NOISE = (1e-5, 1e-4)
@@ -39,11 +40,26 @@ def _sweep_table(rows, param) -> str:
     return _markdown_table({f"{row['value']:g}": row for row in rows}, param)
 
 
+def check_activities(scenario: Scenario) -> None:
+    """Every activity's scenario and the landscape grid, validated before step 1
+    writes anything (e.g. a dt that the activities' intervals are not multiples of)."""
+    for step, param, values in ((3, "gyro-noise", ACTIVITY_1_GYRO_NOISE),
+                                (5, "time-between-measurements", ACTIVITY_2_INTERVALS),
+                                (7, "pc-exponent", ACTIVITY_3A_PC)):
+        try:
+            experiments.sweep_scenarios(scenario, param, values)
+        except InvalidParameterError as err:
+            raise InvalidParameterError(err.name, err.value,
+                                        f"{err.rule} (the workshop's step {step})") from None
+    pc_grid(*LANDSCAPE_GRID)
+
+
 def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
                  quiet: bool = False) -> Path:
     """Run the exercise and write ``out/report.md``; returns its path."""
     scenario = scenario or Scenario()
     out = Path(out)
+    check_activities(scenario)
     started = time.perf_counter()
     bar = progress(total=STEPS, desc="workshop", unit="step", quiet=quiet)
     sections = []

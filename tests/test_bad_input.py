@@ -97,3 +97,62 @@ def test_huge_quaternions_normalise_and_huge_rates_are_refused():
     assert np.allclose(q, [2 ** -0.5, 2 ** -0.5, 0, 0], atol=1e-15)
     with pytest.raises(InvalidParameterError, match="initial_rate_radps = .*within"):
         Scenario(initial_rate_radps=[1e300, 0, 0])
+
+
+def test_workshop_checks_every_activity_before_writing(tmp_path, capsys):
+    out = tmp_path / "w"
+    assert main(["workshop", "--dt", "0.03", "--time-between-measurements", "0.03",
+                 "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "time_between_measurements = 0.2" in err and "step 5" in err
+    assert not out.exists()
+
+
+def test_sweep_refuses_repeated_values_and_labels_every_interval_apart(tmp_path, capsys):
+    from benchmarks.experiments import SWEEP_PARAMETERS
+    assert main(["sweep", "--estimator", "dead-reckoning-resets", "--param",
+                 "time-between-measurements", "--values", "0.2,1,0.2", "--out",
+                 str(tmp_path / "s")]) == 2
+    assert "names 0.2 more than once" in capsys.readouterr().err
+    legend = SWEEP_PARAMETERS["time-between-measurements"].legend
+    labels = {legend.format(value=v, label="") for v in (0.01, 0.04, 0.05)}
+    assert len(labels) == 3
+
+
+def campaign_folder(tmp_path):
+    out = tmp_path / "c"
+    assert main(["montecarlo", "--runs", "6", "--chunk-size", "3", "--tstop", "1", "--out",
+                 str(out), "--quiet"]) == 0
+    return out
+
+
+def test_resume_recomputes_a_damaged_chunk(tmp_path, capsys):
+    out = campaign_folder(tmp_path)
+    before = (out / "montecarlo.csv").read_text()
+    chunk = sorted((out / "chunks").iterdir())[1]
+    chunk.write_bytes(chunk.read_bytes()[:40])          # a truncated copy
+    assert main(["montecarlo", "--runs", "6", "--chunk-size", "3", "--tstop", "1", "--out",
+                 str(out), "--quiet", "--resume"]) == 0
+    assert (out / "montecarlo.csv").read_text() == before
+
+
+def test_resume_refuses_a_damaged_manifest(tmp_path, capsys):
+    out = campaign_folder(tmp_path)
+    (out / "campaign.json").write_text("{not json")
+    capsys.readouterr()
+    assert main(["montecarlo", "--runs", "6", "--chunk-size", "3", "--tstop", "1", "--out",
+                 str(out), "--quiet", "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "campaign.json is damaged" in err and "Traceback" not in err
+
+
+def test_bad_or_unreachable_scheduler_leaves_nothing(tmp_path, capsys, monkeypatch):
+    from benchmarks.engine import campaign
+    out = tmp_path / "c"
+    assert main(["montecarlo", "--scheduler", "not-an-address", "--out", str(out)]) == 2
+    assert "scheduler = 'not-an-address'" in capsys.readouterr().err
+    monkeypatch.setattr(campaign, "SCHEDULER_TIMEOUT_S", 2)
+    assert main(["montecarlo", "--scheduler", "tcp://127.0.0.1:9", "--tstop", "1",
+                 "--out", str(out), "--quiet"]) == 2
+    assert "cannot be reached" in capsys.readouterr().err
+    assert not (out / "campaign.json").exists()

@@ -17,6 +17,8 @@ from __future__ import annotations
 import io
 import json
 import logging
+import re
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +35,9 @@ MANIFEST = "campaign.json"
 CHUNKS = "chunks"
 CAMPAIGN_COLUMNS = ("run", "seed", "estimator") + STAT_COLUMNS
 _FORMAT = 1
+#: How long to try a scheduler before saying it cannot be reached, seconds.
+SCHEDULER_TIMEOUT_S = 10
+_ADDRESS = re.compile(r"^([a-z]+://)?[\w.\-\[\]:]+:\d+$")
 
 
 @dataclass(frozen=True)
@@ -92,7 +97,15 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> None:
             raise InvalidParameterError(
                 "out", str(out), "already holds a campaign; pass --resume to finish it "
                 "or choose another --out")
-        found = json.loads(manifest_path.read_text())
+        try:
+            found = json.loads(manifest_path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise InvalidParameterError(
+                "resume", str(out), f"its {MANIFEST} is damaged ({err}); remove the folder "
+                "or choose another --out") from None
+        if not isinstance(found, dict):
+            raise InvalidParameterError("resume", str(out), f"its {MANIFEST} is damaged (not "
+                                        "an object); remove the folder or choose another --out")
         for key in expected:
             if found.get(key) != expected[key]:
                 raise InvalidParameterError(
@@ -116,7 +129,14 @@ def _dask_client(workers: int, scheduler: str | None):
             "needs Dask; install it with pip install '.[distributed]'") from None
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler:
-        return Client(scheduler), None
+        if not _ADDRESS.match(scheduler):
+            raise InvalidParameterError("scheduler", scheduler,
+                                        "must be an address such as tcp://host:8786")
+        try:
+            return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), None
+        except (OSError, TimeoutError) as err:
+            raise InvalidParameterError("scheduler", scheduler, f"cannot be reached "
+                                        f"({type(err).__name__}: {err})") from None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            dashboard_address=None, silence_logs=logging.ERROR)
     return Client(cluster), cluster
@@ -126,14 +146,19 @@ def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | Non
                  resume: bool = False, progress_bar=None) -> pd.DataFrame:
     """Compute every missing chunk, then return the tidy per-run statistics."""
     out = Path(out)
-    _prepare(campaign, out, resume)
+    # Connect first: a scheduler that cannot be reached leaves nothing behind.
+    client, cluster = _dask_client(workers, scheduler) if (workers or scheduler) else (None, None)
+    try:
+        _prepare(campaign, out, resume)
+    except BaseException:
+        _close(client, cluster)
+        raise
     todo = [(start, stop) for start, stop in campaign.chunks()
-            if not chunk_path(out, start, stop).exists()]
+            if not _chunk_ok(campaign, chunk_path(out, start, stop), stop - start)]
     if progress_bar is not None:
         progress_bar.update(campaign.runs - sum(stop - start for start, stop in todo))
     arguments = (campaign.scenario, campaign.estimators, campaign.base_seed)
-    if workers or scheduler:
-        client, cluster = _dask_client(workers, scheduler)
+    if client is not None:
         try:
             from distributed import as_completed
             futures = {client.submit(compute_chunk, *arguments, start, stop, 1, pure=False):
@@ -144,15 +169,36 @@ def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | Non
                 if progress_bar is not None:
                     progress_bar.update(stop - start)
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            _close(client, cluster)
     else:
         for start, stop in todo:
             _write_chunk(out, start, stop, compute_chunk(*arguments, start, stop))
             if progress_bar is not None:
                 progress_bar.update(stop - start)
     return load_campaign(campaign, out)
+
+
+def _close(client, cluster) -> None:
+    if client is not None:
+        client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def _chunk_ok(campaign: Campaign, path: Path, runs: int) -> bool:
+    """A finished chunk file that loads and holds every column; a damaged one
+    (an interrupted disk, a truncated copy) is removed, to be computed again."""
+    if not path.exists():
+        return False
+    try:
+        with np.load(path) as data:
+            keys = [f"{name}/{column}" for name in campaign.estimators for column in STAT_COLUMNS]
+            ok = all(key in data.files and data[key].shape == (runs,) for key in keys + ["seed"])
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        ok = False
+    if not ok:
+        path.unlink()
+    return ok
 
 
 def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
