@@ -247,6 +247,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
     """The scenario file (or defaults) with the command-line overrides applied."""
+    if args.command in ("tune", "landscape") and args.pc_exponent is not None:
+        raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
+                         "pc_exponent itself; leave --pc-exponent out (from --pc-exponent)")
     scenario = Scenario.from_toml(args.scenario) if args.scenario else Scenario()
     for field_name, flag in SCENARIO_FLAGS.items():
         value = getattr(args, field_name)

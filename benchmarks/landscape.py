@@ -167,19 +167,34 @@ def spread_figure(landscape: Landscape):
     return figure
 
 
+#: Frames of the landscape animation at most: a finer grid is sampled evenly
+#: (thousands of frames exhaust memory when the GIF is quantised, and no one
+#: watches them).
+MAX_ANIMATION_FRAMES = 400
+
+
+def animation_indices(n_values: int) -> np.ndarray:
+    """Grid indices animated: all of them, or evenly spread ones up to the cap."""
+    if n_values <= MAX_ANIMATION_FRAMES:
+        return np.arange(n_values)
+    return np.unique(np.linspace(0, n_values - 1, MAX_ANIMATION_FRAMES).round().astype(int))
+
+
 def write_animation(landscape: Landscape, path, fps: int = 8, dpi: int = 80) -> int:
     """The two panels animated over the sweep, as a GIF; returns the frame count."""
     figure, ekf_line, vertical = _draw(landscape, 0)
     left = figure.axes[0]
     freeze_layout(figure)
     writer = BlittingPillowWriter([ekf_line, vertical, left.title], fps=fps)
+    indices = animation_indices(len(landscape.pc_values))
     with atomic_path(path) as temporary, writer.saving(figure, temporary, dpi):
-        for index, pc in enumerate(landscape.pc_values):
+        for index in indices:
+            pc = landscape.pc_values[index]
             ekf_line.set_ydata(landscape.ekf_curves[index])
             vertical.set_xdata([pc, pc])
             left.set_title(f"Absolute Attitude Error, pc exponent = {pc:g}")
             writer.grab_frame()
-    return len(landscape.pc_values)
+    return len(indices)
 
 
 def write_landscape(landscape: Landscape, out, animate: bool = True) -> dict:

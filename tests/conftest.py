@@ -11,3 +11,17 @@ def rng():
 def random_unit_quaternions(rng, n):
     q = rng.standard_normal((n, 4))
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def pytest_report_header(config):
+    """Name the versions the suite ran on (CI's log then says what was tested)."""
+    from importlib.metadata import PackageNotFoundError, version
+    names = ("filterpy", "numpy", "scipy", "numba", "matplotlib", "seaborn", "pandas", "tqdm",
+             "hypothesis", "dask")
+    found = []
+    for name in names:
+        try:
+            found.append(f"{name} {version(name)}")
+        except PackageNotFoundError:
+            found.append(f"{name} (not installed)")
+    return "tested with: " + ", ".join(found)

@@ -156,3 +156,18 @@ def test_bad_or_unreachable_scheduler_leaves_nothing(tmp_path, capsys, monkeypat
                  "--out", str(out), "--quiet"]) == 2
     assert "cannot be reached" in capsys.readouterr().err
     assert not (out / "campaign.json").exists()
+
+
+def test_fine_landscape_grids_animate_a_capped_number_of_frames():
+    from benchmarks.landscape import MAX_ANIMATION_FRAMES, animation_indices, pc_grid
+    grid = pc_grid(-18, 0, 0.0025)                        # 7201 values, allowed
+    indices = animation_indices(len(grid))
+    assert len(indices) == MAX_ANIMATION_FRAMES
+    assert indices[0] == 0 and indices[-1] == len(grid) - 1 and np.all(np.diff(indices) > 0)
+    assert np.array_equal(animation_indices(73), np.arange(73))
+
+
+@pytest.mark.parametrize("command", ["tune", "landscape"])
+def test_tune_and_landscape_refuse_a_pc_exponent_they_would_ignore(tmp_path, capsys, command):
+    assert main([command, "--pc-exponent", "-9", "--out", str(tmp_path / "x")]) == 2
+    assert "chooses pc_exponent itself" in capsys.readouterr().err

@@ -1,0 +1,130 @@
+"""Property-based tests (hypothesis): invariants that hold for all inputs."""
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from benchmarks.scenario import Scenario, flatten_sections
+from dynamics.quaternion import (
+    attitude_error_rad,
+    from_rotation,
+    grp_from_quat,
+    quat_conjugate,
+    quat_from_grp,
+    quat_from_rotvec,
+    quat_multiply,
+    rotvec_from_quat,
+    to_rotation,
+)
+from dynamics.validation import InvalidParameterError
+from estimators.mekf import discrete_error_model
+from estimators.model import propagate_with_jacobian
+
+finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+vectors4 = st.lists(finite, min_size=4, max_size=4).filter(
+    lambda v: np.linalg.norm(v) > 1e-3)
+unit_quaternions = vectors4.map(lambda v: np.asarray(v) / np.linalg.norm(v))
+rotation_vectors = st.lists(st.floats(-3.0, 3.0, allow_nan=False), min_size=3, max_size=3).map(
+    np.asarray).filter(lambda v: np.linalg.norm(v) < np.pi - 1e-3)   # the log's own range
+
+
+@given(unit_quaternions, unit_quaternions, unit_quaternions)
+def test_product_is_associative_and_keeps_the_norm(a, b, c):
+    left = quat_multiply(quat_multiply(a, b), c)
+    right = quat_multiply(a, quat_multiply(b, c))
+    assert np.allclose(left, right, atol=1e-14)
+    assert abs(np.linalg.norm(left) - 1) < 1e-14
+
+
+@given(unit_quaternions)
+def test_conjugate_is_the_inverse_and_scipy_round_trips(q):
+    assert np.allclose(quat_multiply(q, quat_conjugate(q)), [1, 0, 0, 0], atol=1e-15)
+    back = from_rotation(to_rotation(q))
+    assert attitude_error_rad(q, back) < 1e-7        # the metric's own floor
+    assert np.allclose(np.abs(back @ q), 1.0, atol=1e-14)
+
+
+@given(unit_quaternions, unit_quaternions)
+def test_error_is_sign_invariant_and_symmetric(a, b):
+    e = attitude_error_rad(a, b)
+    assert e == attitude_error_rad(-a, b) == attitude_error_rad(a, -b)
+    assert abs(e - attitude_error_rad(b, a)) < 1e-15
+    assert 0 <= e <= np.pi + 1e-12
+
+
+@given(rotation_vectors)
+def test_rotation_vector_and_grp_round_trip(theta):
+    q = quat_from_rotvec(theta)
+    assert np.allclose(rotvec_from_quat(q), theta, atol=1e-12)
+    assert np.allclose(quat_from_grp(grp_from_quat(q)), q * np.sign(q[0] or 1.0), atol=1e-12)
+
+
+@settings(max_examples=60)
+@given(unit_quaternions, st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3),
+       st.sampled_from([0.001, 0.01, 0.1]))
+def test_workshop_jacobian_matches_central_differences(q, omega, dt):
+    omega = np.asarray(omega)
+    _, jacobian = propagate_with_jacobian(q, omega, dt)
+    step = 1e-6
+    numeric = np.column_stack([
+        (propagate_with_jacobian(q + step * e, omega, dt)[0]
+         - propagate_with_jacobian(q - step * e, omega, dt)[0]) / (2 * step) for e in np.eye(4)])
+    assert np.allclose(numeric, jacobian, atol=1e-8)
+
+
+@settings(max_examples=60)
+@given(unit_quaternions, st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+       st.lists(st.floats(-1e-2, 1e-2), min_size=3, max_size=3))
+def test_mekf_transition_matches_finite_differences_of_the_kinematics(q_hat, omega, beta):
+    # Φ against central differences of the noise-free error propagation, at random states.
+    dt = 0.1
+    omega, beta = np.asarray(omega), np.asarray(beta)
+    phi, _ = discrete_error_model(omega - beta, dt, 0.0, 0.0)
+    centre = quat_multiply(q_hat, quat_from_rotvec((omega - beta) * dt))
+
+    def error_after(delta):
+        q = quat_multiply(quat_multiply(q_hat, quat_from_rotvec(delta[:3])),
+                          quat_from_rotvec((omega - beta - delta[3:]) * dt))
+        return np.concatenate([rotvec_from_quat(quat_multiply(quat_conjugate(centre), q)),
+                               delta[3:]])
+
+    step = 1e-6
+    numeric = np.column_stack([(error_after(step * e) - error_after(-step * e)) / (2 * step)
+                               for e in np.eye(6)])
+    assert np.allclose(numeric, phi, atol=1e-7)
+
+
+toml_values = st.one_of(st.integers(-10 ** 6, 10 ** 6), st.floats(allow_nan=True),
+                        st.text(max_size=5), st.booleans(),
+                        st.lists(st.floats(-10, 10), max_size=5))
+keys = st.sampled_from(["tstop", "dt", "gyro_noise", "pc_exponent", "wobble",
+                        "initial_rate_radps", "initial_attitude_quat",
+                        "time_between_measurements", "star_tracker_model"])
+section_keys = st.sampled_from(["noise_power", "bias_random_walk", "sigma_arcsec", "model",
+                                "interval_s", "initial_bias_deg_per_hr", "nonsense"])
+
+
+@settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow])
+@given(st.dictionaries(keys, toml_values, max_size=4),
+       st.dictionaries(st.sampled_from(["gyro", "star_tracker", "truth"]),
+                       st.dictionaries(section_keys, toml_values, max_size=3), max_size=2))
+def test_scenario_loader_never_fails_with_anything_but_a_clear_value_error(flat, sections):
+    document = {**flat, **sections}
+    try:
+        Scenario().replace(**flatten_sections(document))
+    except InvalidParameterError as err:
+        text = str(err)
+        assert "\n" not in text and " = " in text
+
+
+@settings(max_examples=30)
+@given(st.text(max_size=60))
+def test_any_text_as_a_scenario_file_is_refused_or_loaded(text):
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "s.toml"
+        path.write_text(text)
+        try:
+            Scenario.from_toml(path)
+        except InvalidParameterError as err:
+            assert "\n" not in str(err)
