@@ -32,7 +32,6 @@ message names the parameter, the value and the rule.
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
