@@ -91,11 +91,16 @@ def _estimator_list(text: str) -> tuple[str, ...]:
         twice = next(name for name in names if given.count(name) > 1)
         raise argparse.ArgumentTypeError(
             f"estimators = {text!r}: names {twice} more than once; name each estimator once")
-    unknown = [name for name in names if name not in ESTIMATORS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"estimators = {text!r}: must be names from {', '.join(ESTIMATORS)}, "
-            "separated by commas")
+    if not names:
+        raise argparse.ArgumentTypeError(f"estimators = {text!r}: must name at least one "
+                                         "estimator")
+    from benchmarks.simulation import resolve_estimator
+    for name in names:
+        try:
+            resolve_estimator(name)
+        except InvalidParameterError as err:
+            raise argparse.ArgumentTypeError(f"estimators = {text!r}: {name}: {err.rule} "
+                                             "(names separated by commas)") from None
     return names
 
 
@@ -349,7 +354,6 @@ def command_montecarlo(args, scenario):
     from benchmarks.output import write_csv, write_figure
     from benchmarks.plots import distribution_figure
     from benchmarks.progress import progress
-    from estimators import ESTIMATORS
     campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
                         base_seed=args.seed, chunk_runs=args.chunk_size)
     try:
@@ -363,7 +367,8 @@ def command_montecarlo(args, scenario):
     write_csv(args.out / "montecarlo.csv", CAMPAIGN_COLUMNS,
               (list(row) for row in frame[list(CAMPAIGN_COLUMNS)].itertuples(index=False)),
               digits=17)
-    labels = {name: ESTIMATORS[name].label for name in args.estimators}
+    from benchmarks.simulation import resolve_estimator
+    labels = {name: resolve_estimator(name).label for name in args.estimators}
     write_figure(args.out / "montecarlo.png", distribution_figure(frame, labels))
     summary = frame.groupby("estimator", sort=False)[list(STAT_COLUMNS)].mean()
     print(f"mean over {args.runs} runs (seeds {args.seed}-{args.seed + args.runs - 1}):")

@@ -281,7 +281,8 @@ SUMMARY_COLUMNS = ("runs", "rms_deg", "bound_rms_deg", "efficiency", "anees", "a
 
 def format_summary(summary: dict) -> str:
     """The printed table: estimator, runs, RMS error, bound, efficiency, ANEES, band, verdict."""
-    header = (f"{'estimator':<22} {'runs':>5} {'rms':>12} {'bound':>12} {'efficiency':>10} "
+    width = max(22, *(len(name) for name in summary))
+    header = (f"{'estimator':<{width}} {'runs':>5} {'rms':>12} {'bound':>12} {'efficiency':>10} "
               f"{'ANEES':>8} {'95% band':>15}  verdict")
     lines = [header]
     for name, row in summary.items():
@@ -289,7 +290,7 @@ def format_summary(summary: dict) -> str:
         band = ("" if np.isnan(row["anees"]) else
                 f"[{row['anees_low']:.2f}, {row['anees_high']:.2f}]")
         anees_text = "" if np.isnan(row["anees"]) else f"{row['anees']:.3g}"
-        lines.append(f"{name:<22} {row['runs']:>5} {row['rms_deg'] * scale:>8.4g} {unit:<3}"
+        lines.append(f"{name:<{width}} {row['runs']:>5} {row['rms_deg'] * scale:>8.4g} {unit:<3}"
                      f" {row['bound_rms_deg'] * scale:>8.4g} {unit:<3} {row['efficiency']:>10.3f}"
                      f" {anees_text:>8} {band:>15}  {row['verdict']}")
     return "\n".join(lines)

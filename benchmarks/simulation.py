@@ -12,6 +12,7 @@ noise (the star tracker noise is drawn only at its readings).
 """
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -111,11 +112,34 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
                       available=readings.available, gyro_bias_radps=bias)
 
 
+def resolve_estimator(spec: str) -> type:
+    """The estimator class ``spec`` names: a registry name (``"mekf"``) or a
+    user's own class as ``"package.module:ClassName"``, which must subclass
+    :class:`estimators.AttitudeEstimator` (its module importable: installed,
+    or on ``PYTHONPATH``)."""
+    if spec in ESTIMATORS:
+        return ESTIMATORS[spec]
+    rule = (f"must be one of {', '.join(ESTIMATORS)}, or package.module:ClassName for your "
+            "own AttitudeEstimator subclass")
+    module_name, colon, class_name = str(spec).partition(":")
+    if not colon or not module_name or not class_name.isidentifier():
+        raise InvalidParameterError("estimator", spec, rule)
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as err:      # the user's module: any import failure is reported
+        raise InvalidParameterError("estimator", spec, f"cannot import {module_name} "
+                                    f"({type(err).__name__}: {err})") from None
+    cls = getattr(module, class_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, AttitudeEstimator)):
+        raise InvalidParameterError("estimator", spec, f"{class_name} in {module_name} must be "
+                                    "a subclass of estimators.AttitudeEstimator")
+    return cls
+
+
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
-    """The estimator called ``name``, built from ``scenario`` (its ``from_scenario``)."""
-    if name not in ESTIMATORS:
-        raise InvalidParameterError("estimator", name, f"must be one of {', '.join(ESTIMATORS)}")
-    return ESTIMATORS[name].from_scenario(scenario)
+    """The estimator ``name`` names (see :func:`resolve_estimator`), built from
+    ``scenario`` (its ``from_scenario``)."""
+    return resolve_estimator(name).from_scenario(scenario)
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
@@ -127,9 +151,9 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
     scenario : Scenario, optional
         Defaults to the workshop scenario.
     estimators : iterable of str or AttitudeEstimator
-        Names from :data:`estimators.ESTIMATORS` (built from the scenario)
-        or ready estimator objects (used as they are, keyed by their
-        ``name``).
+        Names from :data:`estimators.ESTIMATORS` or ``module:Class`` specs
+        (built from the scenario, keyed by the string given), or ready
+        estimator objects (used as they are, keyed by their ``name``).
     seed : int
         Seed of the sensor noise.
     traces : bool
@@ -145,15 +169,16 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
     estimates, errors, labels, kept = {}, {}, {}, {}
     for item in estimators:
         estimator = build_estimator(item, scenario) if isinstance(item, str) else item
+        key = item if isinstance(item, str) else estimator.name
         record = (sensors.omega_meas_radps, sensors.star_tracker_quat, sensors.available)
         if traces:
-            kept[estimator.name] = estimator.track(*record)
-            q_est = kept[estimator.name].quat
+            kept[key] = estimator.track(*record)
+            q_est = kept[key].quat
         else:
             q_est = estimator.run(*record)
-        estimates[estimator.name] = q_est
-        errors[estimator.name] = attitude_error_deg(truth.q_true, q_est)
-        labels[estimator.name] = estimator.label
+        estimates[key] = q_est
+        errors[key] = attitude_error_deg(truth.q_true, q_est)
+        labels[key] = estimator.label
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels,
                      traces=kept if traces else None)

@@ -25,10 +25,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.engine.batch import CHUNK_RUNS, make_runs, run_batch
-from benchmarks.metrics import STAT_COLUMNS
+from benchmarks.engine.batch import CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch
+from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_bytes, write_text
 from benchmarks.scenario import Scenario
+from benchmarks.simulation import simulate
 from dynamics.validation import InvalidParameterError
 
 MANIFEST = "campaign.json"
@@ -75,11 +76,21 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     runs = make_runs(scenario, np.arange(base_seed + start, base_seed + stop))
-    batch = run_batch(scenario, runs, estimators, threads=threads)
     arrays = {"seed": runs.seeds}
-    for name in batch.estimators:
+    engine = [name for name in estimators if name in ENGINE_ESTIMATORS]
+    if engine:
+        batch = run_batch(scenario, runs, engine, threads=threads)
+        for name in batch.estimators:
+            for column in STAT_COLUMNS:
+                arrays[f"{name}/{column}"] = batch.statistics[name][column]
+    # Estimators without a kernel (USQUE, users' own) run per run.
+    for name in estimators:
+        if name in engine:
+            continue
+        rows = [error_statistics(simulate(scenario, [name], seed=int(seed)).error_deg[name])
+                for seed in runs.seeds]
         for column in STAT_COLUMNS:
-            arrays[f"{name}/{column}"] = batch.statistics[name][column]
+            arrays[f"{name}/{column}"] = np.array([row[column] for row in rows])
     return arrays
 
 
