@@ -1,5 +1,8 @@
-"""How we compare estimators and show it: scenarios, simulation, metrics,
-figures and the ``attitude-bench`` command line.
+"""How we compare estimators and show it.
+
+At the top: scenarios, simulation, metrics, bounds and the ``attitude-bench``
+command line; ``experiments/`` (what the commands run), ``figures/`` (what
+they draw) and ``engine/`` (the batched Monte Carlo engine).
 
 Nothing in the project imports this package; it imports all the others.
 """

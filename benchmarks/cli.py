@@ -306,7 +306,7 @@ def command_sweep(args, scenario):
 
 
 def command_tune(args, scenario):
-    from benchmarks.tuning import format_iteration_table, tune_pc_exponent
+    from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
     # tune_pc_exponent checks bounds and xtol before its first evaluation.
     result = tune_pc_exponent(scenario, args.seeds, args.bounds, args.xtol, quiet=args.quiet)
     print(format_iteration_table(result.iterations))
@@ -325,7 +325,7 @@ def command_tune(args, scenario):
 
 
 def command_landscape(args, scenario):
-    from benchmarks.landscape import compute_landscape, pc_grid, write_landscape
+    from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_landscape
     grid = pc_grid(args.pc_min, args.pc_max, args.pc_step)
     landscape = compute_landscape(scenario, grid, args.seeds, quiet=args.quiet)
     files = write_landscape(landscape, args.out, animate=not args.no_animation)
@@ -352,7 +352,7 @@ def command_montecarlo(args, scenario):
     _check_seed_range(args)
     from benchmarks.engine.campaign import CAMPAIGN_COLUMNS, Campaign, run_campaign
     from benchmarks.output import write_csv, write_figure
-    from benchmarks.plots import distribution_figure
+    from benchmarks.figures.plots import distribution_figure
     from benchmarks.progress import progress
     campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
                         base_seed=args.seed, chunk_runs=args.chunk_size)
@@ -382,17 +382,17 @@ def command_montecarlo(args, scenario):
 
 def command_workshop(args, scenario):
     if args.part == "flight":
-        from benchmarks.flight_study import run_flight_study
+        from benchmarks.experiments.flight_study import run_flight_study
         report = run_flight_study(scenario, args.out, quiet=args.quiet)
     else:
-        from benchmarks.workshop import run_workshop
+        from benchmarks.experiments.workshop import run_workshop
         report = run_workshop(scenario, args.out, quiet=args.quiet)
     print(f"wrote {report}")
 
 
 def command_consistency(args, scenario):
     _check_seed_range(args)
-    from benchmarks import consistency
+    from benchmarks.experiments import consistency
     from benchmarks.engine.batch import ENGINE_ESTIMATORS
     from benchmarks.output import write_figure, write_text
     from benchmarks.progress import progress

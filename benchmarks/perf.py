@@ -72,7 +72,7 @@ def engine_steps_per_second(scenario: Scenario, batch: int, estimators, repeats:
 
 
 def landscape_seconds(scenario: Scenario) -> float:
-    from benchmarks.landscape import compute_landscape, pc_grid
+    from benchmarks.experiments.landscape import compute_landscape, pc_grid
     start = time.perf_counter()
     compute_landscape(scenario, pc_grid(-18, 0, 0.25), seeds=range(100), quiet=True)
     return time.perf_counter() - start

@@ -159,7 +159,7 @@ def test_bad_or_unreachable_scheduler_leaves_nothing(tmp_path, capsys, monkeypat
 
 
 def test_fine_landscape_grids_animate_a_capped_number_of_frames():
-    from benchmarks.landscape import MAX_ANIMATION_FRAMES, animation_indices, pc_grid
+    from benchmarks.experiments.landscape import MAX_ANIMATION_FRAMES, animation_indices, pc_grid
     grid = pc_grid(-18, 0, 0.0025)                        # 7201 values, allowed
     indices = animation_indices(len(grid))
     assert len(indices) == MAX_ANIMATION_FRAMES

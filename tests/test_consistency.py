@@ -5,7 +5,7 @@ from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 from benchmarks import Scenario, simulate
-from benchmarks.consistency import (
+from benchmarks.experiments.consistency import (
     anees_band,
     fraction_inside_3sigma,
     monte_carlo,

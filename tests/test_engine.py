@@ -153,7 +153,7 @@ def test_mekf_on_workshop_sensors_equals_the_per_run_path():
 
 
 def test_engine_streams_the_per_run_nees_and_nis(flight_batch):
-    from benchmarks.consistency import nees
+    from benchmarks.experiments.consistency import nees
     runs, _ = flight_batch
     batch = run_batch(FLIGHT, runs, ["dead-reckoning", "ekf", "mekf"], consistency=True,
                       nees_every=7, settle_steps=50)

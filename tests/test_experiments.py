@@ -9,7 +9,7 @@ import pytest
 from PIL import Image
 
 from benchmarks.cli import main
-from benchmarks.landscape import LANDSCAPE_COLUMNS, pc_grid
+from benchmarks.experiments.landscape import LANDSCAPE_COLUMNS, pc_grid
 
 SHORT = ["--tstop", "1", "--quiet"]
 
@@ -119,7 +119,8 @@ def test_workshop_writes_report_with_every_figure(tmp_path):
 
 
 def test_notebook_script_runs_as_plain_python(tmp_path):
-    script = Path(__file__).resolve().parents[1] / "benchmarks" / "workshop_notebook.py"
+    script = (Path(__file__).resolve().parents[1] / "benchmarks" / "experiments"
+              / "workshop_notebook.py")
     assert script.read_text().count("# %%") >= 8
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                           env={"ATTITUDE_BENCH_TSTOP": "1", "ATTITUDE_BENCH_OUT": str(tmp_path),
@@ -130,7 +131,7 @@ def test_notebook_script_runs_as_plain_python(tmp_path):
 
 
 def test_flight_study_report_has_its_sections_figures_and_numbers(tmp_path, monkeypatch):
-    from benchmarks import flight_study
+    from benchmarks.experiments import flight_study
     # The study's own sizes take about a minute; the same code on small ones.
     monkeypatch.setattr(flight_study, "STUDY_TSTOP_S", 30.0)
     monkeypatch.setattr(flight_study, "WORKSHOP_SEEDS", 8)

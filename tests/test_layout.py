@@ -36,3 +36,35 @@ def test_imports_point_one_way(package):
         for imported in project_imports(path):
             assert imported == package or imported in ALLOWED[package], \
                 f"{path.relative_to(ROOT)} imports {imported}"
+
+
+#: Inside benchmarks: sub-package → the benchmarks sub-packages it must not import.
+FORBIDDEN_INSIDE = {
+    "figures": ("benchmarks.experiments", "benchmarks.engine", "benchmarks.cli"),
+    "engine": ("benchmarks.experiments", "benchmarks.figures", "benchmarks.cli"),
+    "experiments": ("benchmarks.cli",),
+}
+
+
+def module_imports(path):
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            yield node.module
+            yield from (f"{node.module}.{alias.name}" for alias in node.names)
+
+
+@pytest.mark.parametrize("sub", list(FORBIDDEN_INSIDE))
+def test_benchmarks_sub_packages_import_one_way(sub):
+    for path in (ROOT / "benchmarks" / sub).rglob("*.py"):
+        for name in module_imports(path):
+            assert not name.startswith(FORBIDDEN_INSIDE[sub]), \
+                f"{path.relative_to(ROOT)} imports {name}"
+
+
+def test_benchmarks_top_level_stays_small():
+    # Past about fifteen modules a flat folder stops explaining itself.
+    modules = [p for p in (ROOT / "benchmarks").glob("*.py")]
+    assert len(modules) <= 15, sorted(p.name for p in modules)

@@ -10,7 +10,7 @@ from scipy.optimize import minimize_scalar
 
 from benchmarks.cli import main
 from benchmarks.scenario import Scenario
-from benchmarks.tuning import format_iteration_table, minimize_bounded, tune_pc_exponent
+from benchmarks.experiments.tuning import format_iteration_table, minimize_bounded, tune_pc_exponent
 
 # scipy's own log of minimize_scalar(np.sin, bounds=(0, 2π), method="bounded",
 # options={"disp": 3}), the fminbnd documentation's example (default xtol 1e-5).

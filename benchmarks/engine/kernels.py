@@ -436,7 +436,7 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias
 @njit(cache=True, error_model="numpy")
 def _nees(q_true_k, q, C, scratch):
     """eᵀ C⁻¹ e with e = log(q̂⁻¹ ⊗ q) the body-frame error of estimate ``q``
-    and ``C`` its 3x3 covariance (benchmarks.consistency.nees)."""
+    and ``C`` its 3x3 covariance (benchmarks.experiments.consistency.nees)."""
     w = q[0] * q_true_k[0] + q[1] * q_true_k[1] + q[2] * q_true_k[2] + q[3] * q_true_k[3]
     v0 = q[0] * q_true_k[1] - q[1] * q_true_k[0] - q[2] * q_true_k[3] + q[3] * q_true_k[2]
     v1 = q[0] * q_true_k[2] + q[1] * q_true_k[3] - q[2] * q_true_k[0] - q[3] * q_true_k[1]

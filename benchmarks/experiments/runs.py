@@ -14,7 +14,7 @@ import numpy as np
 
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_csv, write_figure, write_text
-from benchmarks.plots import comparison_figure, flight_figure
+from benchmarks.figures.plots import comparison_figure, flight_figure
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
@@ -67,7 +67,7 @@ def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMA
 
     With the workshop's sensors the figure is the workshop's (total error of
     each estimator); with flight sensors (a gyro bias model or the rotation
-    star tracker) it is :func:`~benchmarks.plots.flight_figure`: per-axis error
+    star tracker) it is :func:`~benchmarks.figures.plots.flight_figure`: per-axis error
     with each filter's ±3σ envelope, and the bias estimates against the truth.
     """
     workshop = scenario.is_workshop_sensors
@@ -148,7 +148,7 @@ def animate(scenario: Scenario, estimator: str | None, seed: int, out: Path, eve
             quiet: bool = False) -> Path:
     """The 3-D attitude animation ``attitude_NAME.gif`` (``attitude_truth.gif``
     without an estimator) and its last frame as PNG; returns the GIF's path."""
-    from benchmarks.animation import frame_indices, write_attitude_animation
+    from benchmarks.figures.animation import frame_indices, write_attitude_animation
     frames = len(frame_indices(scenario.n_steps, every))   # validates every before writing
     result = simulate(scenario, [estimator] if estimator else [], seed=seed)
     q_est = result.estimates[estimator] if estimator else None

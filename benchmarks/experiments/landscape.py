@@ -18,7 +18,7 @@ import seaborn as sns
 from benchmarks.engine import make_runs, run_batch, run_chunked
 from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import atomic_path, write_csv, write_figure
-from benchmarks.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
+from benchmarks.figures.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import simulate_truth

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import consistency, experiments
+from benchmarks import experiments
+from benchmarks.experiments import consistency
 from benchmarks.bounds import posterior_crb
 from benchmarks.engine import make_runs, run_batch
 from benchmarks.output import write_figure, write_text
@@ -25,7 +26,7 @@ from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import build_estimator, simulate, simulate_sensors, simulate_truth
 
-FLIGHT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
+FLIGHT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "flight.toml"
 #: The flight scenario is shortened for the study: ten minutes show the
 #: convergence, the bias estimate settling and steady state, and keep the
 #: per-run UKF affordable.

@@ -14,7 +14,7 @@ from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from benchmarks.output import atomic_path, write_figure
-from benchmarks.plots import freeze_layout
+from benchmarks.figures.plots import freeze_layout
 from dynamics.quaternion import rotation_matrix
 from dynamics.validation import InvalidParameterError
 

@@ -27,10 +27,10 @@ import numpy as np
 
 from benchmarks import Scenario, error_statistics, simulate
 from benchmarks.experiments import sweep
-from benchmarks.landscape import compute_landscape, landscape_figure, pc_grid
+from benchmarks.experiments.landscape import compute_landscape, landscape_figure, pc_grid
 from benchmarks.output import write_figure
-from benchmarks.plots import comparison_figure
-from benchmarks.tuning import format_iteration_table, tune_pc_exponent
+from benchmarks.figures.plots import comparison_figure
+from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
 
 TSTOP = float(os.environ.get("ATTITUDE_BENCH_TSTOP", "50"))
 OUT = Path(os.environ.get("ATTITUDE_BENCH_OUT", "results/notebook"))

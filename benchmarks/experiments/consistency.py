@@ -313,9 +313,9 @@ def consistency_frame(result: ConsistencyResult) -> pd.DataFrame:
 
 
 def figure(result: ConsistencyResult):
-    """The consistency figure of a campaign (see :func:`benchmarks.plots.consistency_figure`)."""
+    """The consistency figure of a campaign (see :func:`benchmarks.figures.plots.consistency_figure`)."""
     from benchmarks.bounds import posterior_crb
-    from benchmarks.plots import consistency_figure
+    from benchmarks.figures.plots import consistency_figure
     errors, sigmas, labels, time_s = {}, {}, {}, None
     for name, sample in result.samples.items():
         trace = sample.traces[name]

@@ -10,12 +10,12 @@ import time
 from pathlib import Path
 
 from benchmarks import experiments
-from benchmarks.landscape import compute_landscape, pc_grid, write_landscape
+from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_landscape
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_text
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.tuning import format_iteration_table, tune_pc_exponent
+from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
 from dynamics.validation import InvalidParameterError
 
 #: The exercise's values for its activities.
