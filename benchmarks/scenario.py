@@ -198,15 +198,13 @@ class Scenario:
         set_("gyro_initial_bias_radps", gyro.initial_bias_radps)
         set_("gyro_scale_misalignment", np.zeros((3, 3)) if gyro.scale_misalignment is None
              else gyro.scale_misalignment)
-        if isinstance(star_tracker, RotationStarTracker):
-            set_("star_tracker_sigma_arcsec", star_tracker.sigma_arcsec)
-            set_("star_tracker_dropout_probability", star_tracker.dropout_probability)
-            set_("star_tracker_to_body_quat", star_tracker.sensor_to_body_quat)
-        else:
-            set_("star_tracker_sigma_arcsec", finite_vector(
-                "star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec, 3))
-            set_("star_tracker_to_body_quat", nonzero_quaternion(
-                "star_tracker_to_body_quat", self.star_tracker_to_body_quat))
+        # The rotation tracker's settings are checked whichever model is chosen:
+        # a file that switches models later should not hide a bad value.
+        rotation = star_tracker if isinstance(star_tracker, RotationStarTracker) else \
+            self._rotation_star_tracker()
+        set_("star_tracker_sigma_arcsec", rotation.sigma_arcsec)
+        set_("star_tracker_dropout_probability", rotation.dropout_probability)
+        set_("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
         set_("estimator_options", _checked_options(self, self.estimator_options))
 
     def build_gyro(self) -> Gyro:
@@ -219,6 +217,9 @@ class Scenario:
         """The star tracker this scenario describes."""
         if self.star_tracker_model == "workshop":
             return StarTracker(self.star_tracker_noise, self.time_between_measurements, self.dt)
+        return self._rotation_star_tracker()
+
+    def _rotation_star_tracker(self) -> RotationStarTracker:
         return RotationStarTracker(
             self.star_tracker_sigma_arcsec, self.time_between_measurements, self.dt,
             dropout_probability=self.star_tracker_dropout_probability,

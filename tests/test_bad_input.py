@@ -171,3 +171,15 @@ def test_fine_landscape_grids_animate_a_capped_number_of_frames():
 def test_tune_and_landscape_refuse_a_pc_exponent_they_would_ignore(tmp_path, capsys, command):
     assert main([command, "--pc-exponent", "-9", "--out", str(tmp_path / "x")]) == 2
     assert "chooses pc_exponent itself" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content, name", [
+    ("[star_tracker]\ndropout_probability = 1.0\n", "star_tracker_dropout_probability"),
+    ("[star_tracker]\nsigma_arcsec = [1, -1, 2]\n", "star_tracker_sigma_arcsec"),
+])
+def test_rotation_tracker_settings_are_checked_whatever_the_model(tmp_path, capsys, content,
+                                                                  name):
+    path = tmp_path / "s.toml"
+    path.write_text(content)           # the model stays the workshop's
+    assert main(["compare", "--scenario", str(path), "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.startswith(f"attitude-bench: error: {name} = ")
