@@ -40,13 +40,13 @@ import numpy as np
 
 from dynamics.validation import (
     InvalidParameterError,
+    covariance_matrix,
     finite_number,
     finite_vector,
     inertia_tensor,
     nonzero_quaternion,
     process_exponent,
 )
-from estimators.ekf import covariance_matrix
 from estimators import ESTIMATORS
 from sensors.gyro import Gyro
 from sensors.noise import (

@@ -134,3 +134,26 @@ def seed_values(name: str, value) -> np.ndarray:
             raise InvalidParameterError(name, item, f"must be a whole number from 0 to "
                                         f"2^63 - 1 = {MAX_SEED}")
     return np.array([int(item) for item in items], dtype=np.int64).reshape(array.shape)
+
+
+def covariance_matrix(name: str, value, size: int = 4) -> np.ndarray:
+    """A ``size`` x ``size`` symmetric positive definite matrix from a scalar
+    (times the identity), a diagonal of ``size`` values, or the matrix itself."""
+    rule = f"must be a number, {size} numbers or a {size}x{size} matrix"
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(name, value, rule) from None
+    if array.ndim == 0:
+        array = array * np.eye(size)
+    elif array.shape == (size,):
+        array = np.diag(array)
+    if array.shape != (size, size):
+        raise InvalidParameterError(name, value, rule)
+    if not np.all(np.isfinite(array)):
+        raise InvalidParameterError(name, value, "must be finite")
+    if not np.allclose(array, array.T):
+        raise InvalidParameterError(name, value, "must be symmetric")
+    if np.linalg.eigvalsh(array)[0] <= 0:
+        raise InvalidParameterError(name, value, "must be positive definite")
+    return array

@@ -31,7 +31,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics.validation import InvalidParameterError, finite_number, nonzero_quaternion
+from dynamics.validation import (
+    InvalidParameterError,
+    covariance_matrix,
+    finite_number,
+    finite_vector,
+    nonzero_quaternion,
+)
 
 #: What an estimator does with a measurement that cannot be used (a
 #: non-finite rate, a non-finite or zero reading).
@@ -242,12 +248,38 @@ class AttitudeEstimator:
         return f"{type(self).__name__}(dt={self.dt!r})"
 
 
+def axis_sigmas(name: str, value) -> np.ndarray:
+    """One standard deviation per axis (a number means the same on all three), >= 0."""
+    if np.ndim(value) == 0:
+        return np.full(3, finite_number(name, value, minimum=0.0))
+    array = finite_vector(name, value, 3)
+    if np.any(array < 0):
+        raise InvalidParameterError(name, value, "must be >= 0")
+    return array
+
+
 class AttitudeAndBiasEstimator(AttitudeEstimator):
     """Base of the six-state filters (attitude error and gyro bias, e.g. the
     MEKF and USQUE): at each output they keep ``_output = (q̂, β̂, P)`` with
     ``P`` 6x6, its attitude block first, and answer the interface from it."""
 
     _output: tuple
+
+    def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,
+                   initial_bias_radps, initial_attitude_sigma_rad, initial_bias_sigma_radps,
+                   output) -> None:
+        """Validate and keep the settings the six-state filters share."""
+        self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
+        self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
+                                                   gyro_bias_random_walk, minimum=0.0)
+        self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
+        self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
+        attitude_sigma = axis_sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
+        bias_sigma = axis_sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
+        self.initial_covariance = np.diag(np.concatenate([attitude_sigma, bias_sigma]) ** 2)
+        if output not in ("prior", "posterior"):
+            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
+        self.output = output
 
     @property
     def attitude(self) -> np.ndarray:

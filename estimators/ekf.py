@@ -56,7 +56,12 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import kinematics_matrix
-from dynamics.validation import InvalidParameterError, finite_number, process_exponent
+from dynamics.validation import (
+    InvalidParameterError,
+    covariance_matrix,
+    finite_number,
+    process_exponent,
+)
 from estimators.base import AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
 from estimators.model import propagate_with_jacobian
@@ -72,29 +77,6 @@ def _measurement_jacobian(_x: np.ndarray) -> np.ndarray:
 def _measurement_function(x: np.ndarray) -> np.ndarray:
     """``h(q) = q``: the star tracker measures the quaternion itself."""
     return x
-
-
-def covariance_matrix(name: str, value, size: int = 4) -> np.ndarray:
-    """A ``size`` x ``size`` symmetric positive definite matrix from a scalar
-    (times the identity), a diagonal of ``size`` values, or the matrix itself."""
-    rule = f"must be a number, {size} numbers or a {size}x{size} matrix"
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, rule) from None
-    if array.ndim == 0:
-        array = array * np.eye(size)
-    elif array.shape == (size,):
-        array = np.diag(array)
-    if array.shape != (size, size):
-        raise InvalidParameterError(name, value, rule)
-    if not np.all(np.isfinite(array)):
-        raise InvalidParameterError(name, value, "must be finite")
-    if not np.allclose(array, array.T):
-        raise InvalidParameterError(name, value, "must be symmetric")
-    if np.linalg.eigvalsh(array)[0] <= 0:
-        raise InvalidParameterError(name, value, "must be positive definite")
-    return array
 
 
 class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):

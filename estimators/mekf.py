@@ -107,10 +107,8 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotvec_from_quat, skew
-from dynamics.validation import InvalidParameterError, finite_number, finite_vector
 from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
-from estimators.ekf import covariance_matrix
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -170,16 +168,6 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
-def _sigmas(name: str, value) -> np.ndarray:
-    """One standard deviation per axis (a number means the same on all three), >= 0."""
-    if np.ndim(value) == 0:
-        return np.full(3, finite_number(name, value, minimum=0.0))
-    array = finite_vector(name, value, 3)
-    if np.any(array < 0):
-        raise InvalidParameterError(name, value, "must be >= 0")
-    return array
-
-
 class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
@@ -223,17 +211,11 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         KalmanFilter.__init__(self, dim_x=6, dim_z=3)
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
-        self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
-        self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
-                                                   gyro_bias_random_walk, minimum=0.0)
-        self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
-        self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
-        attitude_sigma = _sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
-        bias_sigma = _sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
-        self.initial_covariance = np.diag(np.concatenate([attitude_sigma, bias_sigma]) ** 2)
-        if output not in ("prior", "posterior"):
-            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
-        self.output = output
+        self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
+                        measurement_covariance=measurement_covariance,
+                        initial_bias_radps=initial_bias_radps,
+                        initial_attitude_sigma_rad=initial_attitude_sigma_rad,
+                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
         self.H = np.hstack([_I3, np.zeros((3, 3))])
         self.reset()
 

@@ -66,11 +66,10 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from dynamics.quaternion import grp_from_quat, quat_from_grp, quat_from_rotvec, quat_multiply
-from dynamics.validation import InvalidParameterError, finite_number, finite_vector
+from dynamics.validation import InvalidParameterError, finite_number
 from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
-from estimators.ekf import covariance_matrix
-from estimators.mekf import _sigmas, discrete_error_model
+from estimators.mekf import discrete_error_model
 
 _CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
 
@@ -116,17 +115,11 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         points = MerweScaledSigmaPoints(6, alpha=alpha, beta=beta, kappa=kappa)
         UnscentedKalmanFilter.__init__(self, dim_x=6, dim_z=3, dt=self.dt, hx=self._hx,
                                        fx=self._fx, points=points)
-        self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
-        self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
-                                                   gyro_bias_random_walk, minimum=0.0)
-        self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
-        self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
-        attitude_sigma = _sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
-        bias_sigma = _sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
-        self.initial_covariance = np.diag(np.concatenate([attitude_sigma, bias_sigma]) ** 2)
-        if output not in ("prior", "posterior"):
-            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
-        self.output = output
+        self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
+                        measurement_covariance=measurement_covariance,
+                        initial_bias_radps=initial_bias_radps,
+                        initial_attitude_sigma_rad=initial_attitude_sigma_rad,
+                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
         self.reset()
 
     def reset(self) -> None:
