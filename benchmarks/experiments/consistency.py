@@ -149,6 +149,7 @@ class ConsistencyResult:
     summary: dict                       # name → {runs, rms_deg, bound_rms_deg, …}
     anees: dict                         # name → (S,) ANEES at time_s, or None
     bound_rms_deg: np.ndarray           # (S,) the bound's RMS angle at time_s (posterior)
+    bound: object                       # the AttitudeBound over the whole time grid
     samples: dict                       # name → RunResult of the base seed's run (traces)
 
 
@@ -247,7 +248,7 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     time_s = bound.time_s[::every]
     bound_rms = np.degrees(np.sqrt(np.trace(bound.posterior[::every], axis1=1, axis2=2)))
     return ConsistencyResult(scenario=scenario, time_s=time_s, summary=summary, anees=anees,
-                             bound_rms_deg=bound_rms, samples=samples)
+                             bound_rms_deg=bound_rms, bound=bound, samples=samples)
 
 
 def _map(function, arguments, workers: int, progress_bar):
@@ -314,7 +315,6 @@ def consistency_frame(result: ConsistencyResult) -> pd.DataFrame:
 
 def figure(result: ConsistencyResult):
     """The consistency figure of a campaign (see :func:`benchmarks.figures.plots.consistency_figure`)."""
-    from benchmarks.bounds import posterior_crb
     from benchmarks.figures.plots import consistency_figure
     errors, sigmas, labels, time_s = {}, {}, {}, None
     for name, sample in result.samples.items():
@@ -326,8 +326,7 @@ def figure(result: ConsistencyResult):
         errors[name] = np.degrees(attitude_error_vector_rad(sample.truth.q_true, trace.quat))
         sigmas[name] = np.degrees(np.sqrt(np.diagonal(trace.attitude_covariance, axis1=1,
                                                       axis2=2)))
-    bound = posterior_crb(result.scenario)
-    bound_sigma = np.degrees(np.sqrt(np.diagonal(bound.posterior, axis1=1, axis2=2)))
+    bound_sigma = np.degrees(np.sqrt(np.diagonal(result.bound.posterior, axis1=1, axis2=2)))
     bands = {name: (row["anees_low"], row["anees_high"]) for name, row in result.summary.items()}
     return consistency_figure(result.time_s, result.anees, bands, errors, sigmas, bound_sigma,
                               time_s, labels)
