@@ -45,6 +45,7 @@ from dynamics.validation import (
     finite_vector,
     inertia_tensor,
     nonzero_quaternion,
+    one_of,
     process_exponent,
 )
 from estimators import ESTIMATORS
@@ -55,7 +56,6 @@ from sensors.noise import (
     rrw_deg_per_hr_rthr_to_rad_per_s1p5,
 )
 from sensors.star_tracker import (
-    SIGN_CONVENTIONS,
     RotationStarTracker,
     StarTracker,
     outage_windows,
@@ -184,12 +184,7 @@ class Scenario:
         set_("initial_state", nonzero_quaternion("initial_state", self.initial_state))
         set_("initial_covariance", finite_number("initial_covariance", self.initial_covariance,
                                                  strictly_positive=True))
-        if self.star_tracker_model not in STAR_TRACKER_MODELS:
-            raise InvalidParameterError("star_tracker_model", self.star_tracker_model,
-                                        f"must be one of {', '.join(STAR_TRACKER_MODELS)}")
-        if self.star_tracker_sign not in SIGN_CONVENTIONS:
-            raise InvalidParameterError("star_tracker_sign", self.star_tracker_sign,
-                                        f"must be one of {', '.join(SIGN_CONVENTIONS)}")
+        one_of("star_tracker_model", self.star_tracker_model, STAR_TRACKER_MODELS)
         set_("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
                                                       self.star_tracker_outages_s))
         # The sensor classes validate (and normalise) their own settings.

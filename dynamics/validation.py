@@ -44,6 +44,13 @@ def finite_number(name: str, value, *, minimum: float | None = None,
     return number
 
 
+def one_of(name: str, value, choices) -> str:
+    """``value`` if it is one of ``choices``, else an error listing them."""
+    if value not in choices:
+        raise InvalidParameterError(name, value, f"must be one of {', '.join(choices)}")
+    return value
+
+
 def finite_vector(name: str, value, length: int) -> np.ndarray:
     """Return ``value`` as a float array of shape ``(length,)``."""
     try:

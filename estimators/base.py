@@ -37,11 +37,14 @@ from dynamics.validation import (
     finite_number,
     finite_vector,
     nonzero_quaternion,
+    one_of,
 )
 
 #: What an estimator does with a measurement that cannot be used (a
 #: non-finite rate, a non-finite or zero reading).
 ON_INVALID = ("raise", "skip")
+#: Which estimate a filter's step returns: before or after that step's reading.
+OUTPUTS = ("prior", "posterior")
 
 
 class InvalidMeasurementError(InvalidParameterError):
@@ -74,10 +77,7 @@ class AttitudeEstimator:
     def __init__(self, *, dt: float, initial_attitude, on_invalid: str = "raise"):
         self.dt = finite_number("dt", dt, strictly_positive=True)
         self.initial_attitude = nonzero_quaternion("initial_state", initial_attitude)
-        if on_invalid not in ON_INVALID:
-            raise InvalidParameterError("on_invalid", on_invalid,
-                                        f"must be one of {', '.join(ON_INVALID)}")
-        self.on_invalid = on_invalid
+        self.on_invalid = one_of("on_invalid", on_invalid, ON_INVALID)
         self._restart_count()
 
     def _restart_count(self) -> None:
@@ -277,9 +277,7 @@ class AttitudeAndBiasEstimator(AttitudeEstimator):
         attitude_sigma = axis_sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)
         bias_sigma = axis_sigmas("initial_bias_sigma_radps", initial_bias_sigma_radps)
         self.initial_covariance = np.diag(np.concatenate([attitude_sigma, bias_sigma]) ** 2)
-        if output not in ("prior", "posterior"):
-            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
-        self.output = output
+        self.output = one_of("output", output, OUTPUTS)
 
     @property
     def attitude(self) -> np.ndarray:

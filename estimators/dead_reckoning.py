@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import one_of
 from estimators.base import AttitudeEstimator
 from estimators.model import propagate
 
@@ -53,10 +53,7 @@ class DeadReckoning(AttitudeEstimator):
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
                  rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
-        if rate_timing not in RATE_TIMINGS:
-            raise InvalidParameterError("rate_timing", rate_timing,
-                                        f"must be one of {', '.join(RATE_TIMINGS)}")
-        self.rate_timing = rate_timing
+        self.rate_timing = one_of("rate_timing", rate_timing, RATE_TIMINGS)
         self.reset()
 
     def reset(self) -> None:

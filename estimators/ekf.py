@@ -57,12 +57,12 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import kinematics_matrix
 from dynamics.validation import (
-    InvalidParameterError,
     covariance_matrix,
     finite_number,
+    one_of,
     process_exponent,
 )
-from estimators.base import AttitudeEstimator
+from estimators.base import OUTPUTS, AttitudeEstimator
 from estimators.dead_reckoning import IDENTITY
 from estimators.model import propagate_with_jacobian
 
@@ -132,9 +132,7 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         self.pc_exponent = process_exponent("pc_exponent", pc_exponent)
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
-        if output not in ("prior", "posterior"):
-            raise InvalidParameterError("output", output, "must be 'prior' or 'posterior'")
-        self.output = output
+        self.output = one_of("output", output, OUTPUTS)
         self.R = covariance_matrix("measurement_covariance", measurement_covariance)
         self.Q = math.exp(self.pc_exponent) * _IDENTITY_4
         self.reset()

@@ -25,6 +25,7 @@ from dynamics.validation import (
     finite_number,
     finite_vector,
     nonzero_quaternion,
+    one_of,
 )
 from sensors.noise import noise_power_to_std
 
@@ -169,10 +170,7 @@ class RotationStarTracker:
             raise InvalidParameterError("star_tracker_dropout_probability", dropout_probability,
                                         "must be < 1")
         self.outages_s = outage_windows("star_tracker_outages_s", outages_s)
-        if sign not in SIGN_CONVENTIONS:
-            raise InvalidParameterError("star_tracker_sign", sign,
-                                        f"must be one of {', '.join(SIGN_CONVENTIONS)}")
-        self.sign = sign
+        self.sign = one_of("star_tracker_sign", sign, SIGN_CONVENTIONS)
         self.sensor_to_body_quat = nonzero_quaternion("star_tracker_to_body_quat",
                                                       sensor_to_body_quat)
         self.sigma_rad = self.sigma_arcsec / ARCSEC_PER_RAD
