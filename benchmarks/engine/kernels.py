@@ -344,24 +344,30 @@ def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
     _quat_times_normalized(q, dq, q)
 
 
-@njit(cache=True, error_model="numpy")
-def _mekf_update(q, beta, P, z, R, scratch, dq):
-    """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
-    sign = 1.0 if q[0] * z[0] + q[1] * z[1] + q[2] * z[2] + q[3] * z[3] >= 0 else -1.0
-    z0, z1, z2, z3 = sign * z[0], sign * z[1], sign * z[2], sign * z[3]
-    # δq = q̂* ⊗ z
-    w = q[0] * z0 + q[1] * z1 + q[2] * z2 + q[3] * z3
-    v0 = q[0] * z1 - q[1] * z0 - q[2] * z3 + q[3] * z2
-    v1 = q[0] * z2 + q[1] * z3 - q[2] * z0 - q[3] * z1
-    v2 = q[0] * z3 - q[1] * z2 + q[2] * z1 - q[3] * z0
+@njit(cache=True, inline="always", error_model="numpy")
+def _log_error(q, p, norm):
+    """The rotation vector of ``(q⁻¹ ⊗ p) / norm``, aligned to ``w >= 0``
+    (dynamics.quaternion.rotvec_from_quat): the body-frame error from ``q`` to ``p``."""
+    w = q[0] * p[0] + q[1] * p[1] + q[2] * p[2] + q[3] * p[3]
+    v0 = q[0] * p[1] - q[1] * p[0] - q[2] * p[3] + q[3] * p[2]
+    v1 = q[0] * p[2] + q[1] * p[3] - q[2] * p[0] - q[3] * p[1]
+    v2 = q[0] * p[3] - q[1] * p[2] + q[2] * p[1] - q[3] * p[0]
     if w < 0:
         w, v0, v1, v2 = -w, -v0, -v1, -v2
+    w, v0, v1, v2 = w / norm, v0 / norm, v1 / norm, v2 / norm
     vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if vector_norm < 1e-12:
         scale = 2.0 / max(w, 1e-300)
     else:
         scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
-    y0, y1, y2 = scale * v0, scale * v1, scale * v2
+    return scale * v0, scale * v1, scale * v2
+
+
+@njit(cache=True, error_model="numpy")
+def _mekf_update(q, beta, P, z, R, scratch, dq):
+    """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
+    # The reading aligned in sign with q̂ is what the alignment inside the log does.
+    y0, y1, y2 = _log_error(q, z, 1.0)
     S = scratch[0]
     inverse = scratch[1]
     K = scratch[2]
@@ -437,20 +443,8 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias
 def _nees(q_true_k, q, C, scratch):
     """eᵀ C⁻¹ e with e = log(q̂⁻¹ ⊗ q) the body-frame error of estimate ``q``
     and ``C`` its 3x3 covariance (benchmarks.experiments.consistency.nees)."""
-    w = q[0] * q_true_k[0] + q[1] * q_true_k[1] + q[2] * q_true_k[2] + q[3] * q_true_k[3]
-    v0 = q[0] * q_true_k[1] - q[1] * q_true_k[0] - q[2] * q_true_k[3] + q[3] * q_true_k[2]
-    v1 = q[0] * q_true_k[2] + q[1] * q_true_k[3] - q[2] * q_true_k[0] - q[3] * q_true_k[1]
-    v2 = q[0] * q_true_k[3] - q[1] * q_true_k[2] + q[2] * q_true_k[1] - q[3] * q_true_k[0]
-    if w < 0:
-        w, v0, v1, v2 = -w, -v0, -v1, -v2
-    norm_q = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    w, v0, v1, v2 = w / norm_q, v0 / norm_q, v1 / norm_q, v2 / norm_q
-    vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    if vector_norm < 1e-12:
-        scale = 2.0 / max(w, 1e-300)
-    else:
-        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
-    e = (scale * v0, scale * v1, scale * v2)
+    # The EKF's estimate is not unit: normalise it inside the log.
+    e = _log_error(q, q_true_k, math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]))
     S = scratch[0]
     inverse = scratch[1]
     for i in range(3):
