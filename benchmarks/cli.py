@@ -419,8 +419,8 @@ COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_swe
             "workshop": command_workshop}
 
 
-#: Commands that run on the streaming engine (they keep only the truth).
-ENGINE_COMMANDS = ("montecarlo", "tune", "landscape")
+#: Commands that run on the streaming engine alone (their memory is flat).
+ENGINE_COMMANDS = ("montecarlo", "tune")
 
 
 def check_resources(args, scenario) -> None:
@@ -430,6 +430,12 @@ def check_resources(args, scenario) -> None:
     streaming = engine_bytes(n_steps)
     if args.command in ENGINE_COMMANDS:
         check_memory(scenario, streaming)
+        return
+    if args.command == "landscape":
+        # It keeps the first seed's error curve at every grid value, and two more.
+        from benchmarks.experiments.landscape import pc_grid
+        curves = len(pc_grid(args.pc_min, args.pc_max, args.pc_step)) + 2
+        check_memory(scenario, per_run_bytes(n_steps, curves, traced=False))
         return
     estimators = len(getattr(args, "estimators", ()) or ()) or 3
     traced = args.command in ("consistency", "compare", "workshop")

@@ -2,10 +2,11 @@
 
 The per-run path keeps, for every step, the truth (and the integrator's copy
 of it), the sensor readings and each estimator's output; with traces also its
-covariances and bias. The batched engine streams its statistics in blocks and
-keeps only the truth. A run that cannot fit is refused with one line naming
-the parameter and the limit, and the streaming path is suggested where it
-would fit.
+covariances and bias. The batched engine streams the truth, the noise and its
+statistics in blocks, so what it holds does not grow with the run's length
+(runs up to ``TRUTH_CACHE_STEPS`` keep their truth whole, which caps it). A
+run that cannot fit is refused with one line naming the parameter and the
+limit, and the streaming path is suggested where it would fit.
 """
 from __future__ import annotations
 
@@ -19,8 +20,12 @@ from dynamics.validation import InvalidParameterError
 PER_RUN_BYTES_PER_STEP = 240
 ESTIMATOR_BYTES_PER_STEP = 40
 TRACED_ESTIMATOR_BYTES_PER_STEP = 240
-#: The engine keeps the truth (~150 bytes per step) and streams the rest.
-ENGINE_BYTES_PER_STEP = 150
+#: Making the truth whole costs ~150 bytes per step (the integrator's samples
+#: and their copy); the engine does so only up to TRUTH_CACHE_STEPS steps.
+TRUTH_BYTES_PER_STEP = 150
+#: The engine's buffers for a chunk of 1024 runs: the noise of a block
+#: (61 MB), the median histograms (15 MB per estimator) and the state.
+ENGINE_CHUNK_BYTES = 160 * 2**20
 #: Use at most this share of the machine's memory.
 MEMORY_SHARE = 0.8
 
@@ -36,7 +41,9 @@ def per_run_bytes(n_steps: int, estimators: int, traced: bool = False) -> int:
 
 
 def engine_bytes(n_steps: int) -> int:
-    return n_steps * ENGINE_BYTES_PER_STEP
+    """What the engine holds for a run of ``n_steps``: flat above the truth cache."""
+    from benchmarks.simulation import TRUTH_CACHE_STEPS
+    return min(n_steps, TRUTH_CACHE_STEPS) * TRUTH_BYTES_PER_STEP + ENGINE_CHUNK_BYTES
 
 
 def check_memory(scenario, needed_bytes: int, *, streaming_bytes: int | None = None,

@@ -67,6 +67,10 @@ STAR_TRACKER_MODELS = ("workshop", "rotation")
 #: no attitude sensor suite is built for them, and the truth's integrator
 #: would need billions of steps.
 MAX_RATE_RADPS = 100.0
+#: Longest time grid, in steps. The engine's memory no longer grows with the
+#: run, but its time does: at about ten million run-steps a second, one run
+#: of this many steps is a quarter of an hour of the whole machine.
+MAX_STEPS = 10**10
 
 
 def _diag(*values):
@@ -163,6 +167,10 @@ class Scenario:
         set_("tstop", finite_number("tstop", self.tstop, strictly_positive=True))
         if self.tstop < self.dt:
             raise InvalidParameterError("tstop", self.tstop, f"must be >= dt = {self.dt:g}")
+        if self.tstop / self.dt >= MAX_STEPS:
+            raise InvalidParameterError(
+                "tstop", self.tstop, f"makes {self.tstop / self.dt:,.0f} steps of dt = "
+                f"{self.dt:g}; at most {MAX_STEPS:,} steps (tstop = {MAX_STEPS * self.dt:,.0f} s)")
         set_("inertia_tensor_kg_m2", inertia_tensor("inertia_tensor_kg_m2",
                                                     self.inertia_tensor_kg_m2))
         set_("initial_attitude_quat", nonzero_quaternion("initial_attitude_quat",

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import DOP853, solve_ivp
 from scipy.special import ellipj, ellipkinc
 
 from dynamics.validation import InvalidParameterError
@@ -97,8 +97,7 @@ def simulate_torque_free(inertia_kg_m2: np.ndarray, q0: np.ndarray,
     """
     inertia = np.asarray(inertia_kg_m2, dtype=float)
     time_s = np.asarray(time_s, dtype=float)
-    state0 = np.concatenate([np.asarray(q0, float) / np.linalg.norm(q0),
-                             np.asarray(omega0_radps, dtype=float)])
+    state0 = _initial_state(q0, omega0_radps)
     if len(time_s) == 1:
         states = state0[:, None]
     else:
@@ -107,6 +106,59 @@ def simulate_torque_free(inertia_kg_m2: np.ndarray, q0: np.ndarray,
         if not solution.success:  # pragma: no cover - DOP853 does not fail on this smooth system
             raise RuntimeError(f"truth integration failed: {solution.message}")
         states = solution.y
+    return _truth(time_s, states)
+
+
+def torque_free_blocks(inertia_kg_m2: np.ndarray, q0: np.ndarray, omega0_radps: np.ndarray,
+                       dt: float, n_steps: int, block_steps: int):
+    """The truth of :func:`simulate_torque_free` on the grid ``t_k = k dt``,
+    ``k < n_steps``, yielded as consecutive :class:`RigidBodyTruth` blocks of
+    ``block_steps`` steps (the last may be shorter), so that memory does not
+    grow with the run's length.
+
+    The numbers are :func:`simulate_torque_free`'s, bit for bit: this is
+    ``solve_ivp``'s own loop (the DOP853 stepper, each step's dense output
+    evaluated at the grid times it passes), with the grid times computed as
+    they come instead of held in an array.
+    """
+    inertia = np.asarray(inertia_kg_m2, dtype=float)
+    state0 = _initial_state(q0, omega0_radps)
+    pending_time, pending_states = [np.zeros(1)], [state0[:, None]]
+    held = 1
+    if n_steps > 1:
+        t_final = float((n_steps - 1) * dt)
+        solver = DOP853(_equations_of_motion(inertia), 0.0, state0, t_final,
+                        rtol=_RTOL, atol=_ATOL)
+        next_k = 1
+        while next_k < n_steps:
+            solver.step()
+            if solver.status == "failed":  # pragma: no cover - as in simulate_torque_free
+                raise RuntimeError("truth integration failed")
+            # The grid times in (t_old, t], as solve_ivp's searchsorted picks them.
+            stop = next_k
+            while stop < n_steps and stop * dt <= solver.t:
+                stop += 1
+            if stop > next_k:
+                times = np.arange(next_k, stop) * dt
+                pending_time.append(times)
+                pending_states.append(solver.dense_output()(times))
+                held += stop - next_k
+                next_k = stop
+            while held >= block_steps or (next_k == n_steps and held):
+                times, states = np.concatenate(pending_time), np.hstack(pending_states)
+                yield _truth(times[:block_steps], states[:, :block_steps])
+                pending_time, pending_states = [times[block_steps:]], [states[:, block_steps:]]
+                held = len(pending_time[0])
+    else:
+        yield _truth(pending_time[0], pending_states[0])
+
+
+def _initial_state(q0, omega0_radps) -> np.ndarray:
+    return np.concatenate([np.asarray(q0, float) / np.linalg.norm(q0),
+                           np.asarray(omega0_radps, dtype=float)])
+
+
+def _truth(time_s: np.ndarray, states: np.ndarray) -> RigidBodyTruth:
     q_true = states[:4].T
     q_true = q_true / np.linalg.norm(q_true, axis=1, keepdims=True)
     return RigidBodyTruth(time_s=time_s, q_true=q_true, omega_true_radps=states[4:].T.copy())

@@ -73,18 +73,34 @@ def test_output_folder_is_checked_before_any_work(tmp_path, capsys):
 
 def test_a_run_that_cannot_fit_in_memory_is_refused_naming_tstop(tmp_path, capsys):
     scenario = tmp_path / "s.toml"
-    scenario.write_text("tstop = 1e12\n")
+    scenario.write_text("tstop = 1e12\n")      # 1e14 steps: past any machine
     for command in ("compare", "montecarlo", "landscape"):
         assert main([command, "--scenario", str(scenario), "--out", str(tmp_path / "x")]) == 2
         err = capsys.readouterr().err
-        assert err.startswith("attitude-bench: error: tstop = 1000000000000.0: needs about")
+        assert err.startswith("attitude-bench: error: tstop = 1000000000000.0: makes "
+                              "100,000,000,000,000 steps")
+        assert "at most 10,000,000,000 steps" in err and err.count("\n") == 1
+    # 1e9 steps: the per-run path keeps ~240 bytes a step (240 GB), the engine is flat.
+    scenario.write_text("tstop = 1e7\n")
+    for command in ("compare", "landscape"):
+        assert main([command, "--scenario", str(scenario), "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("attitude-bench: error: tstop = 10000000.0: needs about")
         assert "at most about tstop" in err and err.count("\n") == 1
     assert not (tmp_path / "x").exists()
 
 
+def test_the_engine_commands_memory_does_not_grow_with_the_run():
+    from benchmarks.cli import build_parser, check_resources
+    from benchmarks.resources import engine_bytes
+    assert engine_bytes(10**9) == engine_bytes(10**7) < 2**30
+    args = build_parser().parse_args(["montecarlo"])
+    check_resources(args, Scenario(tstop=1e7))            # 1e9 steps: accepted
+
+
 def test_memory_check_suggests_the_streaming_engine_where_it_fits():
     from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
-    scenario = Scenario(tstop=1000.0)
+    scenario = Scenario(tstop=1e5)       # 1e7 steps: ~10 GB per run, ~0.2 GB streamed
     need = per_run_bytes(scenario.n_steps, 3, traced=True)
     with pytest.raises(InvalidParameterError, match="streaming engine .*montecarlo"):
         check_memory(scenario, need, streaming_bytes=engine_bytes(scenario.n_steps),

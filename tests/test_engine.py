@@ -5,6 +5,7 @@ import pytest
 
 from benchmarks import Scenario, error_statistics, simulate
 from benchmarks.engine import MEDIAN_RELATIVE_ERROR, make_runs, run_batch
+from benchmarks.metrics import attitude_error_deg
 from dynamics.validation import InvalidParameterError
 
 SCENARIO = Scenario(tstop=20.0)
@@ -174,3 +175,82 @@ def test_engine_streams_the_per_run_nees_and_nis(flight_batch):
                                                                      rel=1e-6)
             assert streamed["nis_mean"][i] == pytest.approx(np.nanmean(trace.nis), rel=1e-6)
             assert streamed["nis_dof"] == trace.nis_dof
+
+
+def test_the_streamed_truth_is_the_cached_truth_bit_for_bit():
+    # The engine integrates long runs block by block; it must be solve_ivp's numbers.
+    from dynamics.rigid_body import torque_free_blocks
+    from benchmarks.simulation import simulate_truth
+    scenario = Scenario.from_toml(FLIGHT_FILE).replace(tstop=600.0)
+    whole = simulate_truth(scenario)
+    for block_steps in (1, 997, 6001, 10**6):
+        blocks = list(torque_free_blocks(scenario.inertia_tensor_kg_m2,
+                                         scenario.initial_attitude_quat,
+                                         scenario.initial_rate_radps, scenario.dt,
+                                         scenario.n_steps, block_steps))
+        assert [len(b.time_s) for b in blocks[:-1]] == [block_steps] * (len(blocks) - 1)
+        for name in ("time_s", "q_true", "omega_true_radps"):
+            joined = np.concatenate([getattr(b, name) for b in blocks])
+            assert np.array_equal(joined, getattr(whole, name)), (block_steps, name)
+
+
+def test_a_batch_streaming_its_truth_equals_one_holding_it(flight_batch):
+    runs, _ = flight_batch
+    held = run_batch(FLIGHT, runs, ALL)
+    streamed = run_batch(FLIGHT, runs, ALL, cache_steps=10, block_steps=333)
+    for name in held.estimators:
+        for column, values in held.statistics[name].items():
+            assert np.array_equal(values, streamed.statistics[name][column]), (name, column)
+
+
+def test_the_health_checks_count_what_they_should():
+    from benchmarks.engine import kernels
+    counts, factor = np.zeros(kernels.N_HEALTH), np.empty((6, 6))
+    good = np.diag([1.0, 2.0, 3.0])
+    kernels._check_health(np.array([1.0, 0, 0, 0]), True, good, 3, counts, factor)
+    assert counts[kernels.CHECKS] == 1 and counts[1:kernels.WORST_NORM].sum() == 0
+    kernels._check_health(np.array([1.0 + 1e-9, 0, 0, 0]), True, good, 3, counts, factor)
+    assert counts[kernels.NORM_OFF] == 1 and counts[kernels.WORST_NORM] > 9e-10
+    kernels._check_health(np.array([2.0, 0, 0, 0]), False, good, 3, counts, factor)
+    assert counts[kernels.NORM_OFF] == 1                     # not unit by design: not counted
+    skewed = good.copy()
+    skewed[0, 1] = 1e-6
+    kernels._check_health(np.array([1.0, 0, 0, 0]), True, skewed, 3, counts, factor)
+    assert counts[kernels.ASYMMETRIC] == 1 and counts[kernels.NOT_POSITIVE_DEFINITE] == 0
+    indefinite = np.array([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1.0]])   # eigenvalue -1
+    kernels._check_health(np.array([1.0, 0, 0, 0]), True, indefinite, 3, counts, factor)
+    assert counts[kernels.NOT_POSITIVE_DEFINITE] == 1 and counts[kernels.ASYMMETRIC] == 1
+    kernels._check_health(np.array([np.nan, 0, 0, 0]), True, good, 3, counts, factor)
+    assert counts[kernels.NON_FINITE] == 1 and counts[kernels.NORM_OFF] == 2
+    assert counts[kernels.CHECKS] == 6
+
+
+def test_a_healthy_flight_batch_passes_every_check(flight_batch):
+    runs, _ = flight_batch
+    batch = run_batch(FLIGHT, runs, ALL, health=True)
+    for name, health in batch.health.items():
+        assert np.all(health["checks"] >= FLIGHT.n_steps), name
+        for column in ("norm_off", "asymmetric", "not_positive_definite", "non_finite"):
+            assert not health[column].any(), (name, column)
+
+
+def test_sampled_errors_are_the_traces_errors_every_m_steps(flight_batch):
+    runs, batch = flight_batch
+    sampled = run_batch(FLIGHT, runs, ALL, error_every=7)
+    from benchmarks.simulation import simulate_truth
+    truth = simulate_truth(FLIGHT)
+    assert np.array_equal(sampled.sample_time_s, truth.time_s[::7])
+    for name in ALL:
+        expected = attitude_error_deg(truth.q_true[::7], batch.estimates[name][:, ::7])
+        assert sampled.error_samples[name].shape == expected.shape
+        assert np.allclose(sampled.error_samples[name], expected, rtol=1e-12, atol=1e-12), name
+
+
+def test_the_soak_benchmark_reports_every_estimator(capsys):
+    from benchmarks import soak
+    assert soak.main(["--steps", "2000", "--runs", "1", "--every", "10",
+                      "--no-memory-comparison", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    for name in ALL:
+        assert out.count(f"  {name} ") == 2, name      # a health row and a stationarity row
+    assert "NaN/inf" in out and "peak resident memory" in out

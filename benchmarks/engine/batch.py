@@ -4,7 +4,8 @@ A batch is a table of runs that share the scenario's truth and time grid and
 may differ in their seed, their sensor noise powers, their star tracker
 interval and their EKF ``pc_exponent``. For each run the engine draws the
 same random numbers as the per-run path draws for that run's seed
-(:func:`benchmarks.simulation.sensor_generators`), in time blocks, so the
+(:func:`benchmarks.simulation.sensor_generators`), in time blocks (the truth
+too, see :func:`benchmarks.simulation.truth_blocks`), so the
 results are the per-run path's to rounding (checked to 1e-9 in the tests),
 and memory does not grow with the run's length.
 
@@ -25,7 +26,8 @@ import pandas as pd
 
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import WORKSHOP_ESTIMATORS, sensor_generators, simulate_truth
+from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
+                                   simulate_truth, truth_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS
 from sensors.star_tracker import RotationStarTracker, steps_between_readings
@@ -112,6 +114,13 @@ class BatchResult:
     #: samples, ``nees_samples`` (B, S), ``nees_time_average`` (B,),
     #: ``nis_mean`` (B,) and ``nis_dof``.
     consistency: dict | None = None
+    #: With ``health=True``: per estimator, a dict of ``(B,)`` arrays named as
+    #: :data:`HEALTH_COLUMNS` (see :func:`benchmarks.engine.kernels._check_health`).
+    health: dict | None = None
+    #: With ``error_every`` = m > 0: ``error_samples[name]`` ``(B, S)``, each
+    #: estimator's error (degrees) at steps 0, m, 2m, ... (``sample_time_s``).
+    error_samples: dict | None = None
+    sample_time_s: np.ndarray | None = None
 
     def frame(self) -> pd.DataFrame:
         """Tidy: one row per (run, estimator) with the run's settings and statistics."""
@@ -199,6 +208,11 @@ def _reference_estimators(scenario: Scenario, runs: RunTable, with_mekf: bool) -
                        ekf=ESTIMATORS["ekf"].from_scenario(scenario), mekf=mekf)
 
 
+#: The health counters' names, in the kernel's order (kernels.CHECKS ...).
+HEALTH_COLUMNS = ("checks", "norm_off", "asymmetric", "not_positive_definite", "non_finite",
+                  "worst_norm_deviation", "worst_relative_asymmetry")
+
+
 #: Estimators whose kernels stream NEES and NIS (they report a covariance).
 CONSISTENCY_ESTIMATORS = ("ekf", "mekf")
 
@@ -206,7 +220,9 @@ CONSISTENCY_ESTIMATORS = ("ekf", "mekf")
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
               keep_traces: bool = False, block_steps: int = BLOCK_STEPS,
               threads: int | None = None, consistency: bool = False,
-              nees_every: int = 1, settle_steps: int = 0) -> BatchResult:
+              nees_every: int = 1, settle_steps: int = 0,
+              cache_steps: int = TRUTH_CACHE_STEPS, health: bool = False,
+              error_every: int = 0, progress_bar=None) -> BatchResult:
     """Run ``estimators`` (names from :data:`ENGINE_ESTIMATORS`) on every run of ``runs``.
 
     Parameters
@@ -229,6 +245,20 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         and its per-run average from ``settle_steps`` on) and their
         star-tracker NIS (per-run average); see ``BatchResult.consistency``.
         No traces are needed.
+    cache_steps : int
+        Longest run whose truth is taken whole from the cache; longer runs
+        integrate it block by block (the same numbers), so memory stays flat.
+    health : bool
+        Check every estimator's state inside the kernel, after each update and
+        each propagation: |q| = 1, the covariance symmetric, positive definite
+        and finite; counted in ``BatchResult.health``. Off by default (it
+        costs a Cholesky factorisation per check).
+    error_every : int
+        If > 0, keep every estimator's error every that many steps
+        (``BatchResult.error_samples``): the shape of a long run's error
+        without keeping its traces.
+    progress_bar : tqdm-like, optional
+        Updated with the steps of each block as it is done.
     """
     from benchmarks.engine import kernels
     from numba import get_num_threads
@@ -238,7 +268,6 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         raise InvalidParameterError("estimator", unknown[0],
                                     f"must be one of {', '.join(ENGINE_ESTIMATORS)}")
     estimators = tuple(name for name in ENGINE_ESTIMATORS if name in estimators)
-    truth = simulate_truth(scenario)
     n_runs, n_steps, dt = len(runs), scenario.n_steps, scenario.dt
     threads = get_num_threads() if threads is None else threads
     enabled = np.array([name in estimators for name in ENGINE_ESTIMATORS])
@@ -263,10 +292,9 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         star_settings = (np.ascontiguousarray(star_tracker.sigma_rad),
                          np.ascontiguousarray(star_tracker.sensor_to_body),
                          star_tracker.sign == "canonical",
-                         star_tracker.in_outage(truth.time_s),
                          float(star_tracker.dropout_probability))
     else:
-        star_settings = (np.zeros(3), np.eye(3), False, np.zeros(n_steps, dtype=bool), 0.0)
+        star_settings = (np.zeros(3), np.eye(3), False, 0.0)
 
     dr, resets, ekf = reference.dead_reckoning, reference.resets, reference.ekf
     q_dr = np.tile(dr.initial_attitude, (n_runs, 1))
@@ -296,8 +324,6 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     hist = np.zeros((len(estimators), n_runs, HISTOGRAM_BINS), dtype=np.uint32)
     traces = (np.zeros((len(estimators), n_runs, n_steps, 4)) if keep_traces
               else np.zeros((len(estimators), 0, 0, 4)))
-    q_true = np.ascontiguousarray(truth.q_true)
-    omega_true = np.ascontiguousarray(truth.omega_true_radps)
     nees_every = max(1, int(nees_every))
     settle_steps = min(max(0, int(settle_steps)), n_steps - 1)
     n_samples = -(-n_steps // nees_every) if consistency else 0
@@ -306,6 +332,11 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
                           np.zeros((len(estimators), n_runs)), np.zeros((len(estimators), n_runs)),
                           np.zeros((len(estimators), n_runs)))
 
+    health_counts = np.zeros((len(estimators), n_runs if health else 0, kernels.N_HEALTH))
+    error_every = max(0, int(error_every))
+    error_samples = np.zeros((len(estimators), n_runs,
+                              -(-n_steps // error_every) if error_every else 0))
+
     # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
     columns = gyro.normals_per_step
     block_steps = max(1, min(int(block_steps) * 3 // columns, n_steps))
@@ -313,10 +344,11 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     max_readings = -(-block_steps // int(steps_between.min())) + 1
     gyro_buffer = np.empty((n_runs, block_steps, columns))
     star_buffer = np.empty((n_runs, max_readings, 3 if rotation_model else 4))
-    uniforms = np.empty((n_runs, max_readings if star_settings[4] > 0 else 0))
+    uniforms = np.empty((n_runs, max_readings if star_settings[3] > 0 else 0))
 
+    # The truth comes in the same blocks (integrated as it goes for long runs).
     # Draw a block's noise on every core, then advance every run through it.
-    for k0, stop in blocks:
+    for (k0, stop), truth in zip(blocks, truth_blocks(scenario, block_steps, cache_steps)):
         # Readings fall at k ≡ 0 (mod m) in [k0, stop); floor division makes
         # (-1) // m = -1, so the reading at k = 0 is counted too.
         star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
@@ -325,12 +357,17 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         gyro_args = (gyro_std, block_gyro, gyro.bias_step_std, scale,
                      gyro.scale_misalignment is not None, gyro.has_bias_model, bias_true,
                      bias_last)
+        outage = (star_tracker.in_outage(truth.time_s) if rotation_model
+                  else np.zeros(stop - k0, dtype=bool))
         star_args = (rotation_model, star_std, steps_between, star_buffer, star_settings[0],
-                     star_settings[1], star_settings[2], star_settings[3], star_settings[4],
-                     uniforms)
-        kernels.advance(k0, n_steps - 1, q_true, omega_true, dt, gyro_args, star_args, state,
+                     star_settings[1], star_settings[2], outage, star_settings[3], uniforms)
+        kernels.advance(k0, n_steps - 1, np.ascontiguousarray(truth.q_true),
+                        np.ascontiguousarray(truth.omega_true_radps), dt, gyro_args, star_args, state,
                         enabled, rows, options, stats, hist, _FIRST_BITS, traces, keep_traces,
-                        consistency_arrays)
+                        consistency_arrays, bool(health), health_counts, error_every,
+                        error_samples)
+        if progress_bar is not None:
+            progress_bar.update(stop - k0)
 
     statistics, estimates = {}, ({} if keep_traces else None)
     for slot, name in zip(rows[enabled], estimators):
@@ -338,7 +375,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         std = np.sqrt(m2 / (n_steps - 1)) if n_steps > 1 else np.zeros(n_runs)
         if keep_traces:
             estimates[name] = traces[slot]
-            errors = attitude_error_deg(q_true, traces[slot])
+            errors = attitude_error_deg(simulate_truth(scenario).q_true, traces[slot])
             median = np.median(errors, axis=1)
         else:
             median = histogram_median(hist[slot].astype(np.int64), n_steps)
@@ -358,7 +395,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
             if name not in CONSISTENCY_ESTIMATORS:
                 continue
             checked[name] = {
-                "time_s": truth.time_s[::nees_every],
+                "time_s": np.arange(0, n_steps, nees_every) * dt,
                 "nees_samples": samples[slot],
                 "nees_time_average": nees_sum[slot] / (n_steps - settle_steps),
                 "nis_mean": nis_sum[slot] / np.maximum(nis_count[slot], 1),
@@ -366,8 +403,18 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     final = {"gyro_bias_radps": bias_last}
     if "mekf" in estimators:
         final["mekf"] = {"bias_radps": beta_mekf_last, "covariance": P_mekf_last}
+    checked_health = None
+    if health:
+        checked_health = {name: dict(zip(HEALTH_COLUMNS, health_counts[slot].T.copy()))
+                          for slot, name in zip(rows[enabled], estimators)}
+    sampled = None
+    if error_every:
+        sampled = {name: error_samples[slot] for slot, name in zip(rows[enabled], estimators)}
     return BatchResult(runs=runs, estimators=estimators, statistics=statistics,
-                       estimates=estimates, final=final, consistency=checked or None)
+                       estimates=estimates, final=final, consistency=checked or None,
+                       health=checked_health, error_samples=sampled,
+                       sample_time_s=np.arange(0, n_steps, error_every) * dt if error_every
+                       else None)
 
 
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,

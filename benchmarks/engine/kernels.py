@@ -123,8 +123,9 @@ def _propagate(q, w, half_dt, out, jacobian, want_jacobian):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _record(slot, run, k, inv_count, q_true_k, q, stats, hist, hist_first_bits, traces,
-            keep_traces, bits, bits_int):
-    """Error of estimate ``q`` at step ``k``, folded into the run's accumulators."""
+            keep_traces, bits, bits_int, error_every, error_samples):
+    """Error of estimate ``q`` at step ``k``, folded into the run's accumulators
+    (and kept every ``error_every`` steps if that is not 0)."""
     dot = abs(q_true_k[0] * q[0] + q_true_k[1] * q[1] + q_true_k[2] * q[2]
               + q_true_k[3] * q[3])
     error = 2.0 * _acos(min(1.0, dot), bits, bits_int) * _RAD_TO_DEG
@@ -146,6 +147,8 @@ def _record(slot, run, k, inv_count, q_true_k, q, stats, hist, hist_first_bits, 
     if keep_traces:
         for i in range(4):
             traces[slot, run, k, i] = q[i]
+    if error_every and k % error_every == 0:
+        error_samples[slot, run, k // error_every] = error
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -487,16 +490,79 @@ def _fold_consistency(row, run, k, value, consistency):
         samples[row, run, k // every] = value
 
 
+#: Health counters per estimator and run (``run_batch(health=True)``): the
+#: checks made, then how many found |q| off 1 by more than
+#: :data:`NORM_TOLERANCE`, a covariance not symmetric to
+#: :data:`SYMMETRY_TOLERANCE` of its largest diagonal entry, one not positive
+#: definite (a Cholesky pivot <= 0), a NaN or infinity; then the largest
+#: ||q| - 1| and the largest relative asymmetry seen.
+CHECKS, NORM_OFF, ASYMMETRIC, NOT_POSITIVE_DEFINITE, NON_FINITE = 0, 1, 2, 3, 4
+WORST_NORM, WORST_ASYMMETRY = 5, 6
+N_HEALTH = 7
+NORM_TOLERANCE = 1e-12
+SYMMETRY_TOLERANCE = 1e-12
+
+
+@njit(cache=True, error_model="numpy")
+def _check_health(q, unit, P, n, counts, factor):
+    """Fold one check of estimate ``q`` (unit by design if ``unit``) and the
+    leading ``n`` x ``n`` block of ``P`` (n = 0: no covariance) into ``counts``."""
+    counts[CHECKS] += 1
+    finite = True
+    for i in range(4):
+        if not math.isfinite(q[i]):
+            finite = False
+    if unit:
+        deviation = abs(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1.0)
+        if not deviation <= NORM_TOLERANCE:
+            counts[NORM_OFF] += 1
+        if deviation > counts[WORST_NORM]:
+            counts[WORST_NORM] = deviation
+    if n:
+        scale = 0.0
+        for i in range(n):
+            scale = max(scale, abs(P[i, i]))
+        asymmetry = 0.0
+        for i in range(n):
+            for j in range(n):
+                if not math.isfinite(P[i, j]):
+                    finite = False
+                asymmetry = max(asymmetry, abs(P[i, j] - P[j, i]))
+        relative = asymmetry / scale if scale > 0.0 else asymmetry
+        if not relative <= SYMMETRY_TOLERANCE:
+            counts[ASYMMETRIC] += 1
+        if relative > counts[WORST_ASYMMETRY]:
+            counts[WORST_ASYMMETRY] = relative
+        # Cholesky of the symmetric part: positive definite iff every pivot > 0.
+        for j in range(n):
+            total = P[j, j]
+            for m in range(j):
+                total -= factor[j, m] * factor[j, m]
+            if not total > 0.0:
+                counts[NOT_POSITIVE_DEFINITE] += 1
+                break
+            factor[j, j] = math.sqrt(total)
+            for i in range(j + 1, n):
+                value = 0.5 * (P[i, j] + P[j, i])
+                for m in range(j):
+                    value -= factor[i, m] * factor[j, m]
+                factor[i, j] = value / factor[j, j]
+    if not finite:
+        counts[NON_FINITE] += 1
+
+
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, rows, options,
-            stats, hist, hist_first_bits, traces, keep_traces, consistency):
+            stats, hist, hist_first_bits, traces, keep_traces, consistency, check_health,
+            health, error_every, error_samples):
     """Advance every run by one block of steps starting at step ``k0``.
 
+    ``q_true`` (T, 4) and ``omega_true`` (T, 3) are the block's truth.
     ``gyro`` = (std (B,), normals (B, T, 3 or 6), bias_step_std, K (3, 3),
     has_scale, has_bias, bias (B, 3) the true bias β_k, bias_last (B, 3)).
     ``star`` = (rotation_model, std (B,), steps_between (B,), normals
     (B, readings in this block, 3 or 4) consumed in order, sigma_rad (3,),
-    R_bs (3, 3), canonical, outage (N,), dropout_probability, uniforms
+    R_bs (3, 3), canonical, outage (T,), dropout_probability, uniforms
     (B, readings in this block)).
     ``state`` = (q_dr, q_resets, previous_rate (B, 3) for step-average
     timing, x_ekf, P_ekf, q_variance (B,), R (4, 4), q_mekf, beta_mekf,
@@ -505,7 +571,11 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
     P_mekf_last (B, 6, 6)).
     ``options`` = (dead reckoning step-average, resets step-average, EKF
     posterior, MEKF posterior, resets align sign, EKF align sign). Statistics ``(slots, B, 4)``, histograms
-    ``(slots, B, bins)``, traces ``(slots, B, N, 4)`` when kept.
+    ``(slots, B, bins)``, traces ``(slots, B, N, 4)`` when kept; with
+    ``check_health``, ``health`` ``(slots, B, N_HEALTH)`` counts each
+    estimator's state checks after its update and after its propagation
+    (:func:`_check_health`); with ``error_every`` > 0, ``error_samples``
+    ``(slots, B, S)`` keeps each estimator's error every that many steps.
     """
     (gyro_std, gyro_normals, bias_step_std, scale_matrix, has_scale, has_bias, bias_true,
      bias_last) = gyro
@@ -532,6 +602,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
         projected = np.empty((3, 3))
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
+        factor = np.empty((6, 6))
         x = x_ekf[run]
         P = P_ekf[run]
         reading = 0
@@ -544,9 +615,9 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
             # The gyro: ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v.
             if not (has_scale or has_bias):
                 for i in range(3):
-                    w[i] = omega_true[k, i] + gyro_std[run] * gyro_normals[run, j, i]
+                    w[i] = omega_true[j, i] + gyro_std[run] * gyro_normals[run, j, i]
             else:
-                _flight_gyro(w, omega_true[k], gyro_std[run], gyro_normals[run, j], scale_matrix,
+                _flight_gyro(w, omega_true[j], gyro_std[run], gyro_normals[run, j], scale_matrix,
                              has_scale, has_bias, bias_step_std, bias_true[run], bias_last[run],
                              k == last_step)
             due = until_reading == 0
@@ -563,17 +634,17 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                               + sensor_to_body[1, 2] * t2,
                               sensor_to_body[2, 0] * t0 + sensor_to_body[2, 1] * t1
                               + sensor_to_body[2, 2] * t2, dq)
-                    _quat_times_normalized(q_true[k], dq, z)
+                    _quat_times_normalized(q_true[j], dq, z)
                     if canonical and z[0] < 0:
                         for i in range(4):
                             z[i] = -z[i]
-                    available = not outage[k]
+                    available = not outage[j]
                     if dropout_probability > 0.0 and \
                             dropout_uniforms[run, reading] < dropout_probability:
                         available = False
                 else:
                     for i in range(4):
-                        z[i] = q_true[k, i] + star_std[run] * star_normals[run, reading, i]
+                        z[i] = q_true[j, i] + star_std[run] * star_normals[run, reading, i]
                     norm = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2] + z[3] * z[3])
                     for i in range(4):
                         z[i] = z[i] / norm
@@ -585,8 +656,11 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     _propagate(q, w, half_dt, q, F, False)
                 elif k > 0:
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
-                _record(rows[DEAD_RECKONING], run, k, inv_count, q_true[k], q, stats, hist,
-                        hist_first_bits, traces, keep_traces, bits, bits_int)
+                _record(rows[DEAD_RECKONING], run, k, inv_count, q_true[j], q, stats, hist,
+                        hist_first_bits, traces, keep_traces, bits, bits_int,
+                        error_every, error_samples)
+                if check_health:
+                    _check_health(q, True, F, 0, health[rows[DEAD_RECKONING], run], factor)
             if enabled[RESETS]:
                 q = q_resets[run]
                 if available:
@@ -598,8 +672,11 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     _propagate(q, w, half_dt, q, F, False)
                 elif k > 0:
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
-                _record(rows[RESETS], run, k, inv_count, q_true[k], q, stats, hist, hist_first_bits,
-                        traces, keep_traces, bits, bits_int)
+                _record(rows[RESETS], run, k, inv_count, q_true[j], q, stats, hist, hist_first_bits,
+                        traces, keep_traces, bits, bits_int,
+                        error_every, error_samples)
+                if check_health:
+                    _check_health(q, True, F, 0, health[rows[RESETS], run], factor)
             if dr_average or resets_average:
                 for i in range(3):
                     previous_rate[run, i] = w[i]
@@ -608,7 +685,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     prior[i] = x[i]
                 if check and not ekf_posterior:
                     _projected_covariance(x, P, projected)
-                    _fold_consistency(rows[EKF], run, k, _nees(q_true[k], x, projected, scratch6),
+                    _fold_consistency(rows[EKF], run, k, _nees(q_true[j], x, projected, scratch6),
                                       consistency)
                 if available:
                     flip = ekf_align and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2]
@@ -616,6 +693,8 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     for i in range(4):
                         aligned[i] = -z[i] if flip else z[i]
                     nis = _ekf_update(x, P, aligned, R, scratch)
+                    if check_health:   # the additive update leaves |x| off 1 by design
+                        _check_health(x, False, P, 4, health[rows[EKF], run], factor)
                     if check:
                         nis_sum[rows[EKF], run] += nis
                         nis_count[rows[EKF], run] += 1
@@ -625,10 +704,13 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     if check:
                         _projected_covariance(x, P, projected)
                         _fold_consistency(rows[EKF], run, k,
-                                          _nees(q_true[k], x, projected, scratch6), consistency)
-                _record(rows[EKF], run, k, inv_count, q_true[k], prior, stats, hist, hist_first_bits,
-                        traces, keep_traces, bits, bits_int)
+                                          _nees(q_true[j], x, projected, scratch6), consistency)
+                _record(rows[EKF], run, k, inv_count, q_true[j], prior, stats, hist, hist_first_bits,
+                        traces, keep_traces, bits, bits_int,
+                        error_every, error_samples)
                 _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
+                if check_health:
+                    _check_health(x, True, P, 4, health[rows[EKF], run], factor)
             if enabled[MEKF]:
                 qm = q_mekf[run]
                 for i in range(4):
@@ -638,10 +720,12 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     P_mekf_last[run, :, :] = P_mekf[run]
                 if check and not mekf_posterior:
                     _fold_consistency(rows[MEKF], run, k,
-                                      _nees(q_true[k], qm, P_mekf[run], scratch6), consistency)
+                                      _nees(q_true[j], qm, P_mekf[run], scratch6), consistency)
                 if available:
                     nis = _mekf_update(qm, beta_mekf[run], P_mekf[run], z, R_mekf[run],
                                        scratch6, dq)
+                    if check_health:
+                        _check_health(qm, True, P_mekf[run], 6, health[rows[MEKF], run], factor)
                     if check:
                         nis_sum[rows[MEKF], run] += nis
                         nis_count[rows[MEKF], run] += 1
@@ -653,9 +737,12 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                         P_mekf_last[run, :, :] = P_mekf[run]
                     if check:
                         _fold_consistency(rows[MEKF], run, k,
-                                          _nees(q_true[k], qm, P_mekf[run], scratch6),
+                                          _nees(q_true[j], qm, P_mekf[run], scratch6),
                                           consistency)
-                _record(rows[MEKF], run, k, inv_count, q_true[k], out_mekf, stats, hist,
-                        hist_first_bits, traces, keep_traces, bits, bits_int)
+                _record(rows[MEKF], run, k, inv_count, q_true[j], out_mekf, stats, hist,
+                        hist_first_bits, traces, keep_traces, bits, bits_int,
+                        error_every, error_samples)
                 _mekf_propagate(qm, beta_mekf[run], P_mekf[run], w, dt, mekf_noise[run],
                                 mekf_bias_rw[run], scratch6, dq)
+                if check_health:
+                    _check_health(qm, True, P_mekf[run], 6, health[rows[MEKF], run], factor)
