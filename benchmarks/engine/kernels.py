@@ -664,8 +664,17 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
             if enabled[RESETS]:
                 q = q_resets[run]
                 if available:
-                    flip = resets_align and (q[0] * z[0] + q[1] * z[1] + q[2] * z[2]
-                                             + q[3] * z[3]) < 0
+                    flip = False
+                    if resets_align:
+                        # The sign nearest the prediction, as the per-run class compares it.
+                        for i in range(4):
+                            aligned[i] = q[i]
+                        if not resets_average:
+                            _propagate(aligned, w, half_dt, aligned, F, False)
+                        elif k > 0:
+                            _propagate(aligned, previous_rate[run], half_dt, aligned, F, False)
+                        flip = (aligned[0] * z[0] + aligned[1] * z[1] + aligned[2] * z[2]
+                                + aligned[3] * z[3]) < 0
                     for i in range(4):
                         q[i] = -z[i] if flip else z[i]
                 elif not resets_average:
