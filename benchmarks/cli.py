@@ -84,6 +84,16 @@ def _number_list(text: str) -> list[float]:
     return values
 
 
+def importable_from_here() -> None:
+    """Let a user's ``myfilters:MyFilter`` in the current folder import, as
+    under ``python -m``: the folder goes on the module path, last, so that it
+    never hides an installed module. (Dask's local workers start with this
+    process's path, so they find it too.)"""
+    here = str(Path.cwd())
+    if here not in sys.path and "" not in sys.path:
+        sys.path.append(here)
+
+
 def _estimator_list(text: str) -> tuple[str, ...]:
     given = [part.strip() for part in text.split(",") if part.strip()]
     names = tuple(dict.fromkeys(given))
@@ -455,6 +465,7 @@ EXIT_IO = 1
 
 
 def main(argv=None) -> int:
+    importable_from_here()
     try:
         args = build_parser().parse_args(argv)
         scenario = scenario_from_args(args)

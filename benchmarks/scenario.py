@@ -32,6 +32,7 @@ message names the parameter, the value and the rule.
 from __future__ import annotations
 
 import dataclasses
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +49,7 @@ from dynamics.validation import (
     one_of,
     process_exponent,
 )
-from estimators import ESTIMATORS
+from estimators import ESTIMATORS, resolve_estimator
 from sensors.gyro import Gyro
 from sensors.noise import (
     arw_deg_per_rthr_to_rad_per_rts,
@@ -382,7 +383,7 @@ def flatten_sections(data: dict) -> dict:
                 cls = _estimator_class(name)
                 for item, item_value in settings.items():
                     if item in cls.owned_fields:
-                        put(cls.scenario_defaults[item], item_value, f"estimators.{name}.{item}")
+                        put(cls.scenario_defaults[item], item_value, f"estimators.{_key(name)}.{item}")
                     else:
                         options.setdefault(name, {})[item] = item_value
         else:
@@ -392,11 +393,24 @@ def flatten_sections(data: dict) -> dict:
     return flat
 
 
+def _key(name: str) -> str:
+    """``name`` as a TOML key: bare if it can be, quoted otherwise."""
+    return name if re.fullmatch(r"[A-Za-z0-9_-]+", name) else f'"{name}"'
+
+
 def _estimator_class(name: str):
-    if name not in ESTIMATORS:
-        raise InvalidParameterError(f"estimators.{name}", name,
-                                    f"is not an estimator; known: {', '.join(ESTIMATORS)}")
-    return ESTIMATORS[name]
+    """The class of an ``[estimators.NAME]`` section: a registry name, or a
+    user's own as ``[estimators."package.module:ClassName"]``."""
+    if name in ESTIMATORS:
+        return ESTIMATORS[name]
+    if ":" not in name:
+        raise InvalidParameterError(f"estimators.{_key(name)}", name,
+                                    f"is not an estimator; known: {', '.join(ESTIMATORS)}, "
+                                    "or \"package.module:ClassName\" for your own")
+    try:
+        return resolve_estimator(name)
+    except InvalidParameterError as err:
+        raise InvalidParameterError(f"estimators.{_key(name)}", name, err.rule) from None
 
 
 def _checked_options(scenario: Scenario, options) -> dict:
@@ -408,25 +422,27 @@ def _checked_options(scenario: Scenario, options) -> dict:
     for name, settings in options.items():
         cls = _estimator_class(name)
         if not isinstance(settings, dict):
-            raise InvalidParameterError(f"estimators.{name}", settings,
+            raise InvalidParameterError(f"estimators.{_key(name)}", settings,
                                         "must be a section of settings")
         known = cls.option_names()
         for item, value in settings.items():
             if item in cls.owned_fields:
                 raise InvalidParameterError(
-                    f"estimators.{name}.{item}", _plain(value),
+                    f"estimators.{_key(name)}.{item}", _plain(value),
                     f"is the scenario setting {cls.scenario_defaults[item]}; set that instead")
             if item not in known:
                 raise InvalidParameterError(
-                    f"estimators.{name}.{item}", _plain(value),
+                    f"estimators.{_key(name)}.{item}", _plain(value),
                     f"is not a setting of {name}; known: {', '.join(known)}")
         checked[name] = dict(settings)
     for name in checked:
+        # A registry class finds its section by its name; a user's is handed it.
+        own = {} if name in ESTIMATORS else checked[name]
         try:
-            ESTIMATORS[name].from_scenario(_OptionsView(scenario, checked))
+            _estimator_class(name).from_scenario(_OptionsView(scenario, checked), **own)
         except InvalidParameterError as err:
             if err.name in checked[name]:
-                raise InvalidParameterError(f"estimators.{name}.{err.name}", err.value,
+                raise InvalidParameterError(f"estimators.{_key(name)}.{err.name}", err.value,
                                             err.rule) from None
             raise
     return checked

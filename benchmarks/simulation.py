@@ -12,7 +12,6 @@ noise (the star tracker noise is drawn only at its readings).
 """
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -22,8 +21,7 @@ from benchmarks.metrics import attitude_error_deg
 from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
-from dynamics.validation import InvalidParameterError
-from estimators import ESTIMATORS, AttitudeEstimator
+from estimators import ESTIMATORS, AttitudeEstimator, resolve_estimator
 from sensors.star_tracker import RotationStarTracker
 
 #: The workshop's estimators in the order it introduces them.
@@ -135,34 +133,14 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
                       available=readings.available, gyro_bias_radps=bias)
 
 
-def resolve_estimator(spec: str) -> type:
-    """The estimator class ``spec`` names: a registry name (``"mekf"``) or a
-    user's own class as ``"package.module:ClassName"``, which must subclass
-    :class:`estimators.AttitudeEstimator` (its module importable: installed,
-    or on ``PYTHONPATH``)."""
-    if spec in ESTIMATORS:
-        return ESTIMATORS[spec]
-    rule = (f"must be one of {', '.join(ESTIMATORS)}, or package.module:ClassName for your "
-            "own AttitudeEstimator subclass")
-    module_name, colon, class_name = str(spec).partition(":")
-    if not colon or not module_name or not class_name.isidentifier():
-        raise InvalidParameterError("estimator", spec, rule)
-    try:
-        module = importlib.import_module(module_name)
-    except Exception as err:      # the user's module: any import failure is reported
-        raise InvalidParameterError("estimator", spec, f"cannot import {module_name} "
-                                    f"({type(err).__name__}: {err})") from None
-    cls = getattr(module, class_name, None)
-    if not (isinstance(cls, type) and issubclass(cls, AttitudeEstimator)):
-        raise InvalidParameterError("estimator", spec, f"{class_name} in {module_name} must be "
-                                    "a subclass of estimators.AttitudeEstimator")
-    return cls
-
-
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
-    """The estimator ``name`` names (see :func:`resolve_estimator`), built from
-    ``scenario`` (its ``from_scenario``)."""
-    return resolve_estimator(name).from_scenario(scenario)
+    """The estimator ``name`` names (see :func:`estimators.resolve_estimator`),
+    built from ``scenario`` (its ``from_scenario``). A user's class named as
+    ``package.module:ClassName`` also takes the scenario's
+    ``[estimators."package.module:ClassName"]`` section."""
+    cls = resolve_estimator(name)
+    own = {} if name in ESTIMATORS else getattr(scenario, "estimator_options", {}).get(name, {})
+    return cls.from_scenario(scenario, **own)
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,

@@ -79,3 +79,48 @@ def test_bad_user_specs_are_one_line_errors(tmp_path, monkeypatch, capsys):
         err = capsys.readouterr().err
         assert text in err and err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_users_estimator_takes_its_own_scenario_section(tmp_path, monkeypatch, capsys):
+    spec = user_module(tmp_path, monkeypatch)
+    from benchmarks import Scenario
+    from benchmarks.simulation import build_estimator
+    scenario_file = tmp_path / "s.toml"
+    scenario_file.write_text(f'tstop = 2.0\n[estimators."{spec}"]\ngain = 0.5\n')
+    scenario = Scenario.from_toml(scenario_file)
+    assert build_estimator(spec, scenario).gain == 0.5
+    assert build_estimator(spec, Scenario()).gain == 0.05            # the class's default
+    assert main(["compare", "--scenario", str(scenario_file), "--estimators", spec,
+                 "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    capsys.readouterr()
+    scenario_file.write_text(f'[estimators."{spec}"]\nwobble = 1\n')
+    assert main(["compare", "--scenario", str(scenario_file), "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err == (
+        f'attitude-bench: error: estimators."{spec}".wobble = 1: is not a setting of {spec}; '
+        "known: initial_attitude, gain, on_invalid\n")
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_module_in_the_current_folder_imports_from_the_command_line(tmp_path, monkeypatch):
+    # As a console script sees it: the current folder is not on the path.
+    (tmp_path / "myfilters.py").write_text(MODULE)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.path", [p for p in __import__("sys").path
+                                     if p not in ("", str(tmp_path))])
+    assert main(["compare", "--estimators", "ekf,myfilters:Complementary", "--tstop", "2",
+                 "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    summary = pd.read_csv(tmp_path / "c" / "summary.csv")
+    assert list(summary["estimator"]) == ["ekf", "myfilters:Complementary"]
+
+
+def test_dask_workers_import_a_users_module_from_the_main_process_path(tmp_path, monkeypatch):
+    __import__("pytest").importorskip("distributed")
+    spec = user_module(tmp_path, monkeypatch)          # on sys.path only, not PYTHONPATH
+    monkeypatch.delenv("PYTHONPATH", raising=False)
+    from benchmarks import Scenario
+    from benchmarks.engine.campaign import Campaign, run_campaign
+    campaign = Campaign(Scenario(tstop=1.0), ("ekf", spec), runs=4, base_seed=0, chunk_runs=2)
+    on_dask = run_campaign(campaign, tmp_path / "dask", workers=2)
+    in_process = run_campaign(campaign, tmp_path / "local")
+    pd.testing.assert_frame_equal(on_dask, in_process, check_exact=True)
+    assert set(on_dask["estimator"]) == {"ekf", spec}
