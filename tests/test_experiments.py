@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from benchmarks import Scenario
 from benchmarks.cli import main
 from benchmarks.experiments.landscape import LANDSCAPE_COLUMNS, pc_grid
 
@@ -147,3 +148,32 @@ def test_flight_study_report_has_its_sections_figures_and_numbers(tmp_path, monk
         assert (tmp_path / linked).is_file()
     assert "| mekf | 10 |" in report and "| usque | 2 |" in report
     assert "efficiency of" in report and "µs" in report
+
+
+def test_workshop_prose_follows_the_numbers_when_the_flags_change_them(tmp_path):
+    # A gyro 1000x noisier and a loose Q: resets beat dead reckoning and the EKF.
+    assert main(["workshop", "--out", str(tmp_path), "--tstop", "5", "--gyro-noise", "1e-2",
+                 "--pc-exponent", "-3", "--quiet"]) == 0
+    report = (tmp_path / "report.md").read_text()
+    assert "times smaller than dead reckoning's" in report
+    assert "Here dead-reckoning-resets, not the EKF, has the lowest mean error" in report
+    assert "Q = exp(-3) I₄" in report
+    # The exercise's values, shortened: over 5 s dead reckoning has not drifted
+    # yet and is the best (the old fixed prose said the EKF); by 20 s the EKF is.
+    for tstop, best in (("5", "Here dead-reckoning, not the EKF,"), ("20", "The EKF")):
+        out = tmp_path / tstop
+        assert main(["workshop", "--out", str(out), "--tstop", tstop, "--quiet"]) == 0
+        report = (out / "report.md").read_text()
+        assert f"{best} has the lowest mean error of the three" in report
+        assert "circles the minor axis" in report
+
+
+def test_the_tumble_is_described_from_energy_and_momentum():
+    from benchmarks.experiments.workshop import tumble_description
+    inertia = np.diag([1.0, 2.0, 3.0])
+    assert "minor" in tumble_description(Scenario(inertia_tensor_kg_m2=inertia,
+                                                  initial_rate_radps=[0.05, 0.05, 0.0]))
+    assert "major" in tumble_description(Scenario(inertia_tensor_kg_m2=inertia,
+                                                  initial_rate_radps=[0.0, 0.05, 0.05]))
+    assert "spins steadily about the principal axis of 2" in tumble_description(
+        Scenario(inertia_tensor_kg_m2=inertia, initial_rate_radps=[0.0, 0.05, 0.0]))

@@ -9,13 +9,20 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks import experiments
 from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_landscape
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_text
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
+from benchmarks.experiments.tuning import (
+    DEFAULT_BOUNDS,
+    DEFAULT_XTOL,
+    format_iteration_table,
+    tune_pc_exponent,
+)
 from dynamics.validation import InvalidParameterError
 
 #: The exercise's values for its activities.
@@ -54,6 +61,64 @@ def check_activities(scenario: Scenario) -> None:
     pc_grid(*LANDSCAPE_GRID)
 
 
+def tumble_description(scenario: Scenario) -> str:
+    """How the body moves, from its energy and momentum: the angular velocity
+    circles the axis of least or greatest inertia, whichever its momentum's
+    polhode encloses (2T·I_mid against |H|²), or spins about one of them."""
+    moments, axes = np.linalg.eigh(scenario.inertia_tensor_kg_m2)
+    omega = axes.T @ scenario.initial_rate_radps            # principal frame
+    momentum2 = float(np.sum((moments * omega) ** 2))
+    energy2 = float(np.sum(moments * omega ** 2))           # 2T
+    if momentum2 == 0.0:
+        return "and at rest, it stays at rest"
+    on_axis = np.isclose(np.abs(omega), np.linalg.norm(omega), rtol=1e-9)
+    if on_axis.any():
+        return f"it spins steadily about the principal axis of {moments[on_axis.argmax()]:g} kg m²"
+    middle = energy2 * moments[1] - momentum2
+    if abs(middle) <= 1e-12 * momentum2:
+        return "it moves on the separatrix of the intermediate axis, its flips slowing"
+    axis = "minor" if middle > 0 else "major"
+    return (f"its rate vector circles the {axis} axis of inertia while the rates trade "
+            "energy between the other two")
+
+
+def reading_error_rms_deg(scenario: Scenario) -> float:
+    """RMS attitude error of one star tracker reading, degrees."""
+    covariance = scenario.star_tracker_attitude_covariance_rad2
+    return float(np.degrees(np.sqrt(np.trace(covariance))))
+
+
+def reading_error_text(scenario: Scenario) -> str:
+    if scenario.star_tracker_model == "workshop":
+        sigma = (scenario.star_tracker_noise / scenario.dt) ** 0.5
+        return (f"a per-component standard deviation of {sigma:.3g} is an attitude error "
+                f"of about 2√3 × that")
+    return (f"σ = {', '.join(f'{v:g}' for v in scenario.star_tracker_sigma_arcsec)} arcsec "
+            "about the sensor's axes is an attitude error of")
+
+
+def _against(value: float, reference: float) -> str:
+    ratio = value / reference
+    if 0.8 <= ratio <= 1.25:
+        return "comparable to"
+    return f"{ratio:.2g} times" if ratio > 1 else f"{1 / ratio:.2g} times smaller than"
+
+
+def matrix_text(matrix) -> str:
+    matrix = np.asarray(matrix)
+    if np.array_equal(matrix, matrix[0, 0] * np.eye(len(matrix))):
+        return "I₄" if matrix[0, 0] == 1 else f"{matrix[0, 0]:g} I₄"
+    return "diag(" + ", ".join(f"{v:g}" for v in matrix.diagonal()) + ")" \
+        if np.array_equal(matrix, np.diag(matrix.diagonal())) else "the scenario's 4×4 R"
+
+
+def ranking_text(stats: dict) -> str:
+    """Which estimator had the lowest mean error in this run, in words."""
+    best = min(stats, key=lambda name: stats[name]["mean_deg"])
+    label = "The EKF" if best == "ekf" else f"Here {best}, not the EKF,"
+    return f"{label} has the lowest mean error of the three ({stats[best]['mean_deg']:.3g}°)."
+
+
 def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
                  quiet: bool = False) -> Path:
     """Run the exercise and write ``out/report.md``; returns its path."""
@@ -73,12 +138,11 @@ def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
     experiments.animate(scenario, None, SEED, folder, quiet=True)
     sections.append(f"""## 1. The tumbling spacecraft
 
-A rigid body with principal moments diag({", ".join(f"{m:g}" for m in
-scenario.inertia_tensor_kg_m2.diagonal())}) kg m² spins freely from
-ω₀ = {scenario.initial_rate_radps.tolist()} rad/s. With no torque it tumbles
-about its minor axis while its rates trade energy between axes (the truth is
-integrated to 1e-12 relative accuracy and checked against the Jacobi-elliptic
-closed form).
+A rigid body with principal moments {", ".join(f"{m:g}" for m in
+np.linalg.eigvalsh(scenario.inertia_tensor_kg_m2))} kg m² spins freely from
+ω₀ = {scenario.initial_rate_radps.tolist()} rad/s. With no torque
+{tumble_description(scenario)} (the truth is integrated to 1e-12 relative
+accuracy and checked against the Jacobi-elliptic closed form).
 
 ![The true attitude](01-truth/attitude_truth.gif)
 """)
@@ -103,9 +167,12 @@ grows as p·t per axis, so the error wanders upward with time (final error
     folder = step("03-activity-1")
     rows = experiments.sweep(scenario, "dead-reckoning", "gyro-noise", ACTIVITY_1_GYRO_NOISE,
                              SEED, folder, quiet=True)
+    ratio = ACTIVITY_1_GYRO_NOISE[1] / ACTIVITY_1_GYRO_NOISE[0]
     sections.append(f"""## 3. Activity 1 — a noisier gyro
 
-Ten times the noise power means √10 ≈ 3.2 times the drift.
+{ratio:g} times the noise power means √{ratio:g} ≈ {ratio ** 0.5:.1f} times the
+drift on average (here, one noise realisation: {rows[1]['mean_deg'] / rows[0]['mean_deg']:.1f}
+times the mean error).
 
 ![Dead reckoning for two gyro noise powers](03-activity-1/sweep.png)
 
@@ -116,15 +183,16 @@ Ten times the noise power means √10 ≈ 3.2 times the drift.
     folder = step("04-resets")
     _, stats = experiments.compare(scenario, SEED, folder,
                                    estimators=("dead-reckoning", "dead-reckoning-resets"))
+    reading_rms = reading_error_rms_deg(scenario)
+    dead_rms, resets_rms = stats["dead-reckoning"]["rms_deg"], \
+        stats["dead-reckoning-resets"]["rms_deg"]
     sections.append(f"""## 4. Dead reckoning with star-tracker resets
 
 Replacing the estimate with each star tracker reading
 (every {scenario.time_between_measurements:g} s) stops the drift, but the error
-now sits at the star tracker's own noise level: a per-component standard
-deviation of {(scenario.star_tracker_noise / scenario.dt) ** 0.5:.3g} is an
-attitude error of about 2√3 × that ≈ {2 * 3 ** 0.5 * (scenario.star_tracker_noise
-/ scenario.dt) ** 0.5 * 57.2958:.2f}° RMS, comparable to what the gyro alone
-drifts over the whole run.
+now sits at the star tracker's own noise level: {reading_error_text(scenario)}
+≈ {reading_rms:.3g}° RMS at each reading. Over this run the resets' RMS error is
+{resets_rms:.3g}°, {_against(resets_rms, dead_rms)} dead reckoning's {dead_rms:.3g}°.
 
 ![Dead reckoning with and without resets](04-resets/compare.png)
 
@@ -141,7 +209,7 @@ With readings further apart the estimate dead-reckons for longer between
 resets, so the gyro's drift adds to each reading's error; right after a reset
 the error is still the star tracker's own.
 
-![Resets every 0.2, 1 and 5 s](05-activity-2/sweep.png)
+![Resets every {", ".join(f"{v:g}" for v in ACTIVITY_2_INTERVALS)} s](05-activity-2/sweep.png)
 
 {_sweep_table(rows, "interval (s)")}
 """)
@@ -153,7 +221,7 @@ the error is still the star tracker's own.
 
 The EKF blends both sensors, weighting the gyro's prediction by the process
 covariance Q = exp({scenario.pc_exponent:g}) I₄ and the star tracker by
-R = I₄. It has the lowest error of the three (thick black line).
+R = {matrix_text(scenario.measurement_covariance)}. {ranking_text(ekf_stats)}
 
 ![Dead reckoning, resets and the EKF](06-ekf/compare.png)
 
@@ -182,9 +250,9 @@ A smaller process covariance trusts the gyro more and the star tracker less.
     sections.append(f"""## 8. Activity 3b — tuning with a bounded minimiser
 
 Brent's bounded method (MATLAB's `fminbnd`, scipy's
-`minimize_scalar(method="bounded")`) searches [-16, 0] for the exponent
-minimising the loss, the standard deviation of the error, to an x tolerance
-of 0.01:
+`minimize_scalar(method="bounded")`) searches [{DEFAULT_BOUNDS[0]:g}, {DEFAULT_BOUNDS[1]:g}]
+for the exponent minimising the loss, the standard deviation of the error, to
+an x tolerance of {DEFAULT_XTOL:g}:
 
 ```text
 {format_iteration_table(tune.iterations)}
@@ -231,7 +299,7 @@ The numbers are in [landscape.csv](09-landscape/landscape.csv).
     write_text(report, f"""# The attitude estimation workshop
 
 The Kalman-filter workshop's spacecraft attitude exercise, reproduced with
-attitude-bench: a tumbling spacecraft, a 100 Hz gyro and a
+attitude-bench: a tumbling spacecraft, a {1 / scenario.dt:g} Hz gyro and a
 {1 / scenario.time_between_measurements:g} Hz star tracker, and three ways to
 estimate the attitude. Every run uses sensor noise seed {SEED}; every figure
 and table below was produced by this run ({elapsed:.0f} s).
