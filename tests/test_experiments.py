@@ -177,3 +177,12 @@ def test_the_tumble_is_described_from_energy_and_momentum():
                                                   initial_rate_radps=[0.0, 0.05, 0.05]))
     assert "spins steadily about the principal axis of 2" in tumble_description(
         Scenario(inertia_tensor_kg_m2=inertia, initial_rate_radps=[0.0, 0.05, 0.0]))
+
+
+def test_flight_study_verdicts_follow_the_efficiencies():
+    from benchmarks.experiments.flight_study import _mekf_text, _verdict
+    assert "*is* the best filter" in _verdict(1.01, Scenario())
+    assert "0.2 s reading interval" in _verdict(1.01, Scenario())
+    assert "stays 30 % above" in _verdict(1.3, Scenario())
+    assert _mekf_text(0.97).startswith("The MEKF sits at the bound (efficiency 0.97")
+    assert _mekf_text(1.5) == "The MEKF is 1.50 times the bound"
