@@ -16,6 +16,7 @@ from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import check_output_folder
 from benchmarks.scenario import Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
+from benchmarks.experiments.replay import DEFAULT_ESTIMATORS as REPLAY_ESTIMATORS
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
 from dynamics.validation import MAX_SEED, InvalidParameterError
 from estimators import ESTIMATORS
@@ -251,6 +252,27 @@ def build_parser() -> argparse.ArgumentParser:
                              help="run those per-run simulations on a local Dask cluster")
     _add_common(consistency, seed=False)
 
+    replay = commands.add_parser(
+        "replay", help="a recorded gyro against an optical reference attitude (the BROAD "
+        "dataset or your .npz); write replay.png and summary.csv")
+    replay.add_argument("--dataset", default="broad-02", metavar="NAME_OR_PATH",
+                        help="broad-02 (slow rotation, default), broad-07 (fast rotation), or "
+                        "a .npz recording with the same keys")
+    replay.add_argument("--estimators", type=_estimator_list, default=REPLAY_ESTIMATORS,
+                        metavar="A,B,...", help=f"any of {', '.join(ESTIMATORS)} (default: "
+                        f"{','.join(REPLAY_ESTIMATORS)})")
+    replay.add_argument("--star-tracker-interval", type=_number, default=1.0, metavar="SECONDS",
+                        help="seconds between pseudo star tracker readings, rounded to whole "
+                        "samples (default 1)")
+    replay.add_argument("--star-tracker-noise-deg", type=_number, default=0.1, metavar="DEG",
+                        help="σ of the pseudo star tracker's error per axis, degrees "
+                        "(default 0.1)")
+    replay.add_argument("--seed", type=_whole("seed", 0), default=0,
+                        help="seed of the pseudo star tracker's noise (default 0)")
+    replay.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
+                        help="output folder (default results/)")
+    replay.add_argument("--quiet", action="store_true", help="no progress bars")
+
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
     workshop.add_argument("--part", choices=("exercise", "flight"), default="exercise",
@@ -260,8 +282,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def scenario_from_args(args: argparse.Namespace) -> Scenario:
-    """The scenario file (or defaults) with the command-line overrides applied."""
+def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
+    """The scenario file (or defaults) with the command-line overrides applied
+    (None for ``replay``, whose scenario comes from its recording)."""
+    if args.command == "replay":
+        return None
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
                          "pc_exponent itself; leave --pc-exponent out (from --pc-exponent)")
@@ -423,10 +448,32 @@ def command_consistency(args, scenario):
     print(f"wrote {args.out / 'consistency.csv'} and {args.out / 'consistency.png'}")
 
 
+def command_replay(args, _scenario):
+    from benchmarks.experiments.replay import open_dataset, replay, replay_scenario, write_replay
+    from benchmarks.resources import check_memory, per_run_bytes
+    recording, _ = open_dataset(args.dataset)
+    # Settings and memory are checked before the run and before any write.
+    scenario = replay_scenario(recording, args.star_tracker_interval,
+                               args.star_tracker_noise_deg)
+    check_memory(scenario, per_run_bytes(recording.n_samples, len(args.estimators), traced=True))
+    result = replay(args.dataset, args.estimators, args.star_tracker_interval,
+                    args.star_tracker_noise_deg, args.seed, quiet=args.quiet)
+    summary = write_replay(result, args.out)
+    interval = result.run.scenario.time_between_measurements
+    print(f"{result.recording.name}: {result.recording.n_samples:,} samples at "
+          f"{result.recording.rate_hz:g} Hz from its first reference attitude; pseudo star "
+          f"tracker every {interval:.4g} s, σ {args.star_tracker_noise_deg:g}° per axis")
+    print(summary.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    written = ["replay.png", "summary.csv"] + (["ATTRIBUTION.txt"] if result.attribution else [])
+    print(f"wrote {', '.join(str(args.out / name) for name in written)}")
+    if result.attribution:
+        print(result.attribution)
+
+
 COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
             "tune": command_tune, "landscape": command_landscape, "animate": command_animate,
             "montecarlo": command_montecarlo, "consistency": command_consistency,
-            "workshop": command_workshop}
+            "workshop": command_workshop, "replay": command_replay}
 
 
 #: Commands that run on the streaming engine alone (their memory is flat).
@@ -436,6 +483,8 @@ ENGINE_COMMANDS = ("montecarlo", "tune")
 def check_resources(args, scenario) -> None:
     """Refuse, before any work, a run whose memory cannot fit (see benchmarks.resources)."""
     from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
+    if scenario is None:       # replay: checked once its recording is read
+        return
     n_steps = scenario.n_steps
     streaming = engine_bytes(n_steps)
     if args.command in ENGINE_COMMANDS:
@@ -460,6 +509,7 @@ OUTPUT_FILES = {
                                                     "landscape.gif"),
     "animate": (), "montecarlo": ("montecarlo.csv", "montecarlo.png", "campaign.json"),
     "consistency": ("consistency.csv", "consistency.png"), "workshop": ("report.md",),
+    "replay": ("replay.png", "summary.csv", "ATTRIBUTION.txt"),
 }
 EXIT_IO = 1
 

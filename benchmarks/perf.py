@@ -26,10 +26,10 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
+from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import (
     WORKSHOP_ESTIMATORS,
@@ -39,7 +39,6 @@ from benchmarks.simulation import (
 )
 from estimators import ESTIMATORS
 
-FLIGHT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 
 
 def _median_seconds(func, repeats: int) -> float:
@@ -123,7 +122,7 @@ def main(argv=None) -> int:
     print(f"  ratio, batch 1024 EKF to filterpy EKF: {rates[1024, 'ekf'] / filterpy_rate:.0f}x")
     print(f"  ratio, batch 1024 MEKF to batch 1024 EKF: "
           f"{rates[1024, 'mekf'] / rates[1024, 'ekf']:.2f}")
-    short_flight = Scenario.from_toml(FLIGHT_SCENARIO).replace(tstop=500.0)
+    short_flight = Scenario.from_toml(shipped_file(FLIGHT_SCENARIO)).replace(tstop=500.0)
     flight_rate = engine_steps_per_second(short_flight, 1024, ("mekf",), args.repeats)
     print(f"  flight sensors, batch 1024 mekf {flight_rate:>14,.0f} run-steps/s")
 

@@ -25,14 +25,13 @@ import resource
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
+from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 
-FLIGHT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 #: A filter's error counts as stationary when its mean square error over the
 #: last tenth differs from the first tenth's by less than this many standard
 #: errors. The errors are correlated in time (over the bias estimate's time
@@ -53,7 +52,7 @@ def peak_rss_mib() -> float:
 def soak(steps: int, runs: int, every: int, quiet: bool = False):
     """Run the soak; returns (scenario, BatchResult, seconds)."""
     from benchmarks.engine import ENGINE_ESTIMATORS, make_runs, run_batch
-    base = Scenario.from_toml(FLIGHT_SCENARIO)
+    base = Scenario.from_toml(shipped_file(FLIGHT_SCENARIO))
     scenario = base.replace(tstop=(steps - 1) * base.dt)
     start = time.perf_counter()
     with progress(total=scenario.n_steps, desc="soak", unit="step", quiet=quiet) as bar:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import experiments
+from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
 from benchmarks.experiments import consistency
 from benchmarks.bounds import posterior_crb
 from benchmarks.engine import make_runs, run_batch
@@ -26,7 +27,6 @@ from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import build_estimator, simulate, simulate_sensors, simulate_truth
 
-FLIGHT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "flight.toml"
 #: The flight scenario is shortened for the study: ten minutes show the
 #: convergence, the bias estimate settling and steady state, and keep the
 #: per-run UKF affordable.
@@ -186,7 +186,7 @@ def run_flight_study(workshop: Scenario | None = None, out: Path = Path("results
     """Write ``out/report.md`` with the study; returns its path."""
     out = Path(out)
     workshop = workshop or Scenario()
-    flight = Scenario.from_toml(FLIGHT_SCENARIO).replace(tstop=STUDY_TSTOP_S)
+    flight = Scenario.from_toml(shipped_file(FLIGHT_SCENARIO)).replace(tstop=STUDY_TSTOP_S)
     started = time.perf_counter()
     sections = [workshop_efficiency(workshop)[0], flight_side_by_side(flight, out, quiet)[0],
                 convergence_and_cost(flight)[0]]

@@ -249,3 +249,59 @@ def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict
     axes[1].set_title("One run's per-axis error, each filter's ±3σ (shaded)")
     axes[1].legend(loc="upper right", fontsize="small", ncols=2)
     return figure
+
+
+def replay_figure(result) -> Figure:
+    """A replayed recording (:class:`benchmarks.experiments.replay.Replay`):
+    each estimator's error against the reference over the trial, log scale,
+    the movement phase shaded and the reference's gaps left blank (left); the
+    bias estimates against the gyro's mean over the initial rest (right)."""
+    run, time_s = result.run, result.time_s
+    names = list(run.error_deg)
+    colors = dict(zip(names, sns.color_palette("deep", len(names))))
+    with_bias = [name for name in names if run.traces[name].bias_radps is not None]
+    with sns.axes_style("whitegrid"):
+        figure = Figure(figsize=(14.0, 7.5), layout="constrained")
+        grid = figure.add_gridspec(3, 2)
+        error_ax = figure.add_subplot(grid[:, 0])
+        bias_axes = [figure.add_subplot(grid[axis, 1], sharex=error_ax) for axis in range(3)]
+    movement = result.recording.movement
+    for ax in [error_ax, *bias_axes]:
+        if movement.any():
+            first, last = np.flatnonzero(movement)[[0, -1]]
+            ax.axvspan(time_s[first], time_s[last], color="0.85", alpha=0.5, linewidth=0,
+                       label="Movement phase" if ax is error_ax else None)
+    floor = 1e-3   # degrees: the log axis's bottom (an error of 0 at the start)
+    for name in names:
+        style = {"color": "black", "linewidth": 1.2, "zorder": 3} if name == "ekf" \
+            else {"color": colors[name], "linewidth": 1.0}
+        error_ax.plot(time_s, np.maximum(run.error_deg[name], floor), label=run.labels[name],
+                      alpha=0.85, **style)
+    error_ax.set_yscale("log")
+    error_ax.set_ylim(bottom=floor)
+    error_ax.set_xlim(time_s[0], time_s[-1])
+    error_ax.set_title(f"Attitude error against the optical reference: {result.recording.name}")
+    error_ax.set_xlabel(X_LABEL)
+    error_ax.set_ylabel("Error (degrees, log scale)")
+    error_ax.legend(loc="upper left", fontsize="small")
+    rest = np.degrees(result.rest_bias_radps)
+    for axis, ax in enumerate(bias_axes):
+        ax.axhline(rest[axis], color="black", linestyle="--", linewidth=1.5,
+                   label="Gyro mean over the initial rest")
+        for name in with_bias:
+            trace = run.traces[name]
+            estimate = np.degrees(trace.bias_radps[:, axis])
+            sigma = np.degrees(np.sqrt(trace.bias_covariance[:, axis, axis]))
+            ax.plot(time_s, estimate, color=colors[name], linewidth=1.2, label=run.labels[name])
+            ax.fill_between(time_s, estimate - 3 * sigma, estimate + 3 * sigma,
+                            color=colors[name], alpha=0.15, linewidth=0)
+        span = max(abs(rest[axis]), 0.05)
+        ax.set_ylim(rest[axis] - 2 * span, rest[axis] + 2 * span)
+        ax.set_ylabel(f"{AXIS_NAMES[axis]} bias (deg/s)")
+    bias_axes[0].set_title("Gyro bias estimates (±3σ) against the rest-phase mean")
+    bias_axes[0].legend(loc="upper right", fontsize="small")
+    bias_axes[-1].set_xlabel(X_LABEL)
+    if result.attribution:
+        figure.supxlabel(textwrap.fill(result.attribution, 200), fontsize="x-small",
+                         color="0.3")
+    return figure

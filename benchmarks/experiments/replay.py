@@ -1,0 +1,216 @@
+r"""Replay a recorded gyro against an optical reference attitude.
+
+The estimators meet a real gyro — its real bias, noise and scale errors —
+and are scored against an independent reference: the BROAD dataset's
+motion-capture attitude (``datasets/broad/``, CC BY 4.0, attribution in its
+README) or a user's recording with the same keys
+(:func:`sensors.recording.load_recording`).
+
+The star tracker is a *pseudo* star tracker made from that same reference:
+the optical attitude every ``interval_s`` (default 1 s), rotated by a small
+random error of ``noise_deg`` per axis (default 0.1°, drawn from the seed's
+star-tracker stream, :func:`benchmarks.simulation.sensor_generators`), with
+the reference's real gaps as outages — :class:`sensors.RotationStarTracker`
+applied to the record. So one optical record is both the source of the
+readings and the truth they are scored against. The comparison is still
+fair: the readings are sparse (one in 286 samples at 1 s) and noisy, and
+between them — where nearly every scored sample lies — the filters run on
+the real gyro alone; an estimator that copied the readings would be as bad
+as :class:`~estimators.DeadReckoningWithResets` with a 0.1° tracker.
+
+Everything else is the simulation's: a :class:`~benchmarks.Scenario` built
+from the recording (:func:`replay_scenario`) configures every estimator
+through its ``from_scenario``, and :func:`replay` hands back the same
+:class:`~benchmarks.simulation.RunResult` that :func:`benchmarks.simulate`
+does, so every metric and figure works on it unchanged.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.metrics import attitude_error_deg
+from benchmarks.output import write_csv, write_figure, write_text
+from benchmarks.progress import progress
+from benchmarks.scenario import Scenario
+from benchmarks.shipped import shipped_file
+from benchmarks.simulation import RunResult, SensorData, build_estimator, sensor_generators
+from dynamics.rigid_body import RigidBodyTruth
+from dynamics.validation import InvalidParameterError, finite_number
+from sensors.recording import Recording, load_recording
+
+#: ``--dataset`` name → the shipped file.
+DATASETS = {"broad-02": "datasets/broad/02_undisturbed_slow_rotation_B.npz",
+            "broad-07": "datasets/broad/07_undisturbed_fast_rotation_B.npz"}
+ATTRIBUTION = ("Data: BROAD, D. Laidig, M. Caruso, A. Cereatti, T. Seel, \"BROAD - A "
+               "Benchmark for Robust Inertial Orientation Estimation\", Data 6(7), 2021, "
+               "doi:10.3390/data6070072; CC BY 4.0 (converted to .npz, unused channels "
+               "dropped).")
+DEFAULT_ESTIMATORS = ("dead-reckoning", "ekf", "mekf")
+DEFAULT_INTERVAL_S = 1.0
+DEFAULT_NOISE_DEG = 0.1
+#: The filters' gyro bias model: a random walk of this σ_u (rad/s^1.5), a
+#: MEMS gyro's bias instability over minutes; and the prior σ of the bias at
+#: switch-on, 0.01 rad/s ≈ 0.6 °/s, which covers a MEMS gyro's turn-on bias.
+BIAS_RANDOM_WALK = 1e-4
+INITIAL_BIAS_SIGMA_RADPS = 0.01
+#: The six-state filters start on the first reference attitude, within this.
+INITIAL_ATTITUDE_SIGMA_RAD = math.radians(1.0)
+SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "final_deg",
+                   "final_bias_error_degps")
+
+
+def open_dataset(dataset: str) -> tuple[Recording, str | None]:
+    """The recording ``dataset`` names — ``broad-02``, ``broad-07`` or a path
+    to an ``.npz`` — and the attribution it must carry (None for a user's)."""
+    if dataset in DATASETS:
+        try:
+            path = shipped_file(DATASETS[dataset])
+        except FileNotFoundError as err:
+            raise InvalidParameterError("dataset", dataset, str(err)) from None
+        return load_recording(path, name=dataset), ATTRIBUTION
+    if not str(dataset).endswith(".npz"):
+        raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)} "
+                                    "or a path to a .npz recording")
+    return load_recording(dataset), None
+
+
+def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S,
+                    noise_deg: float = DEFAULT_NOISE_DEG) -> Scenario:
+    """The scenario that configures every estimator for ``recording``.
+
+    Its grid is the recording's (``dt`` = 1 / rate), its star tracker the
+    pseudo star tracker (``interval_s`` rounded to whole samples, ``noise_deg``
+    per axis, the reference's gaps as outages), its gyro noise power the
+    variance of the gyro over the initial rest times ``dt``, and every filter
+    starts on the first reference attitude: the additive EKF with
+    R = (σ/2)² I₄ and a Q that covers the gyro's noise and the drift the rest
+    bias, which it cannot estimate, causes over a reading interval (derived
+    from the rest phase and the interval, not tuned on the movement), the
+    six-state filters with a bias prior wide enough for
+    a MEMS gyro (:data:`INITIAL_BIAS_SIGMA_RADPS`).
+    """
+    interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
+    noise_deg = finite_number("star_tracker_noise_deg", noise_deg, minimum=0.0)
+    dt = recording.dt
+    steps = max(1, round(interval_s / dt))
+    if steps >= recording.n_samples:
+        raise InvalidParameterError("star_tracker_interval", interval_s,
+                                    f"must be shorter than the recording "
+                                    f"({recording.n_samples * dt:.1f} s)")
+    rest = recording.gyro_radps[recording.rest_samples]
+    noise_power = float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1 else 0.0
+    bias = recording.rest_gyro_mean_radps() if len(rest) else np.zeros(3)
+    sigma_rad = math.radians(noise_deg)
+    # The EKF's Q per step on each quaternion component: the gyro noise,
+    # (dt/2)² σ_ω², plus the drift of the bias it cannot estimate, as a random
+    # walk whose spread over one reading interval T (n = T/dt steps) equals
+    # that drift: n Q = (β T / 2)², so Q = (β/2)² T dt.
+    interval = steps * dt
+    q_variance = (dt / 2) ** 2 * noise_power / dt + float(np.mean(bias ** 2)) / 4 * interval * dt
+    six_state = {"initial_attitude_sigma_rad": INITIAL_ATTITUDE_SIGMA_RAD,
+                 "initial_bias_sigma_radps": INITIAL_BIAS_SIGMA_RADPS}
+    gaps = tuple((start * dt, stop * dt) for start, stop in recording.reference_gaps())
+    first = recording.reference_quat[np.argmax(recording.has_reference)]
+    return Scenario(
+        tstop=(recording.n_samples - 1) * dt, dt=dt, initial_state=first,
+        initial_attitude_quat=first,
+        gyro_noise=noise_power, gyro_bias_random_walk=BIAS_RANDOM_WALK,
+        star_tracker_model="rotation", star_tracker_sigma_arcsec=[noise_deg * 3600.0] * 3,
+        time_between_measurements=interval, star_tracker_outages_s=gaps,
+        measurement_covariance=max(sigma_rad / 2, 1e-9) ** 2 * np.eye(4),
+        pc_exponent=math.log(max(q_variance, 1e-300)),
+        estimator_options={"mekf": dict(six_state), "usque": dict(six_state)})
+
+
+def pseudo_star_tracker(recording: Recording, scenario: Scenario, seed: int):
+    """The pseudo star tracker's held readings and ``available`` flags."""
+    filled = np.where(recording.has_reference[:, None], recording.reference_quat,
+                      [1.0, 0.0, 0.0, 0.0])     # never read: the gaps are outages
+    return scenario.build_star_tracker().measure(filled, sensor_generators(seed)[1])
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A replayed recording: the run (as :func:`benchmarks.simulate` returns
+    it, with traces), the recording itself, from its first reference
+    attitude on, and the gyro's mean over the initial rest."""
+
+    run: RunResult
+    recording: Recording
+    start_sample: int
+    rest_bias_radps: np.ndarray
+    attribution: str | None
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Time since the start of the recording, seconds."""
+        return (self.start_sample + np.arange(self.recording.n_samples)) * self.recording.dt
+
+    def summary(self) -> pd.DataFrame:
+        """Per estimator: RMS error over the movement phase (the dataset authors'
+        scoring), mean, max and final error over the samples with a reference,
+        and the final bias estimate's largest axis error against the rest
+        mean (°/s; NaN without a bias estimate)."""
+        scored = self.recording.has_reference
+        movement = scored & self.recording.movement
+        rows = []
+        for name, error in self.run.error_deg.items():
+            trace = self.run.traces[name]
+            bias_error = (np.nan if trace.bias_radps is None else float(np.degrees(
+                np.abs(trace.bias_radps[-1] - self.rest_bias_radps).max())))
+            rows.append({"estimator": name,
+                         "rms_movement_deg": float(np.sqrt(np.mean(error[movement] ** 2)))
+                         if movement.any() else np.nan,
+                         "mean_deg": float(error[scored].mean()),
+                         "max_deg": float(error[scored].max()),
+                         "final_deg": float(error[scored][-1]),
+                         "final_bias_error_degps": bias_error})
+        return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+
+def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFAULT_INTERVAL_S,
+           noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0, quiet: bool = True) -> Replay:
+    """Replay ``dataset`` (see :func:`open_dataset`) through ``estimators``."""
+    recording, attribution = open_dataset(dataset)
+    rest_bias = recording.rest_gyro_mean_radps()
+    start = int(np.argmax(recording.has_reference))
+    recording = recording.from_sample(start)
+    scenario = replay_scenario(recording, interval_s, noise_deg)
+    readings = pseudo_star_tracker(recording, scenario, seed)
+    sensors = SensorData(omega_meas_radps=recording.gyro_radps,
+                         star_tracker_quat=readings.quat, available=readings.available)
+    # The truth is the reference attitude; its rate is not observed.
+    truth = RigidBodyTruth(time_s=recording.time_s, q_true=recording.reference_quat,
+                           omega_true_radps=np.full((recording.n_samples, 3), np.nan))
+    estimates, errors, labels, traces = {}, {}, {}, {}
+    for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
+        estimator = build_estimator(name, scenario)
+        traces[name] = estimator.track(sensors.omega_meas_radps, sensors.star_tracker_quat,
+                                       sensors.available)
+        estimates[name] = traces[name].quat
+        errors[name] = attitude_error_deg(truth.q_true, estimates[name])
+        labels[name] = estimator.label
+    run = RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
+                    estimates=estimates, error_deg=errors, labels=labels, traces=traces)
+    return Replay(run=run, recording=recording, start_sample=start, rest_bias_radps=rest_bias,
+                  attribution=attribution)
+
+
+def write_replay(result: Replay, out: Path) -> pd.DataFrame:
+    """Write ``replay.png``, ``summary.csv`` and, for a shipped dataset,
+    ``ATTRIBUTION.txt`` (CC BY 4.0 asks it of derived material)."""
+    from benchmarks.figures.plots import replay_figure
+    out = Path(out)
+    summary = result.summary()
+    write_figure(out / "replay.png", replay_figure(result))
+    write_csv(out / "summary.csv", SUMMARY_COLUMNS,
+              (list(row) for row in summary.itertuples(index=False)))
+    if result.attribution:
+        write_text(out / "ATTRIBUTION.txt", "replay.png and summary.csv derive from:\n"
+                   + result.attribution + "\n")
+    return summary

@@ -1,0 +1,148 @@
+"""Real sensors: a recorded gyro and an independent reference attitude.
+
+A :class:`Recording` is what a motion-capture trial gives: a gyro sampled at
+a fixed rate (body frame, rad/s) and, on the same samples, a reference
+attitude from an optical system (unit quaternions, body → reference frame,
+scalar first, as everywhere in this project), with rows of NaN where the
+markers were not seen, and a flag marking the movement phase — before it the
+sensor rests, which gives the gyro's bias at switch-on.
+
+:func:`load_recording` reads one from a numpy ``.npz`` archive with the keys
+of the BROAD dataset (Laidig et al., *Data* 6(7), 2021) and checks it, so a
+malformed file is one clear error, not a traceback deep in a filter.
+"""
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dynamics.validation import InvalidParameterError
+
+#: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
+#: movement flags (N,) and the sampling rate; ``info`` is optional.
+REQUIRED_KEYS = ("imu_gyr_radps", "opt_quat", "movement", "sampling_rate_hz")
+#: A reference quaternion may be off unit length by this much (rounding of
+#: the recording, not a different convention or scale).
+UNIT_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recorded trial.
+
+    Attributes
+    ----------
+    name : str
+    gyro_radps : (N, 3) gyro readings, rad/s, body frame
+    reference_quat : (N, 4) reference attitude, scalar-first, body → reference;
+        NaN rows where there is none
+    movement : (N,) bool, the movement phase
+    rate_hz : float, sampling rate
+    info : str, the recording's own description
+    """
+
+    name: str
+    gyro_radps: np.ndarray
+    reference_quat: np.ndarray
+    movement: np.ndarray
+    rate_hz: float
+    info: str = ""
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.gyro_radps)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return np.arange(self.n_samples) * self.dt
+
+    @property
+    def has_reference(self) -> np.ndarray:
+        """(N,) bool: samples with a reference attitude."""
+        return ~np.isnan(self.reference_quat).any(axis=1)
+
+    @property
+    def rest_samples(self) -> slice:
+        """The initial rest: every sample before the movement phase starts."""
+        return slice(0, int(np.argmax(self.movement)) if self.movement.any() else self.n_samples)
+
+    def rest_gyro_mean_radps(self) -> np.ndarray:
+        """The gyro's mean over the initial rest: its bias at switch-on (rad/s)."""
+        return self.gyro_radps[self.rest_samples].mean(axis=0)
+
+    def reference_gaps(self) -> list[tuple[int, int]]:
+        """Runs of samples without a reference, as ``[start, stop)`` index pairs."""
+        missing = np.concatenate([[False], ~self.has_reference, [False]])
+        edges = np.flatnonzero(np.diff(missing.astype(np.int8)))
+        return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+    def from_sample(self, start: int) -> "Recording":
+        """The recording from sample ``start`` on."""
+        return Recording(self.name, self.gyro_radps[start:], self.reference_quat[start:],
+                         self.movement[start:], self.rate_hz, self.info)
+
+
+def load_recording(path, name: str | None = None) -> Recording:
+    """Read and check a recording from an ``.npz`` archive with :data:`REQUIRED_KEYS`.
+
+    Raises :class:`~dynamics.validation.InvalidParameterError` (parameter
+    ``dataset``) naming what is wrong: a missing file or key, a wrong shape,
+    non-finite gyro readings, a reference that is not unit quaternions, a
+    rate that is not positive.
+    """
+    path = Path(path)
+
+    def refuse(rule: str):
+        raise InvalidParameterError("dataset", str(path), rule)
+
+    if not path.is_file():
+        refuse("file does not exist")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            data = {key: archive[key] for key in archive.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        refuse(f"must be a numpy .npz archive ({type(err).__name__}: {err})")
+    missing = [key for key in REQUIRED_KEYS if key not in data]
+    if missing:
+        refuse(f"has no key {missing[0]!r}; a recording needs {', '.join(REQUIRED_KEYS)}")
+    gyro, reference = data["imu_gyr_radps"], data["opt_quat"]
+    movement, rate = data["movement"], data["sampling_rate_hz"]
+    if gyro.ndim != 2 or gyro.shape[1] != 3 or len(gyro) < 2:
+        refuse(f"imu_gyr_radps has shape {gyro.shape}; must be (N, 3) with N >= 2")
+    n = len(gyro)
+    if reference.shape != (n, 4):
+        refuse(f"opt_quat has shape {reference.shape}; must be ({n}, 4), one row per gyro sample")
+    if movement.shape != (n,):
+        refuse(f"movement has shape {movement.shape}; must be ({n},)")
+    if movement.dtype != bool and not np.isin(movement, (0, 1)).all():
+        refuse("movement must be true/false (or 0/1) per sample")
+    if rate.shape != () or not np.issubdtype(rate.dtype, np.number) \
+            or not np.isfinite(rate) or rate <= 0:
+        refuse(f"sampling_rate_hz = {rate!r} must be one positive number (Hz)")
+    gyro = gyro.astype(float)
+    bad = np.flatnonzero(~np.isfinite(gyro).all(axis=1))
+    if len(bad):
+        refuse(f"imu_gyr_radps must be finite; row {bad[0]} is {gyro[bad[0]].tolist()}")
+    reference = reference.astype(float)
+    present = ~np.isnan(reference).any(axis=1)
+    if not present.any():
+        refuse("opt_quat has no reference attitude (every row is NaN)")
+    partly = np.flatnonzero(np.isnan(reference).any(axis=1) & ~np.isnan(reference).all(axis=1))
+    if len(partly):
+        refuse(f"opt_quat row {partly[0]} is partly NaN; a row is a quaternion or all NaN")
+    norms = np.linalg.norm(reference[present], axis=1)
+    off = np.flatnonzero(~(np.abs(norms - 1.0) <= UNIT_TOLERANCE))
+    if len(off):
+        row = int(np.flatnonzero(present)[off[0]])
+        refuse(f"opt_quat must hold unit quaternions [w, x, y, z]; row {row} has norm "
+               f"{norms[off[0]]:.6g}")
+    info = str(data["info"]) if "info" in data and data["info"].shape == () else ""
+    return Recording(name=name or path.stem, gyro_radps=gyro, reference_quat=reference,
+                     movement=movement.astype(bool), rate_hz=float(rate), info=info)
