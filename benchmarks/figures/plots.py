@@ -295,8 +295,12 @@ def replay_figure(result) -> Figure:
             ax.plot(time_s, estimate, color=colors[name], linewidth=1.2, label=run.labels[name])
             ax.fill_between(time_s, estimate - 3 * sigma, estimate + 3 * sigma,
                             color=colors[name], alpha=0.15, linewidth=0)
-        span = max(abs(rest[axis]), 0.05)
-        ax.set_ylim(rest[axis] - 2 * span, rest[axis] + 2 * span)
+        # Show the rest mean and where the estimates spend 98 % of the time.
+        values = [rest[axis]] + [np.degrees(run.traces[n].bias_radps[:, axis]) for n in with_bias]
+        low, high = np.percentile(np.hstack(values), [1, 99])
+        low, high = min(low, rest[axis]), max(high, rest[axis])
+        margin = max(0.2 * (high - low), 0.05)
+        ax.set_ylim(low - margin, high + margin)
         ax.set_ylabel(f"{AXIS_NAMES[axis]} bias (deg/s)")
     bias_axes[0].set_title("Gyro bias estimates (±3σ) against the rest-phase mean")
     bias_axes[0].legend(loc="upper right", fontsize="small")
