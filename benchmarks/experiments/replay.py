@@ -83,6 +83,9 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
                     noise_deg: float = DEFAULT_NOISE_DEG) -> Scenario:
     """The scenario that configures every estimator for ``recording``.
 
+    ``noise_deg`` must be positive: the filters weigh each reading by its
+    error covariance, which must be positive definite.
+
     Its grid is the recording's (``dt`` = 1 / rate), its star tracker the
     pseudo star tracker (``interval_s`` rounded to whole samples, ``noise_deg``
     per axis, the reference's gaps as outages), its gyro noise power the
@@ -95,7 +98,7 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
     a MEMS gyro (:data:`INITIAL_BIAS_SIGMA_RADPS`).
     """
     interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
-    noise_deg = finite_number("star_tracker_noise_deg", noise_deg, minimum=0.0)
+    noise_deg = finite_number("star_tracker_noise_deg", noise_deg, strictly_positive=True)
     dt = recording.dt
     steps = max(1, round(interval_s / dt))
     if steps >= recording.n_samples:
@@ -122,7 +125,7 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
         gyro_noise=noise_power, gyro_bias_random_walk=BIAS_RANDOM_WALK,
         star_tracker_model="rotation", star_tracker_sigma_arcsec=[noise_deg * 3600.0] * 3,
         time_between_measurements=interval, star_tracker_outages_s=gaps,
-        measurement_covariance=max(sigma_rad / 2, 1e-9) ** 2 * np.eye(4),
+        measurement_covariance=(sigma_rad / 2) ** 2 * np.eye(4),
         pc_exponent=math.log(max(q_variance, 1e-300)),
         estimator_options={"mekf": dict(six_state), "usque": dict(six_state)})
 
