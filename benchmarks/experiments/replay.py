@@ -176,9 +176,26 @@ class Replay:
         return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
 
 
-def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFAULT_INTERVAL_S,
-           noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0, quiet: bool = True) -> Replay:
-    """Replay ``dataset`` (see :func:`open_dataset`) through ``estimators``."""
+@dataclass(frozen=True)
+class ReplayData:
+    """What the simulation would hand the estimators, made from a recording:
+    the scenario that configures them, the truth (the reference attitude,
+    NaN in its gaps; the rate is not observed, so NaN too) and the sensor
+    data (the real gyro, the pseudo star tracker's readings and flags), on
+    the recording from its first reference attitude on."""
+
+    scenario: Scenario
+    truth: RigidBodyTruth
+    sensors: SensorData
+    recording: Recording
+    start_sample: int
+    rest_bias_radps: np.ndarray
+    attribution: str | None
+
+
+def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
+                noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0) -> ReplayData:
+    """``dataset`` (see :func:`open_dataset`) made ready for any estimator."""
     recording, attribution = open_dataset(dataset)
     rest_bias = recording.rest_gyro_mean_radps()
     start = int(np.argmax(recording.has_reference))
@@ -187,21 +204,30 @@ def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFA
     readings = pseudo_star_tracker(recording, scenario, seed)
     sensors = SensorData(omega_meas_radps=recording.gyro_radps,
                          star_tracker_quat=readings.quat, available=readings.available)
-    # The truth is the reference attitude; its rate is not observed.
     truth = RigidBodyTruth(time_s=recording.time_s, q_true=recording.reference_quat,
                            omega_true_radps=np.full((recording.n_samples, 3), np.nan))
+    return ReplayData(scenario=scenario, truth=truth, sensors=sensors, recording=recording,
+                      start_sample=start, rest_bias_radps=rest_bias, attribution=attribution)
+
+
+def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFAULT_INTERVAL_S,
+           noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0, quiet: bool = True) -> Replay:
+    """Replay ``dataset`` (see :func:`open_dataset`) through ``estimators``
+    (registry names, ``package.module:Class`` specs)."""
+    data = load_replay(dataset, interval_s, noise_deg, seed)
+    sensors = data.sensors
     estimates, errors, labels, traces = {}, {}, {}, {}
     for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
-        estimator = build_estimator(name, scenario)
+        estimator = build_estimator(name, data.scenario)
         traces[name] = estimator.track(sensors.omega_meas_radps, sensors.star_tracker_quat,
                                        sensors.available)
         estimates[name] = traces[name].quat
-        errors[name] = attitude_error_deg(truth.q_true, estimates[name])
+        errors[name] = attitude_error_deg(data.truth.q_true, estimates[name])
         labels[name] = estimator.label
-    run = RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
+    run = RunResult(scenario=data.scenario, seed=seed, truth=data.truth, sensors=sensors,
                     estimates=estimates, error_deg=errors, labels=labels, traces=traces)
-    return Replay(run=run, recording=recording, start_sample=start, rest_bias_radps=rest_bias,
-                  attribution=attribution)
+    return Replay(run=run, recording=data.recording, start_sample=data.start_sample,
+                  rest_bias_radps=data.rest_bias_radps, attribution=data.attribution)
 
 
 def write_replay(result: Replay, out: Path) -> pd.DataFrame:
