@@ -138,14 +138,23 @@ small_vectors = lambda bound: st.lists(st.floats(-bound, bound), min_size=3,  # 
 
 @st.composite
 def engine_cases(draw):
-    """A short random scenario (either sensor model) and a run's settings."""
+    """A short random scenario (either sensor model, every estimator option the
+    kernels implement) and a run's settings."""
     common = dict(
         tstop=draw(st.sampled_from([0.5, 1.0, 2.0])),
         initial_attitude_quat=draw(unit_quaternions),
         initial_rate_radps=draw(small_vectors(0.3)),
         gyro_initial_bias_radps=draw(small_vectors(1e-3)),
         gyro_bias_random_walk=draw(st.sampled_from([0.0, 1e-9, 1e-6])),
-        initial_state=draw(unit_quaternions))
+        initial_state=draw(unit_quaternions),
+        estimator_options={
+            "dead-reckoning": {"rate_timing": draw(st.sampled_from(["workshop", "step-average"]))},
+            "dead-reckoning-resets": {
+                "rate_timing": draw(st.sampled_from(["workshop", "step-average"])),
+                "align_sign": draw(st.booleans())},
+            "ekf": {"output": draw(st.sampled_from(["prior", "posterior"])),
+                    "align_sign": draw(st.booleans())},
+            "mekf": {"output": draw(st.sampled_from(["prior", "posterior"]))}})
     if draw(st.booleans()):
         # Real trackers: a few arcsec to a few arcmin across the boresight, roll up
         # to ten times worse. (R's conditioning bounds how far the two paths'
@@ -156,6 +165,7 @@ def engine_cases(draw):
                                                  cross * draw(st.floats(1.0, 10.0))],
                       star_tracker_dropout_probability=draw(st.floats(0.0, 0.5)),
                       star_tracker_sign=draw(st.sampled_from(["raw", "canonical"])),
+                      star_tracker_outages_s=draw(st.sampled_from([(), ((0.3, 0.7),)])),
                       star_tracker_to_body_quat=draw(unit_quaternions))
     run = dict(seed=draw(st.integers(0, 2**63 - 1)),
                gyro_noise=draw(log_uniform(1e-14, 1e-4)),
@@ -165,7 +175,7 @@ def engine_cases(draw):
     return Scenario(**common), run
 
 
-# Every case costs a few hundred steps on both paths (1,500 cases passed once).
+# Every case costs a few hundred steps on both paths (1,000 cases passed once).
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(engine_cases())
 def test_engine_equals_the_per_run_path_on_random_scenarios(case):
