@@ -104,6 +104,8 @@ def load_recording(path, name: str | None = None) -> Recording:
 
     if not path.is_file():
         refuse("file does not exist")
+    if not zipfile.is_zipfile(path):
+        refuse("must be a numpy .npz archive (a zip file); this file is not one")
     try:
         with np.load(path, allow_pickle=False) as archive:
             data = {key: archive[key] for key in archive.files}
@@ -125,7 +127,8 @@ def load_recording(path, name: str | None = None) -> Recording:
         refuse("movement must be true/false (or 0/1) per sample")
     if rate.shape != () or not np.issubdtype(rate.dtype, np.number) \
             or not np.isfinite(rate) or rate <= 0:
-        refuse(f"sampling_rate_hz = {rate!r} must be one positive number (Hz)")
+        shown = rate.tolist() if rate.size < 5 else f"an array of shape {rate.shape}"
+        refuse(f"sampling_rate_hz = {shown!r} must be one positive number (Hz)")
     gyro = gyro.astype(float)
     bad = np.flatnonzero(~np.isfinite(gyro).all(axis=1))
     if len(bad):

@@ -148,7 +148,7 @@ def test_a_shipped_replay_carries_the_attribution(tmp_path):
     ({"opt_quat": np.zeros((10, 4))}, "opt_quat has shape (10, 4); must be (8000, 4)"),
     ({"opt_quat": np.tile([2.0, 0, 0, 0], (8000, 1))}, "unit quaternions [w, x, y, z]; row 0 "
                                                        "has norm 2"),
-    ({"sampling_rate_hz": np.array(0.0)}, "sampling_rate_hz = array(0.) must be one positive"),
+    ({"sampling_rate_hz": np.array(0.0)}, "sampling_rate_hz = 0.0 must be one positive"),
     ({"sampling_rate_hz": np.array(-285.0)}, "must be one positive number"),
     ({"imu_gyr_radps": np.full((8000, 3), np.nan)}, "imu_gyr_radps must be finite; row 0"),
     ({"opt_quat": np.full((8000, 4), np.nan)}, "has no reference attitude"),
@@ -182,6 +182,7 @@ def test_a_file_that_is_not_an_archive_is_refused(tmp_path, capsys):
     path = tmp_path / "junk.npz"
     path.write_text("not a zip")
     assert main(["replay", "--dataset", str(path), "--out", str(tmp_path / "o")]) == 2
-    assert "must be a numpy .npz archive" in capsys.readouterr().err
+    assert "must be a numpy .npz archive (a zip file); this file is not one" in \
+        capsys.readouterr().err
     with pytest.raises(ValueError, match="must be a numpy .npz archive"):
         load_recording(path)
