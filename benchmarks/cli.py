@@ -269,6 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0.1)")
     replay.add_argument("--seed", type=_whole("seed", 0), default=0,
                         help="seed of the pseudo star tracker's noise (default 0)")
+    replay.add_argument("--scenario", metavar="FILE", type=Path,
+                        help="a TOML file of [estimators.NAME] sections overriding the "
+                        "settings derived from the recording")
     replay.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
     replay.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -455,9 +458,12 @@ def command_replay(args, _scenario):
     # Settings and memory are checked before the run and before any write.
     scenario = replay_scenario(recording, args.star_tracker_interval,
                                args.star_tracker_noise_deg)
+    if args.scenario:
+        scenario = scenario.with_estimator_settings(args.scenario)
     check_memory(scenario, per_run_bytes(recording.n_samples, len(args.estimators), traced=True))
     result = replay(args.dataset, args.estimators, args.star_tracker_interval,
-                    args.star_tracker_noise_deg, args.seed, quiet=args.quiet)
+                    args.star_tracker_noise_deg, args.seed, quiet=args.quiet,
+                    settings=args.scenario)
     summary = write_replay(result, args.out)
     interval = result.run.scenario.time_between_measurements
     print(f"{result.recording.name}: {result.recording.n_samples:,} samples at "

@@ -268,19 +268,40 @@ class Scenario:
     def from_toml(cls, path) -> "Scenario":
         """Load a scenario file: flat field names and/or sections (see the
         module docstring); missing keys take the defaults."""
-        path = Path(path)
-        try:
-            with path.open("rb") as handle:
-                data = tomllib.load(handle)
-        except FileNotFoundError:
-            raise InvalidParameterError("scenario", str(path), "file does not exist") from None
-        except OSError as err:
-            raise InvalidParameterError("scenario", str(path),
-                                        f"cannot be read ({err.strerror})") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-            raise InvalidParameterError("scenario", str(path),
-                                        f"must be valid TOML ({err})") from None
-        return cls().replace(**flatten_sections(data))
+        return cls().replace(**flatten_sections(read_toml(path)))
+
+    def with_estimator_settings(self, path) -> "Scenario":
+        """This scenario with the ``[estimators.NAME]`` sections of the file
+        ``path`` laid over it (for scenarios made otherwise, e.g. from a
+        recording); any other key in the file is refused."""
+        data = read_toml(path)
+        for key, value in data.items():
+            if key != "estimators":
+                raise InvalidParameterError(key, _plain(value), "only [estimators.NAME] "
+                                            "sections may be given here; the rest is set "
+                                            "for you")
+        flat = flatten_sections(data)
+        options = {name: dict(settings) for name, settings in self.estimator_options.items()}
+        for name, settings in flat.pop("estimator_options", {}).items():
+            options.setdefault(name, {}).update(settings)
+        return self.replace(**flat, estimator_options=options)
+
+
+def read_toml(path) -> dict:
+    """A TOML file's document; a missing, unreadable or malformed file is one
+    clear error naming it."""
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError:
+        raise InvalidParameterError("scenario", str(path), "file does not exist") from None
+    except OSError as err:
+        raise InvalidParameterError("scenario", str(path),
+                                    f"cannot be read ({err.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise InvalidParameterError("scenario", str(path),
+                                    f"must be valid TOML ({err})") from None
 
 
 def field_names() -> tuple[str, ...]:

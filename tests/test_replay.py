@@ -186,3 +186,24 @@ def test_a_file_that_is_not_an_archive_is_refused(tmp_path, capsys):
         capsys.readouterr().err
     with pytest.raises(ValueError, match="must be a numpy .npz archive"):
         load_recording(path)
+
+
+def test_a_settings_file_overrides_what_the_recording_sets(tmp_path, capsys):
+    from benchmarks.experiments.replay import load_replay
+    path = _user_recording(tmp_path)
+    settings = tmp_path / "settings.toml"
+    settings.write_text("[estimators.mekf]\ngyro_noise = 1e-5\n"
+                        "[estimators.ekf]\npc_exponent = -16.0\n")
+    derived, overridden = load_replay(str(path)), load_replay(str(path), settings=settings)
+    assert overridden.scenario.pc_exponent == -16.0 != derived.scenario.pc_exponent
+    mekf = overridden.scenario.estimator_options["mekf"]
+    assert mekf["gyro_noise"] == 1e-5
+    assert mekf["initial_bias_sigma_radps"] == derived.scenario.estimator_options["mekf"][
+        "initial_bias_sigma_radps"]                       # the derived ones are kept
+    settings.write_text("tstop = 5\n")
+    assert main(["replay", "--dataset", str(path), "--scenario", str(settings),
+                 "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == ("attitude-bench: error: tstop = 5: only "
+                                       "[estimators.NAME] sections may be given here; the "
+                                       "rest is set for you\n")
+    assert not (tmp_path / "o").exists()

@@ -14,9 +14,9 @@ the reference's real gaps as outages — :class:`sensors.RotationStarTracker`
 applied to the record. So one optical record is both the source of the
 readings and the truth they are scored against. The comparison is still
 fair: the readings are sparse (one in 286 samples at 1 s) and noisy, and
-between them — where nearly every scored sample lies — the filters run on
-the real gyro alone; an estimator that copied the readings would be as bad
-as :class:`~estimators.DeadReckoningWithResets` with a 0.1° tracker.
+between them — where nearly every scored sample lies — every estimator runs
+on the real gyro alone. (Copying the readings is
+:class:`~estimators.DeadReckoningWithResets`, which is scored like the rest.)
 
 Everything else is the simulation's: a :class:`~benchmarks.Scenario` built
 from the recording (:func:`replay_scenario`) configures every estimator
@@ -194,13 +194,18 @@ class ReplayData:
 
 
 def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
-                noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0) -> ReplayData:
-    """``dataset`` (see :func:`open_dataset`) made ready for any estimator."""
+                noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0,
+                settings=None) -> ReplayData:
+    """``dataset`` (see :func:`open_dataset`) made ready for any estimator;
+    ``settings``, a TOML file of ``[estimators.NAME]`` sections, overrides
+    what :func:`replay_scenario` derives."""
     recording, attribution = open_dataset(dataset)
     rest_bias = recording.rest_gyro_mean_radps()
     start = int(np.argmax(recording.has_reference))
     recording = recording.from_sample(start)
     scenario = replay_scenario(recording, interval_s, noise_deg)
+    if settings is not None:
+        scenario = scenario.with_estimator_settings(settings)
     readings = pseudo_star_tracker(recording, scenario, seed)
     sensors = SensorData(omega_meas_radps=recording.gyro_radps,
                          star_tracker_quat=readings.quat, available=readings.available)
@@ -211,10 +216,12 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
 
 
 def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFAULT_INTERVAL_S,
-           noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0, quiet: bool = True) -> Replay:
+           noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0, quiet: bool = True,
+           settings=None) -> Replay:
     """Replay ``dataset`` (see :func:`open_dataset`) through ``estimators``
-    (registry names, ``package.module:Class`` specs)."""
-    data = load_replay(dataset, interval_s, noise_deg, seed)
+    (registry names, ``package.module:Class`` specs); ``settings`` as for
+    :func:`load_replay`."""
+    data = load_replay(dataset, interval_s, noise_deg, seed, settings)
     sensors = data.sensors
     estimates, errors, labels, traces = {}, {}, {}, {}
     for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
