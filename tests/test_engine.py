@@ -268,3 +268,12 @@ def test_resets_align_a_reading_with_the_prediction_as_the_per_run_class_does():
     reference = simulate(scenario.replace(**settings), ["dead-reckoning-resets"], seed=0)
     assert np.abs(batch.estimates["dead-reckoning-resets"][0]
                   - reference.estimates["dead-reckoning-resets"]).max() < 1e-9
+
+
+def test_the_kernel_compiles_once_whatever_the_block_lengths():
+    # A shorter last block used to reach the kernel as a strided view, a
+    # second signature and a second cold compile (about 40 s on a fresh machine).
+    from benchmarks.engine import kernels
+    run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), block_steps=333)   # 2001 = 6 x 333 + 3
+    run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), block_steps=1000)
+    assert len(kernels.advance.signatures) == 1, kernels.advance.signatures

@@ -353,6 +353,10 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         # (-1) // m = -1, so the reading at k = 0 is counted too.
         star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
         block_gyro = gyro_buffer[:, :stop - k0]
+        if not block_gyro.flags.c_contiguous:
+            # The last, shorter block gets a buffer of its own: a strided view
+            # would compile the kernel a second time (about 40 s, cold).
+            gyro_buffer = block_gyro = np.empty((n_runs, stop - k0, columns))
         _fill_normals(generators, block_gyro, star_buffer, star_counts, uniforms, threads)
         gyro_args = (gyro_std, block_gyro, gyro.bias_step_std, scale,
                      gyro.scale_misalignment is not None, gyro.has_bias_model, bias_true,
