@@ -38,6 +38,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from estimators.mekf import transition_coefficients
+
 #: Estimator slots, in the order of ``estimators.ESTIMATORS``.
 DEAD_RECKONING, RESETS, EKF, MEKF = 0, 1, 2, 3
 N_SLOTS = 4
@@ -60,8 +62,6 @@ _QS2 = 2.02094576023350569471e+00
 _QS3 = -6.88283971605453293030e-01
 _QS4 = 7.70381505559019352791e-02
 _HIGH_WORD_MASK = np.int64(-4294967296)   # clears the low 32 bits of a double
-#: The MEKF's switch to Taylor series (estimators.mekf.SERIES_BELOW).
-MEKF_SERIES_BELOW = 0.1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -166,6 +166,9 @@ def _matmul4(a, b, out):
 def _gauss_jordan(S, inverse, n):
     """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
     partial pivoting; S is positive definite."""
+    for i in range(n):
+        for j in range(n):
+            inverse[i, j] = 1.0 if i == j else 0.0
     for col in range(n):
         pivot = col
         for row in range(col + 1, n):
@@ -188,6 +191,16 @@ def _gauss_jordan(S, inverse, n):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _quadratic_form(y, inverse, n):
+    """yᵀ S⁻¹ y for the first n entries of ``y`` (the NIS and the NEES)."""
+    total = 0.0
+    for i in range(n):
+        for j in range(n):
+            total += y[i] * inverse[i, j] * y[j]
+    return total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _ekf_update(x, P, z, R, scratch):
     """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
     P = (I - K) P (I - K)ᵀ + K R Kᵀ."""
@@ -199,15 +212,10 @@ def _ekf_update(x, P, z, R, scratch):
     for i in range(4):
         for j in range(4):
             S[i, j] = P[i, j] + R[i, j]
-            inverse[i, j] = 1.0 if i == j else 0.0
     _gauss_jordan(S, inverse, 4)
     _matmul4(P, inverse, K)
     y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
-    nis = 0.0
-    y = (y0, y1, y2, y3)
-    for i in range(4):
-        for j in range(4):
-            nis += y[i] * inverse[i, j] * y[j]
+    nis = _quadratic_form((y0, y1, y2, y3), inverse, 4)
     for i in range(4):
         x[i] = x[i] + (K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2 + K[i, 3] * y3)
     for i in range(4):
@@ -272,24 +280,10 @@ def _quat_times_normalized(q, d, out):
     out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _transition_coefficients(w, dt):
-    """estimators.mekf.transition_coefficients, formula for formula."""
-    x = w * dt
-    if x < MEKF_SERIES_BELOW:
-        x2 = x * x
-        dt2 = dt * dt
-        return (dt * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0))),
-                dt2 * (0.5 - x2 / 24.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0))),
-                dt2 * dt * (1.0 / 6.0 - x2 / 120.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))),
-                dt2 * dt2 * dt * (1.0 / 60.0 - x2 / 2520.0 * (1.0 - x2 / 72.0
-                                                               * (1.0 - x2 / 110.0))),
-                dt2 * dt2 * (1.0 / 24.0 - x2 / 720.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0))))
-    sn, cs = math.sin(x), math.cos(x)
-    w2 = w * w
-    return (sn / w, (1.0 - cs) / w2, (x - sn) / (w2 * w),
-            (x * x * x / 3.0 + 2.0 * sn - 2.0 * x) / (w2 * w2 * w),
-            (0.5 * x * x + cs - 1.0) / (w2 * w2))
+#: The MEKF's transition coefficients: the per-run function itself, compiled
+#: (plain scalar arithmetic, so one definition serves both paths).
+_transition_coefficients = njit(cache=True, inline="always",
+                                error_model="numpy")(transition_coefficients)
 
 
 @njit(cache=True, error_model="numpy")
@@ -380,13 +374,8 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
     for i in range(3):
         for j in range(3):
             S[i, j] = P[i, j] + R[i, j]
-            inverse[i, j] = 1.0 if i == j else 0.0
     _gauss_jordan(S, inverse, 3)
-    nis = 0.0
-    y = (y0, y1, y2)
-    for i in range(3):
-        for j in range(3):
-            nis += y[i] * inverse[i, j] * y[j]
+    nis = _quadratic_form((y0, y1, y2), inverse, 3)
     # K = P Hᵀ S⁻¹ (6x3): P's first three columns times S⁻¹.
     for i in range(6):
         for j in range(3):
@@ -453,13 +442,8 @@ def _nees(q_true_k, q, C, scratch):
     for i in range(3):
         for j in range(3):
             S[i, j] = C[i, j]
-            inverse[i, j] = 1.0 if i == j else 0.0
     _gauss_jordan(S, inverse, 3)
-    total = 0.0
-    for i in range(3):
-        for j in range(3):
-            total += e[i] * inverse[i, j] * e[j]
-    return total
+    return _quadratic_form(e, inverse, 3)
 
 
 @njit(cache=True, error_model="numpy")
