@@ -264,6 +264,11 @@ class AttitudeAndBiasEstimator(AttitudeEstimator):
     ``P`` 6x6, its attitude block first, and answer the interface from it."""
 
     _output: tuple
+    #: Both take the gyro's noise model and the star tracker's body-frame
+    #: covariance from the scenario: filters matched to their sensors.
+    scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
+                         "gyro_bias_random_walk": "gyro_bias_random_walk",
+                         "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
 
     def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,
                    initial_bias_radps, initial_attitude_sigma_rad, initial_bias_sigma_radps,

@@ -199,9 +199,6 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
 
     name = "mekf"
     label = "MEKF"
-    scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
-                         "gyro_bias_random_walk": "gyro_bias_random_walk",
-                         "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,

@@ -95,9 +95,6 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
 
     name = "usque"
     label = "USQUE (UKF)"
-    scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
-                         "gyro_bias_random_walk": "gyro_bias_random_walk",
-                         "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
