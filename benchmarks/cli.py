@@ -452,18 +452,14 @@ def command_consistency(args, scenario):
 
 
 def command_replay(args, _scenario):
-    from benchmarks.experiments.replay import open_dataset, replay, replay_scenario, write_replay
+    from benchmarks.experiments.replay import load_replay, run_replay, write_replay
     from benchmarks.resources import check_memory, per_run_bytes
-    recording, _ = open_dataset(args.dataset)
-    # Settings and memory are checked before the run and before any write.
-    scenario = replay_scenario(recording, args.star_tracker_interval,
-                               args.star_tracker_noise_deg)
-    if args.scenario:
-        scenario = scenario.with_estimator_settings(args.scenario)
-    check_memory(scenario, per_run_bytes(recording.n_samples, len(args.estimators), traced=True))
-    result = replay(args.dataset, args.estimators, args.star_tracker_interval,
-                    args.star_tracker_noise_deg, args.seed, quiet=args.quiet,
-                    settings=args.scenario)
+    # The recording, the settings and the memory are checked before any write.
+    data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
+                       args.seed, settings=args.scenario)
+    check_memory(data.scenario, per_run_bytes(data.recording.n_samples, len(args.estimators),
+                                              traced=True))
+    result = run_replay(data, args.estimators, args.seed, quiet=args.quiet)
     summary = write_replay(result, args.out)
     interval = result.run.scenario.time_between_measurements
     print(f"{result.recording.name}: {result.recording.n_samples:,} samples at "

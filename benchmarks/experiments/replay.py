@@ -79,6 +79,17 @@ def open_dataset(dataset: str) -> tuple[Recording, str | None]:
     return load_recording(dataset), None
 
 
+def interval_steps(recording: Recording, interval_s: float) -> int:
+    """``interval_s`` in whole samples of ``recording``, checked."""
+    interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
+    steps = max(1, round(interval_s / recording.dt))
+    if steps >= recording.n_samples:
+        raise InvalidParameterError("star_tracker_interval", interval_s,
+                                    f"must be shorter than the recording "
+                                    f"({recording.n_samples * recording.dt:.1f} s)")
+    return steps
+
+
 def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S,
                     noise_deg: float = DEFAULT_NOISE_DEG) -> Scenario:
     """The scenario that configures every estimator for ``recording``.
@@ -97,14 +108,9 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
     six-state filters with a bias prior wide enough for
     a MEMS gyro (:data:`INITIAL_BIAS_SIGMA_RADPS`).
     """
-    interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
+    steps = interval_steps(recording, interval_s)
     noise_deg = finite_number("star_tracker_noise_deg", noise_deg, strictly_positive=True)
     dt = recording.dt
-    steps = max(1, round(interval_s / dt))
-    if steps >= recording.n_samples:
-        raise InvalidParameterError("star_tracker_interval", interval_s,
-                                    f"must be shorter than the recording "
-                                    f"({recording.n_samples * dt:.1f} s)")
     rest = recording.gyro_radps[recording.rest_samples]
     noise_power = float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1 else 0.0
     bias = recording.rest_gyro_mean_radps() if len(rest) else np.zeros(3)
@@ -200,6 +206,7 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     ``settings``, a TOML file of ``[estimators.NAME]`` sections, overrides
     what :func:`replay_scenario` derives."""
     recording, attribution = open_dataset(dataset)
+    interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
     start = int(np.argmax(recording.has_reference))
     recording = recording.from_sample(start)
@@ -221,7 +228,13 @@ def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFA
     """Replay ``dataset`` (see :func:`open_dataset`) through ``estimators``
     (registry names, ``package.module:Class`` specs); ``settings`` as for
     :func:`load_replay`."""
-    data = load_replay(dataset, interval_s, noise_deg, seed, settings)
+    return run_replay(load_replay(dataset, interval_s, noise_deg, seed, settings), estimators,
+                      seed, quiet)
+
+
+def run_replay(data: ReplayData, estimators=DEFAULT_ESTIMATORS, seed: int = 0,
+               quiet: bool = True) -> Replay:
+    """Run ``estimators`` on data from :func:`load_replay` (made with ``seed``)."""
     sensors = data.sensors
     estimates, errors, labels, traces = {}, {}, {}, {}
     for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
