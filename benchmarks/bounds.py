@@ -50,6 +50,7 @@ from scipy.linalg import solve_discrete_are
 
 from benchmarks.simulation import simulate_truth
 from estimators.mekf import discrete_error_model
+from dynamics.validation import InvalidParameterError
 from sensors.star_tracker import steps_between_readings
 
 #: Standard normal draws for E|δθ| (fixed: the bound is a deterministic number).
@@ -114,8 +115,28 @@ def linear_model(scenario):
     return scenario.gyro_noise, scenario.gyro_bias_random_walk, R, prior, with_bias
 
 
+def check_bound_inputs(scenario) -> None:
+    """Refuse a scenario whose bound cannot be computed: the recursion inverts
+    the reading's covariance ``R`` (its information) and the prior ``P₀``, so
+    both must be positive definite — a noise-free tracker or a perfectly known
+    start has no finite information to add."""
+    _, _, R, prior, _ = linear_model(scenario)
+    if scenario.star_tracker_model == "rotation":
+        name, value = "star_tracker_sigma_arcsec", scenario.star_tracker_sigma_arcsec
+    else:
+        name, value = "star_tracker_noise", scenario.star_tracker_noise
+    if not np.all(np.linalg.eigvalsh(R) > 0):
+        raise InvalidParameterError(name, value, "must be > 0 on every axis for the bound "
+                                    "(benchmarks.bounds inverts the reading's covariance)")
+    if not np.all(np.linalg.eigvalsh(prior) > 0):
+        raise InvalidParameterError("initial covariance", np.diag(prior).tolist(),
+                                    "must be > 0 on every axis for the bound "
+                                    "(benchmarks.bounds inverts the prior)")
+
+
 def posterior_crb(scenario) -> AttitudeBound:
     """The posterior Cramér–Rao bound along the scenario's true trajectory."""
+    check_bound_inputs(scenario)
     noise, bias_rw, R, prior, with_bias = linear_model(scenario)
     truth = simulate_truth(scenario)
     m = steps_between_readings(scenario.time_between_measurements, scenario.dt)

@@ -16,6 +16,7 @@ from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import check_output_folder
 from benchmarks.scenario import Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
+from benchmarks.divergence import EXIT_DIVERGED, DivergenceReport, report_of
 from benchmarks.experiments.replay import DEFAULT_ESTIMATORS as REPLAY_ESTIMATORS
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
 from dynamics.validation import MAX_SEED, InvalidParameterError
@@ -126,6 +127,7 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("scenario (defaults: the workshop's, or --scenario FILE)")
     group.add_argument("--scenario", metavar="FILE", type=Path,
                        help="TOML file of scenario settings (see scenarios/default.toml)")
+    _add_import_option(group)
     group.add_argument("--gyro-noise", type=_number, metavar="POWER",
                        help="gyro noise power, rad^2/s (default 1e-5)")
     group.add_argument("--star-tracker-noise", type=_number, metavar="POWER",
@@ -140,6 +142,13 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
                        help="gyro and estimator step (default 0.01)")
 
 
+def _add_import_option(parser) -> None:
+    parser.add_argument("--allow-import", action="append", default=[], metavar="MODULE",
+                        help="let the scenario file's [estimators.\"MODULE:Class\"] sections "
+                        "import MODULE (its code runs); naming MODULE:Class in --estimators "
+                        "allows it too. Repeatable")
+
+
 def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
     if seed:
         parser.add_argument("--seed", type=_whole("seed", 0), default=0,
@@ -147,7 +156,15 @@ def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
     parser.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_divergence_option(parser)
     _add_scenario_options(parser)
+
+
+def _add_divergence_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--allow-divergence", action="store_true",
+                        help="exit 0 even if an estimator diverged in some run (its statistics "
+                        f"are NaN either way; without this flag the exit status is "
+                        f"{EXIT_DIVERGED})")
 
 
 def _estimator_option(parser, required=True):
@@ -272,9 +289,11 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--scenario", metavar="FILE", type=Path,
                         help="a TOML file of [estimators.NAME] sections overriding the "
                         "settings derived from the recording")
+    _add_import_option(replay)
     replay.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
     replay.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_divergence_option(replay)
 
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
@@ -285,6 +304,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def allowed_imports(args: argparse.Namespace) -> list[str]:
+    """The modules a scenario file may import: those of ``--allow-import``
+    and the ``module:Class`` estimators named on the command line."""
+    named = list(getattr(args, "estimators", None) or ()) + [getattr(args, "estimator", None)]
+    return list(args.allow_import) + [name for name in named if name and ":" in name]
+
+
 def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     """The scenario file (or defaults) with the command-line overrides applied
     (None for ``replay``, whose scenario comes from its recording)."""
@@ -293,16 +319,60 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
                          "pc_exponent itself; leave --pc-exponent out (from --pc-exponent)")
-    scenario = Scenario.from_toml(args.scenario) if args.scenario else Scenario()
-    for field_name, flag in SCENARIO_FLAGS.items():
-        value = getattr(args, field_name)
-        if value is None:
-            continue
-        try:
-            scenario = scenario.replace(**{field_name: value})
-        except InvalidParameterError as err:
-            raise UsageError(f"{err} (from {flag})") from None
+    scenario = (Scenario.from_toml(args.scenario, allow_imports=allowed_imports(args))
+                if args.scenario else Scenario())
+    # All overrides at once: --tstop 0.001 --dt 1e-4 is checked against the new dt.
+    given = {name: getattr(args, name) for name in SCENARIO_FLAGS
+             if getattr(args, name) is not None}
+    try:
+        scenario = scenario.replace(**given)
+    except InvalidParameterError as err:
+        # Name the flag that set the value, or else the flags that changed its context.
+        flags = [SCENARIO_FLAGS[err.name]] if err.name in given else \
+            [SCENARIO_FLAGS[name] for name in given]
+        raise UsageError(f"{err} (from {', '.join(flags)})") from None
     return scenario
+
+
+#: The settings only some estimators read: setting → those estimators (the
+#: rest read every setting). Users' own estimators may read any of them.
+READ_ONLY_BY = {"star_tracker_noise": ("dead-reckoning-resets", "ekf", "mekf", "usque"),
+                "time_between_measurements": ("dead-reckoning-resets", "ekf", "mekf", "usque"),
+                "pc_exponent": ("ekf",)}
+
+
+def ineffective_reason(field_name: str, scenario: Scenario, names) -> str | None:
+    """Why setting ``field_name`` cannot change the results of estimators
+    ``names`` on ``scenario`` (None if it can)."""
+    if field_name == "star_tracker_noise" and scenario.star_tracker_model == "rotation":
+        return ("has no effect with the rotation star tracker, whose noise is "
+                "[star_tracker] sigma_arcsec")
+    if not names and field_name not in ("tstop", "dt"):
+        return "has no effect on the truth alone (no estimator is run)"
+    readers = READ_ONLY_BY.get(field_name)
+    if readers is None or any(name in readers or name not in ESTIMATORS for name in names):
+        return None
+    return f"has no effect on {', '.join(names)}; it is read only by {', '.join(readers)}"
+
+
+def check_effects(args, scenario: Scenario | None) -> None:
+    """Refuse a flag (or a swept setting) that cannot change what the chosen
+    estimators compute: its rows or numbers would be identical, silently."""
+    if scenario is None or args.command in ("tune", "landscape", "workshop"):
+        return
+    names = getattr(args, "estimators", None)
+    if names is None:
+        names = (args.estimator,) if getattr(args, "estimator", None) else ()
+    flags = {name: flag for name, flag in SCENARIO_FLAGS.items()
+             if getattr(args, name, None) is not None}
+    if args.command == "sweep":
+        flags[SWEEP_PARAMETERS[args.param].field] = "--param " + args.param
+    for field_name, flag in flags.items():
+        reason = ineffective_reason(field_name, scenario, names)
+        if reason:
+            value = args.param if flag.startswith("--param") else getattr(args, field_name)
+            raise UsageError(f"{flag.split()[0].lstrip('-').replace('-', '_')} = {value!r}: "
+                             f"{reason} (from {flag})")
 
 
 def summary_line(name: str, stats: dict) -> str:
@@ -324,12 +394,14 @@ def format_table(stats: dict, first_column: str = "estimator", columns=STAT_COLU
 def command_run(args, scenario):
     stats = experiments.run_one(scenario, args.estimator, args.seed, args.out)
     print(summary_line(args.estimator, stats))
+    return report_of(scenario.dt, {args.estimator: stats["diverged_step"]})
 
 
 def command_compare(args, scenario):
     _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
+    return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
 
 
 def command_sweep(args, scenario):
@@ -341,6 +413,7 @@ def command_sweep(args, scenario):
                              args.out, quiet=args.quiet)
     print(format_table({f"{row['value']:g}": row for row in rows}, first_column=args.param))
     print(f"wrote {args.out / 'sweep.png'} and {args.out / 'sweep.csv'}")
+    return report_of(scenario.dt, {args.estimator: [row["diverged_step"] for row in rows]})
 
 
 def command_tune(args, scenario):
@@ -356,10 +429,15 @@ def command_tune(args, scenario):
         spread = result.single_seed_optima
         print(f"single-seed optima: 5% {spread['p5']:.3f}, 50% {spread['p50']:.3f}, "
               f"95% {spread['p95']:.3f}")
+    if result.diverged_evaluations:
+        print(f"{result.diverged_evaluations} of {result.evaluations} evaluations diverged in "
+              "some run and counted as an infinite loss")
     experiments.write_json(args.out / "tune.json", result.as_json())
-    experiments.compare(scenario.replace(pc_exponent=result.pc_exponent), result.seeds[0],
-                        args.out, figure_name="tune.png", summary_name=None)
+    _, stats = experiments.compare(scenario.replace(pc_exponent=result.pc_exponent),
+                                   result.seeds[0], args.out, figure_name="tune.png",
+                                   summary_name=None)
     print(f"wrote {args.out / 'tune.json'} and {args.out / 'tune.png'}")
+    return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
 
 
 def command_landscape(args, scenario):
@@ -371,6 +449,7 @@ def command_landscape(args, scenario):
     print(f"lowest mean error std {best['std_deg']:.6f} deg at pc_exponent = "
           f"{landscape.best_pc_exponent:g} ({len(grid)} values x {len(args.seeds)} runs)")
     print("wrote " + ", ".join(str(path) for path in files.values()))
+    return report_of(scenario.dt, {"ekf": landscape.diverged_step})
 
 
 def command_animate(args, scenario):
@@ -408,14 +487,20 @@ def command_montecarlo(args, scenario):
     from benchmarks.simulation import resolve_estimator
     labels = {name: resolve_estimator(name).label for name in args.estimators}
     write_figure(args.out / "montecarlo.png", distribution_figure(frame, labels))
+    # Diverged runs have NaN statistics: pandas' means and quantiles leave them out.
     summary = frame.groupby("estimator", sort=False)[list(STAT_COLUMNS)].mean()
-    print(f"mean over {args.runs} runs (seeds {args.seed}-{args.seed + args.runs - 1}):")
+    report = report_of(scenario.dt, {name: part["diverged_step"].to_numpy()
+                                     for name, part in frame.groupby("estimator", sort=False)})
+    left_out = f", leaving out {report.total} diverged" if report.total else ""
+    print(f"mean over {args.runs} runs (seeds {args.seed}-{args.seed + args.runs - 1}"
+          f"{left_out}):")
     print(format_table(summary.to_dict(orient="index")))
     spread = frame.groupby("estimator", sort=False)["std_deg"].quantile([0.05, 0.5, 0.95])
     for name in args.estimators:
         p5, p50, p95 = spread[name].tolist()
         print(f"{name}: error std over runs 5% {p5:.4f}, 50% {p50:.4f}, 95% {p95:.4f} deg")
     print(f"wrote {args.out / 'montecarlo.csv'} and {args.out / 'montecarlo.png'}")
+    return report
 
 
 def command_workshop(args, scenario):
@@ -449,6 +534,7 @@ def command_consistency(args, scenario):
     write_text(args.out / "consistency.csv", frame.to_csv(index=False))
     write_figure(args.out / "consistency.png", consistency.figure(result))
     print(f"wrote {args.out / 'consistency.csv'} and {args.out / 'consistency.png'}")
+    return report_of(scenario.dt, result.diverged_step)
 
 
 def command_replay(args, _scenario):
@@ -456,7 +542,7 @@ def command_replay(args, _scenario):
     from benchmarks.resources import check_memory, per_run_bytes
     # The recording, the settings and the memory are checked before any write.
     data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
-                       args.seed, settings=args.scenario)
+                       args.seed, settings=args.scenario, allow_imports=allowed_imports(args))
     check_memory(data.scenario, per_run_bytes(data.recording.n_samples, len(args.estimators),
                                               traced=True))
     result = run_replay(data, args.estimators, args.seed, quiet=args.quiet)
@@ -470,6 +556,7 @@ def command_replay(args, _scenario):
     print(f"wrote {', '.join(str(args.out / name) for name in written)}")
     if result.attribution:
         print(result.attribution)
+    return report_of(result.run.scenario.dt, result.run.diverged_step)
 
 
 COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
@@ -489,6 +576,9 @@ def check_resources(args, scenario) -> None:
         return
     n_steps = scenario.n_steps
     streaming = engine_bytes(n_steps)
+    if args.command == "montecarlo":
+        check_memory(scenario, engine_bytes(n_steps, args.chunk_size), chunk_runs=args.chunk_size)
+        return
     if args.command in ENGINE_COMMANDS:
         check_memory(scenario, streaming)
         return
@@ -521,9 +611,10 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         scenario = scenario_from_args(args)
+        check_effects(args, scenario)
         check_output_folder(args.out, OUTPUT_FILES[args.command])
         check_resources(args, scenario)
-        COMMANDS[args.command](args, scenario)
+        report = COMMANDS[args.command](args, scenario)
     except (UsageError, InvalidParameterError) as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -537,7 +628,20 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    return 0
+    return _divergence_status(report, args.allow_divergence)
+
+
+def _divergence_status(report: DivergenceReport | None, allowed: bool) -> int:
+    """0, or :data:`EXIT_DIVERGED` after saying which estimators diverged."""
+    if report is None or not report.total:
+        return 0
+    for line in report.lines():
+        print(f"{PROG}: warning: {line}", file=sys.stderr)
+    if allowed:
+        return 0
+    print(f"{PROG}: exit status {EXIT_DIVERGED} because runs diverged (the results are "
+          "written; pass --allow-divergence to exit 0)", file=sys.stderr)
+    return EXIT_DIVERGED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -24,8 +24,10 @@ TRACED_ESTIMATOR_BYTES_PER_STEP = 240
 #: and their copy); the engine does so only up to TRUTH_CACHE_STEPS steps.
 TRUTH_BYTES_PER_STEP = 150
 #: The engine's buffers for a chunk of 1024 runs: the noise of a block
-#: (61 MB), the median histograms (15 MB per estimator) and the state.
+#: (61 MB), the median histograms (15 MB per estimator) and the state; they
+#: grow with the chunk's runs.
 ENGINE_CHUNK_BYTES = 160 * 2**20
+ENGINE_CHUNK_RUNS = 1024
 #: Use at most this share of the machine's memory.
 MEMORY_SHARE = 0.8
 
@@ -40,14 +42,16 @@ def per_run_bytes(n_steps: int, estimators: int, traced: bool = False) -> int:
     return n_steps * (PER_RUN_BYTES_PER_STEP + estimators * each)
 
 
-def engine_bytes(n_steps: int) -> int:
-    """What the engine holds for a run of ``n_steps``: flat above the truth cache."""
+def engine_bytes(n_steps: int, chunk_runs: int = ENGINE_CHUNK_RUNS) -> int:
+    """What the engine holds for chunks of ``chunk_runs`` runs of ``n_steps``:
+    flat in the run's length above the truth cache."""
     from benchmarks.simulation import TRUTH_CACHE_STEPS
-    return min(n_steps, TRUTH_CACHE_STEPS) * TRUTH_BYTES_PER_STEP + ENGINE_CHUNK_BYTES
+    return (min(n_steps, TRUTH_CACHE_STEPS) * TRUTH_BYTES_PER_STEP
+            + ENGINE_CHUNK_BYTES * max(chunk_runs, ENGINE_CHUNK_RUNS) // ENGINE_CHUNK_RUNS)
 
 
 def check_memory(scenario, needed_bytes: int, *, streaming_bytes: int | None = None,
-                 limit_bytes: int | None = None) -> None:
+                 limit_bytes: int | None = None, chunk_runs: int | None = None) -> None:
     """Refuse a run that needs more than the machine can give.
 
     ``streaming_bytes`` is what the engine would need for the same scenario;
@@ -56,6 +60,12 @@ def check_memory(scenario, needed_bytes: int, *, streaming_bytes: int | None = N
     limit = int(MEMORY_SHARE * machine_memory_bytes()) if limit_bytes is None else limit_bytes
     if needed_bytes <= limit:
         return
+    if chunk_runs is not None and chunk_runs > ENGINE_CHUNK_RUNS:
+        most = ENGINE_CHUNK_RUNS * (limit // ENGINE_CHUNK_BYTES)
+        raise InvalidParameterError(
+            "chunk_size", chunk_runs, f"a chunk of {chunk_runs:,} runs needs about "
+            f"{needed_bytes / 2**30:,.1f} GiB and this machine allows {limit / 2**30:.1f} GiB:"
+            f" at most about {most:,} runs per chunk here")
     per_step = needed_bytes / scenario.n_steps
     longest = limit / per_step * scenario.dt
     hint = ""

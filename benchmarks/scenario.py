@@ -19,6 +19,9 @@ both::
     [star_tracker]   # model ("workshop" or "rotation"), interval_s, noise_power,
                      # sigma_arcsec, dropout_probability, outages_s, sign, to_body_quat
     [estimators.mekf]   # any constructor keyword of that estimator
+    [estimators."package.module:ClassName"]   # your own estimator's keywords;
+                     # its module is imported only with the caller's consent
+                     # (``allow_imports``): importing runs its code
 
 Missing keys take the defaults; an unknown key is an error naming its
 section. Then override field by field::
@@ -37,10 +40,13 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import math
+
 import numpy as np
 
 from dynamics.validation import (
     InvalidParameterError,
+    axis_standard_deviations,
     covariance_matrix,
     finite_number,
     finite_vector,
@@ -48,6 +54,7 @@ from dynamics.validation import (
     nonzero_quaternion,
     one_of,
     process_exponent,
+    standard_deviation,
 )
 from estimators import ESTIMATORS, resolve_estimator
 from sensors.gyro import Gyro
@@ -68,6 +75,9 @@ STAR_TRACKER_MODELS = ("workshop", "rotation")
 #: no attitude sensor suite is built for them, and the truth's integrator
 #: would need billions of steps.
 MAX_RATE_RADPS = 100.0
+#: The largest gyro noise σ per sample, rad/s: readings then stay far inside
+#: the ±1000 rad/s an estimator accepts (estimators.base.MAX_RATE_RADPS).
+MAX_GYRO_NOISE_RADPS = 10.0
 #: Longest time grid, in steps. The engine's memory no longer grows with the
 #: run, but its time does: at about ten million run-steps a second, one run
 #: of this many steps is a quarter of an hour of the whole machine.
@@ -182,6 +192,12 @@ class Scenario:
                                         f"each component must be within ±{MAX_RATE_RADPS:g} rad/s "
                                         "(a spacecraft, not a centrifuge)")
         set_("gyro_noise", finite_number("gyro_noise", self.gyro_noise, minimum=0.0))
+        if self.gyro_noise / self.dt > MAX_GYRO_NOISE_RADPS ** 2:
+            raise InvalidParameterError(
+                "gyro_noise", self.gyro_noise, f"makes the reading noise √(p/dt) = "
+                f"{math.sqrt(self.gyro_noise / self.dt):.3g} rad/s per sample; at most "
+                f"{MAX_GYRO_NOISE_RADPS:g} rad/s (gyro_noise <= "
+                f"{MAX_GYRO_NOISE_RADPS ** 2 * self.dt:g} with dt = {self.dt:g})")
         set_("star_tracker_noise", finite_number("star_tracker_noise", self.star_tracker_noise,
                                                  minimum=0.0))
         set_("time_between_measurements", finite_number(
@@ -196,6 +212,7 @@ class Scenario:
         one_of("star_tracker_model", self.star_tracker_model, STAR_TRACKER_MODELS)
         set_("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
                                                       self.star_tracker_outages_s))
+        self._check_standard_deviations()
         # The sensor classes validate (and normalise) their own settings.
         gyro, star_tracker = self.build_gyro(), self.build_star_tracker()
         set_("gyro_bias_random_walk", gyro.bias_random_walk)
@@ -210,6 +227,14 @@ class Scenario:
         set_("star_tracker_dropout_probability", rotation.dropout_probability)
         set_("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
         set_("estimator_options", _checked_options(self, self.estimator_options))
+
+    def _check_standard_deviations(self) -> None:
+        """The σ the sensors square into variances: refused here while the
+        square would overflow (the sensors check the rest)."""
+        standard_deviation("gyro_bias_random_walk", self.gyro_bias_random_walk)
+        if np.ndim(self.star_tracker_sigma_arcsec) == 1:
+            axis_standard_deviations("star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec,
+                                     len(self.star_tracker_sigma_arcsec))
 
     def build_gyro(self) -> Gyro:
         """The gyro this scenario describes."""
@@ -265,16 +290,27 @@ class Scenario:
         return {name: _plain(getattr(self, name)) for name in field_names()}
 
     @classmethod
-    def from_toml(cls, path) -> "Scenario":
+    def from_toml(cls, path, *, allow_imports=()) -> "Scenario":
         """Load a scenario file: flat field names and/or sections (see the
-        module docstring); missing keys take the defaults."""
-        return cls().replace(**flatten_sections(read_toml(path)))
+        module docstring); missing keys take the defaults.
 
-    def with_estimator_settings(self, path) -> "Scenario":
+        A section ``[estimators."package.module:ClassName"]`` imports that
+        module, which runs its code: it is refused, before anything is
+        imported, unless ``allow_imports`` (module names, or
+        ``package.module:ClassName`` specs, which allow their module) names
+        the module. Registry names (``[estimators.mekf]``) need no consent.
+        """
+        data = read_toml(path)
+        check_import_consent(data, allow_imports)
+        return cls().replace(**flatten_sections(data))
+
+    def with_estimator_settings(self, path, *, allow_imports=()) -> "Scenario":
         """This scenario with the ``[estimators.NAME]`` sections of the file
         ``path`` laid over it (for scenarios made otherwise, e.g. from a
-        recording); any other key in the file is refused."""
+        recording); any other key in the file is refused. ``allow_imports``
+        as for :meth:`from_toml`."""
         data = read_toml(path)
+        check_import_consent(data, allow_imports)
         for key, value in data.items():
             if key != "estimators":
                 raise InvalidParameterError(key, _plain(value), "only [estimators.NAME] "
@@ -302,6 +338,41 @@ def read_toml(path) -> dict:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise InvalidParameterError("scenario", str(path),
                                     f"must be valid TOML ({err})") from None
+
+
+def allowed_modules(allow_imports) -> frozenset[str]:
+    """The modules ``allow_imports`` consents to import: module names, or
+    ``package.module:ClassName`` specs (which allow their module); one string
+    is one name."""
+    rule = "must be module names or package.module:ClassName specs"
+    items = [allow_imports] if isinstance(allow_imports, str) else allow_imports
+    try:
+        items = list(items)
+    except TypeError:
+        raise InvalidParameterError("allow_imports", allow_imports, rule) from None
+    for item in items:
+        if not isinstance(item, str) or not item.partition(":")[0]:
+            raise InvalidParameterError("allow_imports", item, rule)
+    return frozenset(item.partition(":")[0] for item in items)
+
+
+def check_import_consent(data: dict, allow_imports) -> None:
+    """Refuse a TOML document's ``[estimators."package.module:ClassName"]``
+    section whose module ``allow_imports`` does not allow, importing nothing:
+    reading a data file must not run code the user did not agree to."""
+    sections = data.get("estimators")
+    if not isinstance(sections, dict):
+        return                   # flatten_sections names what is wrong with it
+    allowed = allowed_modules(allow_imports)
+    for name, settings in sections.items():
+        module, colon, _ = name.partition(":")
+        if name in ESTIMATORS or not colon or module in allowed:
+            continue
+        raise InvalidParameterError(
+            f"estimators.{_key(name)}", _plain(settings),
+            f"reading the file would import {module} and run its code; allow it with "
+            f"--allow-import {module} or by naming {name} in --estimators (from Python: "
+            f"allow_imports=[{module!r}])")
 
 
 def field_names() -> tuple[str, ...]:
@@ -345,11 +416,11 @@ SECTIONS = {
         "noise_power": SectionKey("gyro_noise"),
         "arw_deg_per_rthr": SectionKey(
             "gyro_noise", lambda v: arw_deg_per_rthr_to_rad_per_rts(
-                finite_number("gyro.arw_deg_per_rthr", v, minimum=0.0)) ** 2),
+                standard_deviation("gyro.arw_deg_per_rthr", v)) ** 2),
         "bias_random_walk": SectionKey("gyro_bias_random_walk"),
         "bias_rw_deg_per_hr_rthr": SectionKey(
             "gyro_bias_random_walk", lambda v: rrw_deg_per_hr_rthr_to_rad_per_s1p5(
-                finite_number("gyro.bias_rw_deg_per_hr_rthr", v, minimum=0.0))),
+                standard_deviation("gyro.bias_rw_deg_per_hr_rthr", v))),
         "initial_bias_radps": SectionKey("gyro_initial_bias_radps"),
         "initial_bias_deg_per_hr": SectionKey(
             "gyro_initial_bias_radps", lambda v: deg_per_hr_to_radps(

@@ -64,6 +64,10 @@ class RunResult:
     error_deg: dict
     labels: dict
     traces: dict | None = None
+    #: ``diverged_step[name]``: the step where the estimator's estimate or
+    #: covariance stopped being finite (its estimates and errors are NaN from
+    #: there on), or -1 where it never did.
+    diverged_step: dict | None = None
 
     @property
     def time_s(self) -> np.ndarray:
@@ -167,7 +171,7 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
                  streaming_bytes=engine_bytes(scenario.n_steps))
     truth = simulate_truth(scenario)
     sensors = simulate_sensors(scenario, truth, seed)
-    estimates, errors, labels, kept = {}, {}, {}, {}
+    estimates, errors, labels, kept, diverged = {}, {}, {}, {}, {}
     for item in estimators:
         estimator = build_estimator(item, scenario) if isinstance(item, str) else item
         key = item if isinstance(item, str) else estimator.name
@@ -180,7 +184,9 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         estimates[key] = q_est
         errors[key] = attitude_error_deg(truth.q_true, q_est)
         labels[key] = estimator.label
+        step = getattr(estimator, "diverged_step", None)
+        diverged[key] = -1 if step is None else int(step)
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels,
-                     traces=kept if traces else None)
+                     traces=kept if traces else None, diverged_step=diverged)
 

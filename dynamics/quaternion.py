@@ -98,13 +98,15 @@ def attitude_error_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
 
     .. math:: e = 2 \arccos\bigl(\min(1, |q_\text{true} \cdot \hat q|)\bigr)
 
-    Sign-invariant: ``q`` and ``-q`` give zero error. Both inputs are taken as
+    Sign-invariant: ``q`` and ``-q`` give zero error; NaN where an estimate
+    is not finite. Both inputs are taken as
     unit quaternions (the workshop metric; see SPEC "What is measured").
     Being an arccos near 1, it cannot resolve angles below about 1e-7 rad
     (6e-6 degrees): identical attitudes can show an error of that size.
     """
     dot = np.abs(np.sum(np.asarray(q_true, dtype=float) * np.asarray(q_est, dtype=float), axis=-1))
-    return 2.0 * np.arccos(np.minimum(1.0, dot))
+    # A non-finite estimate has no error angle: NaN, never the 0 of min(1, inf).
+    return np.where(np.isfinite(dot), 2.0 * np.arccos(np.minimum(1.0, dot)), np.nan)
 
 
 def skew(v: np.ndarray) -> np.ndarray:

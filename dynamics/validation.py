@@ -7,8 +7,13 @@ broke, e.g. ``gyro_noise = -1.0: must be a finite number >= 0``.
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
+
+#: A standard deviation at or above this has a square (its variance) that
+#: overflows a double: the square root of the largest double, 1.34e154.
+MAX_STANDARD_DEVIATION = math.sqrt(sys.float_info.max)
 
 
 class InvalidParameterError(ValueError):
@@ -44,6 +49,44 @@ def finite_number(name: str, value, *, minimum: float | None = None,
     return number
 
 
+def boolean(name: str, value) -> bool:
+    """``value`` if it is a real boolean (Python's or numpy's); text such as
+    ``"false"`` and numbers such as ``0`` are refused, not coerced."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidParameterError(name, value, "must be true or false (a boolean, not text "
+                                    "or a number)")
+    return bool(value)
+
+
+def standard_deviation(name: str, value, *, strictly_positive: bool = False) -> float:
+    """A standard deviation: a finite number >= 0 (or > 0) whose square is finite."""
+    number = finite_number(name, value, minimum=0.0, strictly_positive=strictly_positive)
+    _check_square(name, value, number)
+    return number
+
+
+def axis_standard_deviations(name: str, value, length: int = 3, *,
+                             strictly_positive: bool = False) -> np.ndarray:
+    """One standard deviation per axis (a number means the same on all), each
+    >= 0 (or > 0 on every axis) with a finite square."""
+    if np.ndim(value) == 0:
+        return np.full(length, standard_deviation(name, value,
+                                                  strictly_positive=strictly_positive))
+    array = finite_vector(name, value, length)
+    if strictly_positive and np.any(array <= 0):
+        raise InvalidParameterError(name, value, "must be > 0 on every axis")
+    if np.any(array < 0):
+        raise InvalidParameterError(name, value, "must be >= 0")
+    _check_square(name, value, float(array.max()))
+    return array
+
+
+def _check_square(name: str, value, largest: float) -> None:
+    if not math.isfinite(largest * largest):
+        raise InvalidParameterError(name, value, f"must be below {MAX_STANDARD_DEVIATION:.3g} "
+                                    "so that its square (a variance) is finite")
+
+
 def one_of(name: str, value, choices) -> str:
     """``value`` if it is one of ``choices``, else an error listing them."""
     if value not in choices:
@@ -51,12 +94,37 @@ def one_of(name: str, value, choices) -> str:
     return value
 
 
+def _not_a_number(value):
+    """The rule a boolean, text or complex element of ``value`` (nested lists, tuples,
+    arrays) breaks, or None: numpy would turn ``True`` into 1 and ``"2"`` into 2."""
+    array = isinstance(value, np.ndarray)
+    if isinstance(value, (bool, np.bool_)) or (array and value.dtype == bool):
+        return "must be numbers, not true/false"
+    if isinstance(value, (str, bytes)) or (array and value.dtype.kind in "SU"):
+        return "must be numbers, not text"
+    if isinstance(value, complex) or (array and value.dtype.kind == "c"):
+        return "must be real numbers, not complex"
+    items = value.ravel().tolist() if array and value.dtype == object else value
+    if isinstance(items, (list, tuple)):
+        return next(filter(None, map(_not_a_number, items)), None)
+    return None
+
+
+def float_array(name: str, value, rule: str) -> np.ndarray:
+    """``value`` as a float array of any shape; ``rule`` says what it must be
+    when it is not numbers. Booleans and text are refused, never converted."""
+    wrong = _not_a_number(value)
+    if wrong:
+        raise InvalidParameterError(name, value, wrong)
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(name, value, rule) from None
+
+
 def finite_vector(name: str, value, length: int) -> np.ndarray:
     """Return ``value`` as a float array of shape ``(length,)``."""
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, f"must be a list of {length} numbers") from None
+    array = float_array(name, value, f"must be a list of {length} numbers")
     if array.shape != (length,):
         raise InvalidParameterError(name, value, f"must be a list of {length} numbers")
     if not np.all(np.isfinite(array)):
@@ -83,10 +151,7 @@ def inertia_tensor(name: str, value) -> np.ndarray:
     satisfy the triangle inequality ``I_a <= I_b + I_c`` that every real mass
     distribution obeys.
     """
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, "must be a 3x3 matrix or 3 principal moments") from None
+    array = float_array(name, value, "must be a 3x3 matrix or 3 principal moments")
     if array.shape == (3,):
         array = np.diag(array)
     if array.shape != (3, 3):
@@ -147,10 +212,7 @@ def covariance_matrix(name: str, value, size: int = 4) -> np.ndarray:
     """A ``size`` x ``size`` symmetric positive definite matrix from a scalar
     (times the identity), a diagonal of ``size`` values, or the matrix itself."""
     rule = f"must be a number, {size} numbers or a {size}x{size} matrix"
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(name, value, rule) from None
+    array = float_array(name, value, rule)
     if array.ndim == 0:
         array = array * np.eye(size)
     elif array.shape == (size,):

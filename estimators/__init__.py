@@ -28,11 +28,17 @@ from estimators.usque import USQUE
 ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
                                         MultiplicativeEKF, USQUE)}
 
+#: What a concrete estimator must override: the base class's raise NotImplementedError.
+ABSTRACT_METHODS = ("_step", "reset")
+
+
 def resolve_estimator(spec: str) -> type:
     """The estimator class ``spec`` names: a registry name (``"mekf"``) or a
     user's own class as ``"package.module:ClassName"``, which must subclass
-    :class:`estimators.AttitudeEstimator` (its module importable: installed,
-    or on ``PYTHONPATH``)."""
+    :class:`estimators.AttitudeEstimator` and implement its
+    :data:`ABSTRACT_METHODS` (its module importable: installed, or on
+    ``PYTHONPATH``). Importing the module runs its code: callers reading a
+    data file ask the user's consent first (:meth:`benchmarks.Scenario.from_toml`)."""
     if spec in ESTIMATORS:
         return ESTIMATORS[spec]
     rule = (f"must be one of {', '.join(ESTIMATORS)}, or package.module:ClassName for your "
@@ -40,17 +46,33 @@ def resolve_estimator(spec: str) -> type:
     module_name, colon, class_name = str(spec).partition(":")
     if not colon or not module_name or not class_name.isidentifier():
         raise InvalidParameterError("estimator", spec, rule)
+    return _checked_class(spec, _imported(spec, module_name), class_name)
+
+
+def _imported(spec: str, module_name: str):
     try:
-        module = importlib.import_module(module_name)
+        return importlib.import_module(module_name)
     except Exception as err:      # the user's module: any import failure is reported
         raise InvalidParameterError("estimator", spec, f"cannot import {module_name} "
                                     f"({type(err).__name__}: {err})") from None
-    cls = getattr(module, class_name, None)
-    if not (isinstance(cls, type) and issubclass(cls, AttitudeEstimator)):
-        raise InvalidParameterError("estimator", spec, f"{class_name} in {module_name} must be "
-                                    "a subclass of estimators.AttitudeEstimator")
-    return cls
 
+
+def _checked_class(spec: str, module, class_name: str) -> type:
+    """``module``'s class ``class_name``, if it is a concrete estimator."""
+    where = module.__name__
+    if not hasattr(module, class_name):
+        raise InvalidParameterError("estimator", spec, f"module {where} has no class {class_name}")
+    cls = getattr(module, class_name)
+    if not (isinstance(cls, type) and issubclass(cls, AttitudeEstimator)):
+        raise InvalidParameterError("estimator", spec, f"{class_name} in {where} is not an "
+                                    "estimator: it must be a subclass of "
+                                    "estimators.AttitudeEstimator")
+    missing = [method for method in ABSTRACT_METHODS
+               if getattr(cls, method) is getattr(AttitudeEstimator, method)]
+    if missing:
+        raise InvalidParameterError("estimator", spec, f"{class_name} is abstract: it does "
+                                    f"not implement {' and '.join(missing)}")
+    return cls
 
 __all__ = ["ESTIMATORS", "AttitudeEstimator", "DeadReckoning", "DeadReckoningWithResets",
            "EstimateTrace", "MultiplicativeEKF", "QuaternionEKF", "USQUE", "resolve_estimator"]

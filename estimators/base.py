@@ -33,6 +33,7 @@ import numpy as np
 
 from dynamics.validation import (
     InvalidParameterError,
+    axis_standard_deviations,
     covariance_matrix,
     finite_number,
     finite_vector,
@@ -45,6 +46,10 @@ from dynamics.validation import (
 ON_INVALID = ("raise", "skip")
 #: Which estimate a filter's step returns: before or after that step's reading.
 OUTPUTS = ("prior", "posterior")
+#: The largest body rate a measurement may report, per axis: ten times what a
+#: scenario's truth may turn at (100 rad/s), beyond any spacecraft or hand-held
+#: IMU; a larger finite rate (1e300 rad/s) turns dead reckoning into NaN.
+MAX_RATE_RADPS = 1000.0
 
 
 class InvalidMeasurementError(InvalidParameterError):
@@ -53,7 +58,7 @@ class InvalidMeasurementError(InvalidParameterError):
 
 
 class AttitudeEstimator:
-    """Base class: subclasses implement :meth:`step` and :meth:`reset`.
+    """Base class: subclasses implement :meth:`_step` and :meth:`reset`.
 
     Attributes
     ----------
@@ -86,6 +91,9 @@ class AttitudeEstimator:
         #: Measurements skipped under ``on_invalid="skip"``: rates and readings.
         self.skipped = {"rate": 0, "reading": 0}
         self._last_rate = np.zeros(3)
+        #: The step where the estimate or its covariance stopped being finite
+        #: (see :meth:`step`), or None.
+        self.diverged_step = None
 
     @classmethod
     def settings_from_scenario(cls, scenario) -> dict:
@@ -154,10 +162,13 @@ class AttitudeEstimator:
 
         Measurements are checked here, where they enter: a rate that is not 3
         finite numbers, or a reading that is not 4 finite numbers of non-zero
-        norm, raises :class:`InvalidMeasurementError` naming the step and the
-        value, or, with ``on_invalid="skip"``, is treated as missing (the
-        last good rate is held; the reading is ignored) and counted in
-        :attr:`skipped`. Subclasses implement :meth:`_step`.
+        norm, or a rate beyond ±:data:`MAX_RATE_RADPS`, raises
+        :class:`InvalidMeasurementError` naming the step and the value, or,
+        with ``on_invalid="skip"``, is treated as missing (the last good rate
+        is held; the reading is ignored) and counted in :attr:`skipped`.
+        A step whose estimate or state is not finite (see
+        :meth:`state_is_finite`) marks the estimator diverged: that step's
+        estimate and every later one is NaN. Subclasses implement :meth:`_step`.
 
         Parameters
         ----------
@@ -167,21 +178,59 @@ class AttitudeEstimator:
             The star tracker's reading if one was taken at step ``k``
             (``available[k]``), else None.
         """
-        omega = np.asarray(omega_meas_radps, dtype=float)
-        if omega.shape != (3,) or not math.isfinite(omega[0] + omega[1] + omega[2]):
-            omega = self._invalid("rate", "omega_meas_radps", omega_meas_radps,
-                                  "must be 3 finite numbers (rad/s)", self._last_rate)
-        else:
-            self._last_rate = omega
+        omega = self._checked_rate(omega_meas_radps)
         if star_tracker_quat is not None:
-            reading = np.asarray(star_tracker_quat, dtype=float)
-            norm2 = reading @ reading if reading.shape == (4,) else math.nan
-            if not (math.isfinite(norm2) and norm2 > 1e-24):
-                star_tracker_quat = self._invalid(
-                    "reading", "star_tracker_quat", star_tracker_quat,
-                    "must be 4 finite numbers of non-zero norm", None)
+            star_tracker_quat = self._checked_reading(star_tracker_quat)
         self.step_index += 1
-        return self._step(omega, star_tracker_quat)
+        if self.diverged_step is not None:
+            return np.full(4, np.nan)
+        # Overflow on the way to divergence is what the test below catches,
+        # not something to warn about at every step.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            try:
+                estimate = self._step(omega, star_tracker_quat)
+            except np.linalg.LinAlgError:      # a covariance no longer positive definite
+                estimate = None
+            except ValueError:                 # scipy refusing a non-finite matrix
+                if self.state_is_finite():
+                    raise
+                estimate = None
+            finite = estimate is not None and finite_state(estimate) and self.state_is_finite()
+        if not finite:
+            self.diverged_step = self.step_index - 1
+            return np.full(4, np.nan)
+        return estimate
+
+    def _checked_rate(self, omega_meas_radps) -> np.ndarray:
+        """The step's rate, or the last good one under ``on_invalid="skip"``."""
+        omega = _real_array("omega_meas_radps", omega_meas_radps, strict=False)
+        if omega.shape != (3,) or not math.isfinite(omega[0] + omega[1] + omega[2]):
+            return self._invalid("rate", "omega_meas_radps", omega_meas_radps,
+                                 "must be 3 finite numbers (rad/s)", self._last_rate)
+        if max(abs(omega[0]), abs(omega[1]), abs(omega[2])) > MAX_RATE_RADPS:
+            return self._invalid("rate", "omega_meas_radps", omega_meas_radps,
+                                 f"each component must be within ±{MAX_RATE_RADPS:g} rad/s "
+                                 "(beyond any spacecraft or hand-held IMU)", self._last_rate)
+        self._last_rate = omega
+        return omega
+
+    def _checked_reading(self, star_tracker_quat):
+        """The step's reading, or None under ``on_invalid="skip"``."""
+        reading = _real_array("star_tracker_quat", star_tracker_quat, strict=False)
+        norm2 = reading @ reading if reading.shape == (4,) else math.nan
+        if not (math.isfinite(norm2) and norm2 > 1e-24):
+            return self._invalid("reading", "star_tracker_quat", star_tracker_quat,
+                                 "must be 4 finite numbers of non-zero norm", None)
+        return star_tracker_quat
+
+    def state_is_finite(self) -> bool:
+        """Whether the state the next step starts from is finite (checked
+        after every step; a filter also checks its covariance, see
+        :func:`finite_state`). Once it is not, the estimator has *diverged*:
+        :attr:`diverged_step` records the step and every estimate from that
+        step on is NaN, so a diverged run never scores as a number. The
+        engine's kernels make the same test at the same step."""
+        return True
 
     def _invalid(self, kind, name, value, rule, replacement):
         if self.on_invalid == "raise":
@@ -204,25 +253,41 @@ class AttitudeEstimator:
         star_tracker_quat : (N, 4) array, the held star tracker output
         available : (N,) bool array, True where a new reading was taken
         """
-        self.reset()
-        self._restart_count()
-        omega = np.asarray(omega_meas_radps, dtype=float)
-        star = np.asarray(star_tracker_quat, dtype=float)
-        available = np.asarray(available, dtype=bool)
+        omega, star, available = self._start_record(omega_meas_radps, star_tracker_quat,
+                                                    available)
         estimates = np.empty((len(omega), 4))
         for k in range(len(omega)):
             estimates[k] = self.step(omega[k], star[k] if available[k] else None)
         return estimates
 
+    def _start_record(self, omega_meas_radps, star_tracker_quat, available):
+        """Reset, and check a whole record's shapes: ``(N, 3)`` rates, ``(N, 4)``
+        readings and ``(N,)`` booleans, one row per step (values are checked
+        step by step, in :meth:`step`)."""
+        self.reset()
+        self._restart_count()
+        omega = _real_array("omega_meas_radps", omega_meas_radps)
+        star = _real_array("star_tracker_quat", star_tracker_quat)
+        flags = np.asarray(available)
+        n = len(omega) if omega.ndim == 2 else -1
+        for name, array, shape in (("omega_meas_radps", omega, (n, 3)),
+                                   ("star_tracker_quat", star, (n, 4)),
+                                   ("available", flags, (n,))):
+            if n < 0 or array.shape != shape:
+                rule = (f"must have shape {shape}: one row per step, as the rates" if n >= 0
+                        else "must have shape (N, 3): one row per step")
+                raise InvalidMeasurementError(f"{name} of shape", array.shape, rule)
+        if flags.dtype != bool:
+            raise InvalidMeasurementError("available", flags, "must be booleans (True where "
+                                          "a reading was taken)")
+        return omega, star, flags
+
     def track(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
               available: np.ndarray) -> "EstimateTrace":
         """Like :meth:`run`, also collecting the covariance and bias estimate
         of every step (None where the estimator keeps none)."""
-        self.reset()
-        self._restart_count()
-        omega = np.asarray(omega_meas_radps, dtype=float)
-        star = np.asarray(star_tracker_quat, dtype=float)
-        available = np.asarray(available, dtype=bool)
+        omega, star, available = self._start_record(omega_meas_radps, star_tracker_quat,
+                                                    available)
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
@@ -240,7 +305,9 @@ class AttitudeEstimator:
                     continue
                 if columns[key] is None:
                     columns[key] = np.empty((n,) + np.shape(value))
-                columns[key][k] = value
+                columns[key][k] = value if self.diverged_step is None else np.nan
+            if nis is not None and self.diverged_step is not None:
+                nis[k] = np.nan
         return EstimateTrace(quat=quat, **columns, nis=nis,
                              nis_dof=None if nis is None else self.innovation_dof)
 
@@ -248,14 +315,35 @@ class AttitudeEstimator:
         return f"{type(self).__name__}(dt={self.dt!r})"
 
 
+def _real_array(name: str, value, strict: bool = True) -> np.ndarray:
+    """``value`` as a float array. Complex, boolean, string or object data are
+    refused (numpy would drop an imaginary part, or fail deep inside a
+    filter); with ``strict=False`` they come back as an empty array, which
+    the caller's shape check then refuses with its own rule."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):      # ragged lists
+        array = np.asarray(None)
+    if array.dtype.kind in "iuf":
+        return array.astype(float, copy=False)
+    if not strict:
+        return np.empty(0)
+    raise InvalidMeasurementError(name, value, "must be real numbers (not complex, booleans "
+                                  "or text)")
+
+
+def finite_state(vector, covariance=None) -> bool:
+    """The divergence test: ``sum(vector)`` and ``trace(covariance)`` finite
+    (a NaN or infinity in either makes its sum non-finite)."""
+    if not math.isfinite(float(np.sum(vector))):
+        return False
+    return covariance is None or math.isfinite(float(np.trace(covariance)))
+
+
 def axis_sigmas(name: str, value) -> np.ndarray:
-    """One standard deviation per axis (a number means the same on all three), >= 0."""
-    if np.ndim(value) == 0:
-        return np.full(3, finite_number(name, value, minimum=0.0))
-    array = finite_vector(name, value, 3)
-    if np.any(array < 0):
-        raise InvalidParameterError(name, value, "must be >= 0")
-    return array
+    """One standard deviation per axis (a number means the same on all three),
+    >= 0 and small enough that its square (a variance) is finite."""
+    return axis_standard_deviations(name, value)
 
 
 class AttitudeAndBiasEstimator(AttitudeEstimator):

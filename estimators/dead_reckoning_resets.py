@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynamics.validation import boolean
 from estimators.dead_reckoning import IDENTITY, DeadReckoning
 
 
@@ -44,7 +45,7 @@ class DeadReckoningWithResets(DeadReckoning):
                  on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, rate_timing=rate_timing,
                          on_invalid=on_invalid)
-        self.align_sign = bool(align_sign)
+        self.align_sign = boolean("align_sign", align_sign)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         self._advance(omega_meas_radps)

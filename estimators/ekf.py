@@ -57,12 +57,13 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import kinematics_matrix
 from dynamics.validation import (
+    boolean,
     covariance_matrix,
     finite_number,
     one_of,
     process_exponent,
 )
-from estimators.base import OUTPUTS, AttitudeEstimator
+from estimators.base import OUTPUTS, AttitudeEstimator, finite_state
 from estimators.dead_reckoning import IDENTITY
 from estimators.model import propagate_with_jacobian
 
@@ -128,7 +129,7 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         ExtendedKalmanFilter.__init__(self, dim_x=4, dim_z=4)
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_state,
                                    on_invalid=on_invalid)
-        self.align_sign = bool(align_sign)
+        self.align_sign = boolean("align_sign", align_sign)
         self.pc_exponent = process_exponent("pc_exponent", pc_exponent)
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
@@ -160,6 +161,9 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         """Nonlinear state prediction ``x ← f(x, u)`` with ``u`` the gyro rate (rad/s);
         also sets ``F`` to the exact Jacobian at the pre-step ``x``."""
         self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
+
+    def state_is_finite(self) -> bool:
+        return finite_state(self.x, self.P)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         # filterpy replaces x and P with new arrays, so keeping references is a snapshot.

@@ -107,7 +107,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotvec_from_quat, skew
-from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
+from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
 from estimators.dead_reckoning import IDENTITY
 
 _I3 = np.eye(3)
@@ -254,6 +254,9 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         self.predict(F=phi, Q=q)
         propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)
+
+    def state_is_finite(self) -> bool:
+        return finite_state(self.q_hat, self.P) and finite_state(self.beta_hat)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         if self.output == "prior":

@@ -66,16 +66,62 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from dynamics.quaternion import grp_from_quat, quat_from_grp, quat_from_rotvec, quat_multiply
-from dynamics.validation import InvalidParameterError, finite_number
-from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator
+from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
+from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
 from estimators.dead_reckoning import IDENTITY
 from estimators.mekf import discrete_error_model
 
 _CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+#: n, the filter's state: the attitude error's GRPs and the gyro bias.
+STATE_SIZE = 6
+#: Smallest (n + λ)/n: below it the weights, up to n/(n + λ), exceed 1e8 and
+#: the rounding of the weighted sums (1e8 × 2.2e-16 relative) grows until the
+#: covariance is no longer positive definite (at α = 1e-7 Cholesky fails).
+MIN_SPREAD_RATIO = 1e-8
+#: (n + λ) and (n + λ) σ² must stay within these: filterpy takes the Cholesky
+#: factor of (n + λ) P, which must neither overflow nor underflow.
+MAX_SCALED_VARIANCE = 1e300
+MIN_SCALED_VARIANCE = 1e-300
 
 
 def _unit(q: np.ndarray) -> np.ndarray:
     return q / np.sqrt(q @ q)
+
+
+def _scaling(alpha, beta, kappa) -> tuple[float, float, float, float]:
+    """The checked scaling parameters and the spread ``n + λ = α² (n + κ)``."""
+    alpha = finite_number("alpha", alpha, strictly_positive=True)
+    beta = finite_number("beta", beta, minimum=0.0)
+    kappa = finite_number("kappa", kappa)
+    if STATE_SIZE + kappa <= 0:
+        raise InvalidParameterError("kappa", kappa, f"must be > -{STATE_SIZE} so that "
+                                    f"n + kappa > 0 (n = {STATE_SIZE})")
+    spread = alpha * alpha * (STATE_SIZE + kappa)
+    low, high = MIN_SPREAD_RATIO * STATE_SIZE, MAX_SCALED_VARIANCE
+    if not low <= spread <= high:
+        name, value = ("alpha", alpha) if alpha != 1.0 else ("kappa", kappa)
+        raise InvalidParameterError(
+            name, value, f"makes n + lambda = alpha^2 (n + kappa) = {spread:.3g} (alpha = "
+            f"{alpha:g}, kappa = {kappa:g}, n = {STATE_SIZE}); it must be within {low:g} and "
+            f"{high:g}: smaller, the sigma-point weights exceed 1e8 and their rounding breaks "
+            "the covariance's positive definiteness; larger, (n + lambda) P overflows")
+    return alpha, beta, kappa, spread
+
+
+def _check_sigma_spread(name: str, value, spread: float) -> None:
+    """Each σ > 0 with (n + λ) σ² a normal, finite double: filterpy draws the
+    sigma points from the Cholesky factor of (n + λ) P."""
+    sigma = axis_standard_deviations(name, value)
+    if sigma.min() == 0:
+        raise InvalidParameterError(name, value, "must be > 0 on every axis: USQUE's sigma "
+                                    "points need a positive definite covariance")
+    for scaled in spread * sigma.min() ** 2, spread * sigma.max() ** 2:
+        if not MIN_SCALED_VARIANCE <= scaled <= MAX_SCALED_VARIANCE:
+            raise InvalidParameterError(
+                name, value, f"makes (n + lambda) sigma^2 = {scaled:.3g} (n + lambda = "
+                f"{spread:.3g}); it must be within {MIN_SCALED_VARIANCE:g} and "
+                f"{MAX_SCALED_VARIANCE:g}: the sigma points come from the Cholesky factor of "
+                "(n + lambda) P")
 
 
 class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
@@ -91,6 +137,10 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         The scaled sigma points' spread, prior-knowledge and secondary
         scaling parameters (Van der Merwe): ``λ = α² (n + κ) − n``.
         The defaults (1, 2, 0) put the points ``√6 σ`` from the mean.
+        ``n + λ`` must be within ``6e-8`` and ``1e300`` and every
+        ``(n + λ) σ²`` of the initial covariance within ``1e-300`` and
+        ``1e300`` (σ > 0 on every axis), so that the Cholesky factor of
+        ``(n + λ) P`` exists in floating point.
     """
 
     name = "usque"
@@ -104,13 +154,11 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
                  on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
-        alpha = finite_number("alpha", alpha, strictly_positive=True)
-        beta = finite_number("beta", beta, minimum=0.0)
-        kappa = finite_number("kappa", kappa)
-        if alpha * alpha * (6 + kappa) <= 0:
-            raise InvalidParameterError("kappa", kappa, "must make alpha^2 (n + kappa) > 0, n = 6")
-        points = MerweScaledSigmaPoints(6, alpha=alpha, beta=beta, kappa=kappa)
-        UnscentedKalmanFilter.__init__(self, dim_x=6, dim_z=3, dt=self.dt, hx=self._hx,
+        alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
+        _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
+        _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
+        points = MerweScaledSigmaPoints(STATE_SIZE, alpha=alpha, beta=beta, kappa=kappa)
+        UnscentedKalmanFilter.__init__(self, dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
                                        fx=self._fx, points=points)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
@@ -176,6 +224,9 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         # The prior mean's δp stays in x until the next update or reset: the
         # sigma points filterpy drew for the update are relative to q_next.
         self.q_hat = q_next
+
+    def state_is_finite(self) -> bool:
+        return finite_state(self.q_hat, self.P) and finite_state(self.x)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         if self.output == "prior":

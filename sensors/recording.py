@@ -94,8 +94,10 @@ def load_recording(path, name: str | None = None) -> Recording:
 
     Raises :class:`~dynamics.validation.InvalidParameterError` (parameter
     ``dataset``) naming what is wrong: a missing file or key, a wrong shape,
+    channels that are not real numbers (true/false, complex, text, objects),
     non-finite gyro readings, a reference that is not unit quaternions, a
-    rate that is not positive.
+    movement mask that is not true/false or does not begin at rest, a rate
+    that is not positive.
     """
     path = Path(path)
 
@@ -106,14 +108,12 @@ def load_recording(path, name: str | None = None) -> Recording:
         refuse("file does not exist")
     if not zipfile.is_zipfile(path):
         refuse("must be a numpy .npz archive (a zip file); this file is not one")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            data = {key: archive[key] for key in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        refuse(f"must be a numpy .npz archive ({type(err).__name__}: {err})")
+    data = _read_archive(path, refuse)
     missing = [key for key in REQUIRED_KEYS if key not in data]
     if missing:
         refuse(f"has no key {missing[0]!r}; a recording needs {', '.join(REQUIRED_KEYS)}")
+    for key in ("imu_gyr_radps", "opt_quat", "sampling_rate_hz"):
+        _check_numbers(key, data[key], refuse)
     gyro, reference = data["imu_gyr_radps"], data["opt_quat"]
     movement, rate = data["movement"], data["sampling_rate_hz"]
     if gyro.ndim != 2 or gyro.shape[1] != 3 or len(gyro) < 2:
@@ -123,10 +123,14 @@ def load_recording(path, name: str | None = None) -> Recording:
         refuse(f"opt_quat has shape {reference.shape}; must be ({n}, 4), one row per gyro sample")
     if movement.shape != (n,):
         refuse(f"movement has shape {movement.shape}; must be ({n},)")
-    if movement.dtype != bool and not np.isin(movement, (0, 1)).all():
-        refuse("movement must be true/false (or 0/1) per sample")
-    if rate.shape != () or not np.issubdtype(rate.dtype, np.number) \
-            or not np.isfinite(rate) or rate <= 0:
+    if movement.dtype != bool and (movement.dtype.kind not in "iu"
+                                   or not np.isin(movement, (0, 1)).all()):
+        refuse(f"movement must be true/false (or the integers 0/1) per sample; it holds "
+               f"{_kind(movement)}")
+    if movement[0]:
+        refuse("movement is true from the first sample on; a recording must begin at rest "
+               "(false), since the gyro's bias at switch-on is its mean over the initial rest")
+    if rate.shape != () or not np.isfinite(rate) or rate <= 0:
         shown = rate.tolist() if rate.size < 5 else f"an array of shape {rate.shape}"
         refuse(f"sampling_rate_hz = {shown!r} must be one positive number (Hz)")
     gyro = gyro.astype(float)
@@ -149,3 +153,35 @@ def load_recording(path, name: str | None = None) -> Recording:
     info = str(data["info"]) if "info" in data and data["info"].shape == () else ""
     return Recording(name=name or path.stem, gyro_radps=gyro, reference_quat=reference,
                      movement=movement.astype(bool), rate_hz=float(rate), info=info)
+
+
+def _read_archive(path: Path, refuse) -> dict:
+    """The archive's arrays; an unreadable one names its key (object arrays,
+    which only pickle could read, are refused: loading a pickle runs code)."""
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        refuse(f"must be a numpy .npz archive ({type(err).__name__}: {err})")
+    data = {}
+    with archive:
+        for key in archive.files:
+            try:
+                data[key] = archive[key]
+            except ValueError as err:
+                refuse(f"{key} cannot be read ({err}); it must hold numbers")
+            except (OSError, EOFError, zipfile.BadZipFile) as err:
+                refuse(f"must be a numpy .npz archive ({type(err).__name__}: {err})")
+    return data
+
+
+def _kind(array: np.ndarray) -> str:
+    """What an array holds, in words."""
+    kinds = {"b": "true/false", "c": "complex numbers", "U": "text", "S": "bytes",
+             "O": "Python objects", "V": "raw records", "M": "dates", "m": "time spans"}
+    return kinds.get(array.dtype.kind, f"{array.dtype} numbers")
+
+
+def _check_numbers(key: str, array: np.ndarray, refuse) -> None:
+    """``key`` holds real numbers: not true/false, complex numbers, text, objects."""
+    if array.dtype.kind not in "iuf":
+        refuse(f"{key} must hold real numbers; it holds {_kind(array)}")

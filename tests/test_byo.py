@@ -87,14 +87,15 @@ def test_users_estimator_takes_its_own_scenario_section(tmp_path, monkeypatch, c
     from benchmarks.simulation import build_estimator
     scenario_file = tmp_path / "s.toml"
     scenario_file.write_text(f'tstop = 2.0\n[estimators."{spec}"]\ngain = 0.5\n')
-    scenario = Scenario.from_toml(scenario_file)
+    scenario = Scenario.from_toml(scenario_file, allow_imports=[spec])
     assert build_estimator(spec, scenario).gain == 0.5
     assert build_estimator(spec, Scenario()).gain == 0.05            # the class's default
     assert main(["compare", "--scenario", str(scenario_file), "--estimators", spec,
                  "--out", str(tmp_path / "c"), "--quiet"]) == 0
     capsys.readouterr()
     scenario_file.write_text(f'[estimators."{spec}"]\nwobble = 1\n')
-    assert main(["compare", "--scenario", str(scenario_file), "--out", str(tmp_path / "x")]) == 2
+    assert main(["compare", "--scenario", str(scenario_file), "--out", str(tmp_path / "x"),
+                 "--allow-import", spec.partition(":")[0]]) == 2
     assert capsys.readouterr().err == (
         f'attitude-bench: error: estimators."{spec}".wobble = 1: is not a setting of {spec}; '
         "known: initial_attitude, gain, on_invalid\n")

@@ -23,7 +23,7 @@ def direct_frame(n_runs, base_seed=0, scenario=SCENARIO):
     """The same runs computed in one engine batch, as the campaign's tidy frame."""
     batch = run_batch(scenario, make_runs(scenario, np.arange(base_seed, base_seed + n_runs)),
                       ESTIMATORS)
-    return batch.frame()[["run", "seed", "estimator", *STAT_COLUMNS]]
+    return batch.frame()[["run", "seed", "estimator", *STAT_COLUMNS, "diverged_step"]]
 
 
 def test_campaign_equals_one_batch_whatever_the_chunk_size(tmp_path):
@@ -83,8 +83,9 @@ def test_montecarlo_cli_outputs(tmp_path, capsys):
                  "--seed", "7", "--tstop", "5", "--out", str(out), "--quiet"]) == 0
     with open(out / "montecarlo.csv", newline="") as handle:
         rows = list(csv.reader(handle))
-    assert rows[0] == ["run", "seed", "estimator", *STAT_COLUMNS]
+    assert rows[0] == ["run", "seed", "estimator", *STAT_COLUMNS, "diverged_step"]
     assert [r[2] for r in rows[1:]] == ["ekf"] * 12 + ["dead-reckoning"] * 12   # as asked
+    assert {r[-1] for r in rows[1:]} == {"-1"}                                  # none diverged
     assert [int(r[1]) for r in rows[1:13]] == list(range(7, 19))
     assert (out / "montecarlo.png").stat().st_size > 20_000
     printed = capsys.readouterr().out

@@ -72,6 +72,61 @@ class RunTable:
         return RunTable(*(getattr(self, name)[indices] for name in self.__dataclass_fields__))
 
 
+def seed_range(first: int, count: int) -> np.ndarray:
+    """Seeds ``first, first + 1, …`` (``count`` of them) as int64, exact up to
+    2⁶³ - 1 (``np.arange(first, first + count)`` would turn to float64 there)."""
+    return np.arange(count, dtype=np.int64) + np.int64(first)
+
+
+def whole_number(name: str, value, minimum: int) -> int:
+    """``value`` as an int if it is a whole number >= ``minimum`` (not a bool)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or value < minimum:
+        raise InvalidParameterError(name, value, f"must be a whole number >= {minimum}")
+    return int(value)
+
+
+def checked_estimators(estimators) -> tuple:
+    """The engine estimators named in ``estimators`` (a list of names), in slot order."""
+    if isinstance(estimators, str) or not hasattr(estimators, "__iter__"):
+        raise InvalidParameterError("estimators", estimators, "must be a list of names, e.g. "
+                                    f"[{ENGINE_ESTIMATORS[0]!r}], not a single string")
+    names = list(estimators)
+    for name in names:
+        if not isinstance(name, str) or name not in ENGINE_ESTIMATORS:
+            raise InvalidParameterError("estimators", name,
+                                        f"must be one of {', '.join(ENGINE_ESTIMATORS)}")
+    if not names or len(set(names)) != len(names):
+        raise InvalidParameterError("estimators", names, "must name at least one estimator, "
+                                    "each once")
+    return tuple(name for name in ENGINE_ESTIMATORS if name in names)
+
+
+def checked_runs(scenario: Scenario, runs) -> RunTable:
+    """``runs`` as the kernel needs it: a :class:`RunTable` of equal-length,
+    non-empty 1-D columns, whole seeds, and settings the scenario accepts."""
+    if not isinstance(scenario, Scenario):
+        raise InvalidParameterError("scenario", type(scenario).__name__,
+                                    "must be a benchmarks.scenario.Scenario")
+    if not isinstance(runs, RunTable):
+        raise InvalidParameterError("runs", type(runs).__name__,
+                                    "must be a RunTable (see make_runs)")
+    lengths = {name: np.shape(getattr(runs, name)) for name in RunTable.__dataclass_fields__}
+    if any(len(shape) != 1 for shape in lengths.values()) or \
+            len(set(lengths.values())) != 1 or not lengths["seeds"][0]:
+        raise InvalidParameterError("runs", {name: shape for name, shape in lengths.items()},
+                                    "every column must be 1-D, of the same length, not empty")
+    columns = {}
+    for name in PER_RUN_SETTINGS:
+        column = np.asarray(getattr(runs, name))
+        if column.dtype.kind not in "iuf":
+            raise InvalidParameterError(f"runs.{name}", column, "must be real numbers")
+        columns[name] = np.ascontiguousarray(column, dtype=float)
+        for value in np.unique(columns[name]):
+            scenario.replace(**{name: float(value)})     # as the scenario validates it
+    return RunTable(np.ascontiguousarray(seed_values("runs.seeds", runs.seeds)), **columns)
+
+
 def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
     """A run table: ``seeds`` and any of :data:`PER_RUN_SETTINGS` as scalars or
     arrays (broadcast together); missing settings come from ``scenario``.
@@ -84,14 +139,13 @@ def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
         raise InvalidParameterError(name, settings[name],
                                     f"is not a per-run setting; known: {', '.join(PER_RUN_SETTINGS)}")
     columns = {name: settings.get(name, getattr(scenario, name)) for name in PER_RUN_SETTINGS}
-    seeds, *values = np.broadcast_arrays(seed_values("seed", seeds),
-                                         *(np.asarray(columns[n], dtype=float)
-                                           for n in PER_RUN_SETTINGS))
-    for name, column in zip(PER_RUN_SETTINGS, values):
-        for value in np.unique(column):
-            scenario.replace(**{name: float(value)})
-    return RunTable(np.ascontiguousarray(seeds),
-                    *(np.ascontiguousarray(column, dtype=float) for column in values))
+    try:
+        seeds, *values = np.broadcast_arrays(seed_values("seed", seeds),
+                                             *(np.asarray(columns[n]) for n in PER_RUN_SETTINGS))
+    except ValueError:
+        raise InvalidParameterError("settings", {n: np.shape(columns[n]) for n in columns},
+                                    "must broadcast with the seeds") from None
+    return checked_runs(scenario, RunTable(seeds, *values))
 
 
 @dataclass
@@ -106,6 +160,10 @@ class BatchResult:
     runs: RunTable
     estimators: tuple
     statistics: dict
+    #: Per estimator ``(B,)``: the step where each run's estimate or
+    #: covariance stopped being finite, -1 where it never did. A diverged
+    #: run's statistics are NaN, never a number.
+    diverged_step: dict = None
     estimates: dict | None = None
     #: The last step's true gyro bias ``(B, 3)`` and, for the MEKF, its
     #: output bias estimate ``(B, 3)`` and 6x6 covariance ``(B, 6, 6)``.
@@ -132,8 +190,16 @@ class BatchResult:
                 part[setting] = getattr(self.runs, setting)
             for column in STAT_COLUMNS:
                 part[column] = self.statistics[name][column]
+            part["diverged_step"] = self.diverged_step[name]
             parts.append(part)
         return pd.concat(parts, ignore_index=True)
+
+
+def _nan_from(samples: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """``samples`` ``(B, S)`` with row ``b`` NaN from column ``first[b]`` on
+    (``first < 0``: untouched)."""
+    columns = np.arange(samples.shape[1])
+    return np.where((first[:, None] >= 0) & (columns >= first[:, None]), np.nan, samples)
 
 
 def _bin_edge(index: np.ndarray) -> np.ndarray:
@@ -263,11 +329,16 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     from benchmarks.engine import kernels
     from numba import get_num_threads
 
-    unknown = [name for name in estimators if name not in ENGINE_ESTIMATORS]
-    if unknown:
-        raise InvalidParameterError("estimator", unknown[0],
-                                    f"must be one of {', '.join(ENGINE_ESTIMATORS)}")
-    estimators = tuple(name for name in ENGINE_ESTIMATORS if name in estimators)
+    # Every argument is checked before compiled code sees it: the kernel
+    # trusts shapes and lengths, so a bad table would read or write out of bounds.
+    runs = checked_runs(scenario, runs)
+    estimators = checked_estimators(estimators)
+    block_steps, nees_every, cache_steps, error_every = (
+        whole_number("block_steps", block_steps, 1), whole_number("nees_every", nees_every, 1),
+        whole_number("cache_steps", cache_steps, 0), whole_number("error_every", error_every, 0))
+    settle_steps = whole_number("settle_steps", settle_steps, 0)
+    if threads is not None:
+        threads = whole_number("threads", threads, 1)
     n_runs, n_steps, dt = len(runs), scenario.n_steps, scenario.dt
     threads = get_num_threads() if threads is None else threads
     enabled = np.array([name in estimators for name in ENGINE_ESTIMATORS])
@@ -321,6 +392,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     # Accumulators only for the estimators that run: row[slot] is each one's row.
     rows = np.cumsum(enabled) - 1
     stats = np.zeros((len(estimators), n_runs, kernels.N_ACCUMULATORS))
+    diverged = np.full((len(estimators), n_runs), -1, dtype=np.int64)
     hist = np.zeros((len(estimators), n_runs, HISTOGRAM_BINS), dtype=np.uint32)
     traces = (np.zeros((len(estimators), n_runs, n_steps, 4)) if keep_traces
               else np.zeros((len(estimators), 0, 0, 4)))
@@ -367,7 +439,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
                      star_settings[1], star_settings[2], outage, star_settings[3], uniforms)
         kernels.advance(k0, n_steps - 1, np.ascontiguousarray(truth.q_true),
                         np.ascontiguousarray(truth.omega_true_radps), dt, gyro_args, star_args, state,
-                        enabled, rows, options, stats, hist, _FIRST_BITS, traces, keep_traces,
+                        enabled, rows, options, stats, diverged, hist, _FIRST_BITS, traces, keep_traces,
                         consistency_arrays, bool(health), health_counts, error_every,
                         error_samples)
         if progress_bar is not None:
@@ -392,17 +464,23 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
             "max_deg": stats[slot, :, kernels.MAX].copy(),
             "final_deg": stats[slot, :, kernels.FINAL].copy(),
         }
+        for column in STAT_COLUMNS:     # a diverged run has no statistics
+            statistics[name][column][diverged[slot] >= 0] = np.nan
     checked = {}
     if consistency:
         _, _, _, samples, nees_sum, nis_sum, nis_count = consistency_arrays
         for slot, name in zip(rows[enabled], estimators):
             if name not in CONSISTENCY_ESTIMATORS:
                 continue
+            lost = diverged[slot] >= 0
             checked[name] = {
                 "time_s": np.arange(0, n_steps, nees_every) * dt,
-                "nees_samples": samples[slot],
-                "nees_time_average": nees_sum[slot] / (n_steps - settle_steps),
-                "nis_mean": nis_sum[slot] / np.maximum(nis_count[slot], 1),
+                "nees_samples": _nan_from(samples[slot], np.where(
+                    lost, -(-diverged[slot] // nees_every), -1)),
+                "nees_time_average": np.where(lost, np.nan,
+                                              nees_sum[slot] / (n_steps - settle_steps)),
+                "nis_mean": np.where(lost, np.nan,
+                                     nis_sum[slot] / np.maximum(nis_count[slot], 1)),
                 "nis_dof": (reference.ekf if name == "ekf" else mekf[0]).dim_z}
     final = {"gyro_bias_radps": bias_last}
     if "mekf" in estimators:
@@ -415,6 +493,8 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     if error_every:
         sampled = {name: error_samples[slot] for slot, name in zip(rows[enabled], estimators)}
     return BatchResult(runs=runs, estimators=estimators, statistics=statistics,
+                       diverged_step={name: diverged[slot].copy()
+                                      for slot, name in zip(rows[enabled], estimators)},
                        estimates=estimates, final=final, consistency=checked or None,
                        health=checked_health, error_samples=sampled,
                        sample_time_s=np.arange(0, n_steps, error_every) * dt if error_every
@@ -432,6 +512,8 @@ def run_chunked(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATO
 
     Chunking never changes a run's numbers; it bounds memory.
     """
+    chunk_runs = whole_number("chunk_runs", chunk_runs, 1)
+    runs = checked_runs(scenario, runs)
     parts = []
     for start in range(0, len(runs), chunk_runs):
         part = run_batch(scenario, runs.slice(start, start + chunk_runs), estimators)
@@ -441,4 +523,7 @@ def run_chunked(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATO
     statistics = {name: {column: np.concatenate([p.statistics[name][column] for p in parts])
                          for column in STAT_COLUMNS}
                   for name in parts[0].estimators}
-    return BatchResult(runs=runs, estimators=parts[0].estimators, statistics=statistics)
+    diverged = {name: np.concatenate([p.diverged_step[name] for p in parts])
+                for name in parts[0].estimators}
+    return BatchResult(runs=runs, estimators=parts[0].estimators, statistics=statistics,
+                       diverged_step=diverged)

@@ -14,6 +14,7 @@ writes them, so workers need no access to the output folder.
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import logging
@@ -25,7 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.engine.batch import CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch
+from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch,
+                                     seed_range)
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_bytes, write_text
 from benchmarks.scenario import Scenario
@@ -34,8 +36,11 @@ from dynamics.validation import InvalidParameterError
 
 MANIFEST = "campaign.json"
 CHUNKS = "chunks"
-CAMPAIGN_COLUMNS = ("run", "seed", "estimator") + STAT_COLUMNS
-_FORMAT = 1
+#: A chunk's columns per estimator: the statistics (NaN for a diverged run)
+#: and the step where the run diverged (-1: it did not).
+CHUNK_COLUMNS = STAT_COLUMNS + ("diverged_step",)
+CAMPAIGN_COLUMNS = ("run", "seed", "estimator") + CHUNK_COLUMNS
+_FORMAT = 2
 #: How long to try a scheduler before saying it cannot be reached, seconds.
 SCHEDULER_TIMEOUT_S = 10
 _ADDRESS = re.compile(r"^([a-z]+://)?[\w.\-\[\]:]+:\d+$")
@@ -56,6 +61,15 @@ class Campaign:
                 "estimators": list(self.estimators), "runs": self.runs,
                 "base_seed": self.base_seed, "chunk_runs": self.chunk_runs}
 
+    def fingerprint(self) -> str:
+        """A digest of what decides a run's numbers: the scenario, the
+        estimators and the base seed. Every chunk carries it, so ``--resume``
+        can tell a chunk of this campaign from one copied from another."""
+        decisive = {"format": _FORMAT, "scenario": self.scenario.as_dict(),
+                    "estimators": list(self.estimators), "base_seed": self.base_seed}
+        text = json.dumps(decisive, sort_keys=True, default=repr)
+        return hashlib.sha256(text.encode()).hexdigest()
+
     def chunks(self) -> list[tuple[int, int]]:
         return [(start, min(start + self.chunk_runs, self.runs))
                 for start in range(0, self.runs, self.chunk_runs)]
@@ -75,7 +89,7 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
     if threads is not None:
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    runs = make_runs(scenario, np.arange(base_seed + start, base_seed + stop))
+    runs = make_runs(scenario, seed_range(base_seed + start, stop - start))
     arrays = {"seed": runs.seeds}
     engine = [name for name in estimators if name in ENGINE_ESTIMATORS]
     if engine:
@@ -83,14 +97,17 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
         for name in batch.estimators:
             for column in STAT_COLUMNS:
                 arrays[f"{name}/{column}"] = batch.statistics[name][column]
+            arrays[f"{name}/diverged_step"] = batch.diverged_step[name]
     # Estimators without a kernel (USQUE, users' own) run per run.
     for name in estimators:
         if name in engine:
             continue
-        rows = [error_statistics(simulate(scenario, [name], seed=int(seed)).error_deg[name])
-                for seed in runs.seeds]
+        results = [simulate(scenario, [name], seed=int(seed)) for seed in runs.seeds]
+        rows = [error_statistics(result.error_deg[name]) for result in results]
         for column in STAT_COLUMNS:
             arrays[f"{name}/{column}"] = np.array([row[column] for row in rows])
+        arrays[f"{name}/diverged_step"] = np.array([r.diverged_step[name] for r in results],
+                                                   dtype=np.int64)
     return arrays
 
 
@@ -100,10 +117,12 @@ def _write_chunk(out: Path, start: int, stop: int, arrays: dict) -> None:
     write_bytes(chunk_path(out, start, stop), buffer.getvalue())
 
 
-def _prepare(campaign: Campaign, out: Path, resume: bool) -> None:
+def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
+    """Check or write ``campaign.json``; True if this call wrote it."""
     manifest_path = out / MANIFEST
     expected = campaign.manifest()
-    if manifest_path.exists():
+    manifest_existed = manifest_path.exists()
+    if manifest_existed:
         if not resume:
             raise InvalidParameterError(
                 "out", str(out), "already holds a campaign; pass --resume to finish it "
@@ -129,6 +148,7 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> None:
     # A crash can leave a temporary file beside the chunks: never a result.
     for stale in (out / CHUNKS).glob(".*.tmp*"):
         stale.unlink(missing_ok=True)
+    return not manifest_existed
 
 
 def _dask_client(workers: int, scheduler: str | None):
@@ -153,22 +173,54 @@ def _dask_client(workers: int, scheduler: str | None):
     return Client(cluster), cluster
 
 
+def check_campaign(campaign: Campaign) -> None:
+    """Refuse a campaign that cannot run, before anything is written: its
+    counts, and every estimator built from the scenario as a run builds it."""
+    from benchmarks.engine.batch import checked_estimators, whole_number
+    from benchmarks.simulation import build_estimator
+    whole_number("runs", campaign.runs, 1)
+    whole_number("chunk_runs", campaign.chunk_runs, 1)
+    whole_number("base_seed", campaign.base_seed, 0)
+    if isinstance(campaign.estimators, str) or not campaign.estimators:
+        raise InvalidParameterError("estimators", campaign.estimators,
+                                    "must be a non-empty list of names")
+    engine = [name for name in campaign.estimators if name in ENGINE_ESTIMATORS]
+    if engine:
+        checked_estimators(engine)
+    make_runs(campaign.scenario, seed_range(campaign.base_seed, 1))
+    for name in campaign.estimators:
+        build_estimator(name, campaign.scenario)
+
+
 def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | None = None,
                  resume: bool = False, progress_bar=None) -> pd.DataFrame:
     """Compute every missing chunk, then return the tidy per-run statistics."""
     out = Path(out)
+    check_campaign(campaign)
     # Connect first: a scheduler that cannot be reached leaves nothing behind.
     client, cluster = _dask_client(workers, scheduler) if (workers or scheduler) else (None, None)
     try:
-        _prepare(campaign, out, resume)
+        fresh = _prepare(campaign, out, resume)
+        todo = [(start, stop) for start, stop in campaign.chunks()
+                if not _chunk_ok(campaign, chunk_path(out, start, stop), stop - start)]
     except BaseException:
         _close(client, cluster)
         raise
-    todo = [(start, stop) for start, stop in campaign.chunks()
-            if not _chunk_ok(campaign, chunk_path(out, start, stop), stop - start)]
     if progress_bar is not None:
         progress_bar.update(campaign.runs - sum(stop - start for start, stop in todo))
+    try:
+        _compute(campaign, out, todo, client, cluster, progress_bar)
+    except Exception:
+        if fresh and not any((out / CHUNKS).glob("runs-*.npz")):
+            (out / MANIFEST).unlink(missing_ok=True)     # a refused campaign leaves nothing
+        raise
+    return load_campaign(campaign, out)
+
+
+def _compute(campaign: Campaign, out: Path, todo, client, cluster, progress_bar) -> None:
+    """Compute the chunks ``todo``, writing each as it arrives."""
     arguments = (campaign.scenario, campaign.estimators, campaign.base_seed)
+    fingerprint = {"fingerprint": np.array(campaign.fingerprint())}
     if client is not None:
         try:
             from distributed import as_completed
@@ -176,17 +228,17 @@ def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | Non
                        (start, stop) for start, stop in todo}
             for future in as_completed(futures):
                 start, stop = futures[future]
-                _write_chunk(out, start, stop, future.result())
+                _write_chunk(out, start, stop, {**future.result(), **fingerprint})
                 if progress_bar is not None:
                     progress_bar.update(stop - start)
         finally:
             _close(client, cluster)
     else:
         for start, stop in todo:
-            _write_chunk(out, start, stop, compute_chunk(*arguments, start, stop))
+            _write_chunk(out, start, stop, {**compute_chunk(*arguments, start, stop),
+                                            **fingerprint})
             if progress_bar is not None:
                 progress_bar.update(stop - start)
-    return load_campaign(campaign, out)
 
 
 def _close(client, cluster) -> None:
@@ -197,19 +249,32 @@ def _close(client, cluster) -> None:
 
 
 def _chunk_ok(campaign: Campaign, path: Path, runs: int) -> bool:
-    """A finished chunk file that loads and holds every column; a damaged one
-    (an interrupted disk, a truncated copy) is removed, to be computed again."""
+    """A finished chunk file of this campaign that loads and holds every
+    column; a damaged one (an interrupted disk, a truncated copy) is removed,
+    to be computed again. A whole chunk of another campaign (another
+    fingerprint, or other seeds) is refused: it is somebody's result."""
     if not path.exists():
         return False
     try:
         with np.load(path) as data:
-            keys = [f"{name}/{column}" for name in campaign.estimators for column in STAT_COLUMNS]
+            keys = [f"{name}/{column}" for name in campaign.estimators for column in CHUNK_COLUMNS]
             ok = all(key in data.files and data[key].shape == (runs,) for key in keys + ["seed"])
+            found = str(data["fingerprint"]) if "fingerprint" in data.files else None
+            seeds = data["seed"] if ok else None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile):
         ok = False
     if not ok:
         path.unlink()
-    return ok
+        return False
+    start = int(path.stem.split("-")[1])
+    expected = seed_range(campaign.base_seed + start, runs)
+    if found != campaign.fingerprint() or not np.array_equal(seeds, expected):
+        what = ("other seeds" if found == campaign.fingerprint()
+                else "other settings" if found else "no fingerprint")
+        raise InvalidParameterError(
+            "resume", str(path.parent.parent), f"chunk {CHUNKS}/{path.name} belongs to another "
+            f"campaign ({what}); remove it to compute it again, or choose another --out")
+    return True
 
 
 def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
@@ -220,7 +285,7 @@ def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
             for name in campaign.estimators:
                 part = pd.DataFrame({"run": np.arange(start, stop), "seed": data["seed"],
                                      "estimator": name})
-                for column in STAT_COLUMNS:
+                for column in CHUNK_COLUMNS:
                     part[column] = data[f"{name}/{column}"]
                 parts.append(part)
     frame = pd.concat(parts, ignore_index=True)

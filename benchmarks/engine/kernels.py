@@ -122,12 +122,45 @@ def _propagate(q, w, half_dt, out, jacobian, want_jacobian):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _mark_diverged(slot, run, k, diverged, traces, keep_traces, error_every, error_samples):
+    """Step ``k`` is where the run's estimator ``slot`` stopped being finite
+    (unless it already had): from ``k`` on its estimate and error are NaN."""
+    if diverged[slot, run] < 0:
+        diverged[slot, run] = k
+    if keep_traces:
+        for i in range(4):
+            traces[slot, run, k, i] = math.nan
+    if error_every and k % error_every == 0:
+        error_samples[slot, run, k // error_every] = math.nan
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _finite_state(q, n_q, P, n):
+    """The divergence test of estimators.base.AttitudeEstimator.state_is_finite:
+    the sum of the first ``n_q`` state entries and the trace of the leading
+    ``n`` x ``n`` covariance block are finite (a NaN or infinity anywhere in
+    them makes its sum non-finite)."""
+    total = 0.0
+    for i in range(n_q):
+        total += q[i]
+    trace = 0.0
+    for i in range(n):
+        trace += P[i, i]
+    return math.isfinite(total) and math.isfinite(trace)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _record(slot, run, k, inv_count, q_true_k, q, stats, hist, hist_first_bits, traces,
-            keep_traces, bits, bits_int, error_every, error_samples):
+            keep_traces, bits, bits_int, error_every, error_samples, diverged):
     """Error of estimate ``q`` at step ``k``, folded into the run's accumulators
-    (and kept every ``error_every`` steps if that is not 0)."""
+    (and kept every ``error_every`` steps if that is not 0). A non-finite
+    estimate marks the run diverged (:func:`_mark_diverged`): its error is
+    NaN, never the 0 that ``min(1, NaN)`` would give."""
     dot = abs(q_true_k[0] * q[0] + q_true_k[1] * q[1] + q_true_k[2] * q[2]
               + q_true_k[3] * q[3])
+    if diverged[slot, run] >= 0 or not math.isfinite(dot):
+        _mark_diverged(slot, run, k, diverged, traces, keep_traces, error_every, error_samples)
+        return
     error = 2.0 * _acos(min(1.0, dot), bits, bits_int) * _RAD_TO_DEG
     delta = error - stats[slot, run, MEAN]
     stats[slot, run, MEAN] += delta * inv_count
@@ -537,7 +570,7 @@ def _check_health(q, unit, P, n, counts, factor):
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, rows, options,
-            stats, hist, hist_first_bits, traces, keep_traces, consistency, check_health,
+            stats, diverged, hist, hist_first_bits, traces, keep_traces, consistency, check_health,
             health, error_every, error_samples):
     """Advance every run by one block of steps starting at step ``k0``.
 
@@ -554,7 +587,9 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
     MEKF's output bias and covariance at ``last_step``: beta_mekf_last (B, 3),
     P_mekf_last (B, 6, 6)).
     ``options`` = (dead reckoning step-average, resets step-average, EKF
-    posterior, MEKF posterior, resets align sign, EKF align sign). Statistics ``(slots, B, 4)``, histograms
+    posterior, MEKF posterior, resets align sign, EKF align sign). Statistics ``(slots, B, 4)``;
+    ``diverged`` ``(slots, B)`` the step where each run stopped being finite
+    (-1: never, see :func:`_mark_diverged`); histograms
     ``(slots, B, bins)``, traces ``(slots, B, N, 4)`` when kept; with
     ``check_health``, ``health`` ``(slots, B, N_HEALTH)`` counts each
     estimator's state checks after its update and after its propagation
@@ -642,7 +677,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
                 _record(rows[DEAD_RECKONING], run, k, inv_count, q_true[j], q, stats, hist,
                         hist_first_bits, traces, keep_traces, bits, bits_int,
-                        error_every, error_samples)
+                        error_every, error_samples, diverged)
                 if check_health:
                     _check_health(q, True, F, 0, health[rows[DEAD_RECKONING], run], factor)
             if enabled[RESETS]:
@@ -667,7 +702,7 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                     _propagate(q, previous_rate[run], half_dt, q, F, False)
                 _record(rows[RESETS], run, k, inv_count, q_true[j], q, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int,
-                        error_every, error_samples)
+                        error_every, error_samples, diverged)
                 if check_health:
                     _check_health(q, True, F, 0, health[rows[RESETS], run], factor)
             if dr_average or resets_average:
@@ -700,8 +735,11 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                                           _nees(q_true[j], x, projected, scratch6), consistency)
                 _record(rows[EKF], run, k, inv_count, q_true[j], prior, stats, hist, hist_first_bits,
                         traces, keep_traces, bits, bits_int,
-                        error_every, error_samples)
+                        error_every, error_samples, diverged)
                 _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
+                if not _finite_state(x, 4, P, 4):
+                    _mark_diverged(rows[EKF], run, k, diverged, traces, keep_traces,
+                                   error_every, error_samples)
                 if check_health:
                     _check_health(x, True, P, 4, health[rows[EKF], run], factor)
             if enabled[MEKF]:
@@ -734,8 +772,12 @@ def advance(k0, last_step, q_true, omega_true, dt, gyro, star, state, enabled, r
                                           consistency)
                 _record(rows[MEKF], run, k, inv_count, q_true[j], out_mekf, stats, hist,
                         hist_first_bits, traces, keep_traces, bits, bits_int,
-                        error_every, error_samples)
+                        error_every, error_samples, diverged)
                 _mekf_propagate(qm, beta_mekf[run], P_mekf[run], w, dt, mekf_noise[run],
                                 mekf_bias_rw[run], scratch6, dq)
+                if not (_finite_state(qm, 4, P_mekf[run], 6)
+                        and _finite_state(beta_mekf[run], 3, P_mekf[run], 0)):
+                    _mark_diverged(rows[MEKF], run, k, diverged, traces, keep_traces,
+                                   error_every, error_samples)
                 if check_health:
                     _check_health(qm, True, P_mekf[run], 6, health[rows[MEKF], run], factor)

@@ -151,13 +151,15 @@ class ConsistencyResult:
     bound_rms_deg: np.ndarray           # (S,) the bound's RMS angle at time_s (posterior)
     bound: object                       # the AttitudeBound over the whole time grid
     samples: dict                       # name → RunResult of the base seed's run (traces)
+    diverged_step: dict | None = None   # name → (runs,) diverged steps, -1 where none
 
 
 def per_run_consistency(scenario, name: str, seed: int, every: int, settle_steps: int) -> dict:
     """One per-run simulation of ``name``: its RMS error and NEES figures."""
     from benchmarks.simulation import simulate
     result = simulate(scenario, [name], seed=seed, traces=True)
-    out = {"rms_deg": float(np.sqrt(np.mean(result.error_deg[name] ** 2)))}
+    out = {"rms_deg": float(np.sqrt(np.mean(result.error_deg[name] ** 2))),
+           "diverged_step": result.diverged_step[name]}
     errors = run_errors(result, name)
     if errors["attitude_covariance"] is not None:
         values = nees(errors["attitude"], errors["attitude_covariance"])
@@ -181,7 +183,8 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     the run) is left out of the time averages.
     """
     from benchmarks.bounds import posterior_crb
-    from benchmarks.engine.batch import CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch
+    from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch,
+                                         seed_range)
     from benchmarks.simulation import build_estimator, simulate
 
     n_steps = scenario.n_steps
@@ -195,14 +198,15 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     if engine_names:
         parts = []
         for start in range(0, runs, CHUNK_RUNS):
-            seeds = np.arange(base_seed + start, base_seed + min(runs, start + CHUNK_RUNS))
+            seeds = seed_range(base_seed + start, min(runs, start + CHUNK_RUNS) - start)
             parts.append(run_batch(scenario, make_runs(scenario, seeds), engine_names,
                                    consistency=True, nees_every=every,
                                    settle_steps=settle_steps))
             if progress_bar is not None:
                 progress_bar.update(len(seeds) * len(engine_names))
         for name in engine_names:
-            record = {"rms_deg": np.concatenate([p.statistics[name]["rms_deg"] for p in parts])}
+            record = {"rms_deg": np.concatenate([p.statistics[name]["rms_deg"] for p in parts]),
+                      "diverged_step": np.concatenate([p.diverged_step[name] for p in parts])}
             if parts[0].consistency and name in parts[0].consistency:
                 for key in ("nees_samples", "nees_time_average", "nis_mean"):
                     record[key] = np.concatenate([p.consistency[name][key] for p in parts])
@@ -212,7 +216,8 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
         seeds = range(base_seed, base_seed + min(runs, per_run_limit))
         arguments = [(scenario, name, seed, every, settle_steps) for seed in seeds]
         outcomes = _map(per_run_consistency, arguments, workers, progress_bar)
-        record = {"rms_deg": np.array([o["rms_deg"] for o in outcomes])}
+        record = {"rms_deg": np.array([o["rms_deg"] for o in outcomes]),
+                  "diverged_step": np.array([o["diverged_step"] for o in outcomes])}
         if "nees_samples" in outcomes[0]:
             record["nees_samples"] = np.array([o["nees_samples"] for o in outcomes])
             record["nees_time_average"] = np.array([o["nees_time_average"] for o in outcomes])
@@ -223,32 +228,45 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
 
     summary, anees = {}, {}
     for name in estimators:
-        record = per_run[name]
         output = getattr(build_estimator(name, scenario), "output", "posterior")
-        n_runs = len(record["rms_deg"])
-        row = {"runs": n_runs, "rms_deg": float(np.sqrt(np.mean(record["rms_deg"] ** 2))),
-               "bound_rms_deg": bound.rms_deg(output)}
-        row["efficiency"] = row["rms_deg"] / row["bound_rms_deg"]
-        if "nees_samples" in record:
-            band = anees_band(n_runs, 3, level)
-            row.update(anees=float(np.mean(record["nees_time_average"])), anees_low=band[0],
-                       anees_high=band[1])
-            row["verdict"] = verdict(row["anees"], band)
-            anees[name] = record["nees_samples"].mean(axis=0)
-        else:
-            row.update(anees=np.nan, anees_low=np.nan, anees_high=np.nan, verdict="no covariance")
-            anees[name] = None
-        if "nis_mean" in record:
-            row["anis"] = float(np.mean(record["nis_mean"]))
-            row["nis_dof"] = record["nis_dof"]
-        summary[name] = row
+        summary[name], anees[name] = _summary_row(per_run[name], bound.rms_deg(output), level)
     # One traced run (the base seed) of each estimator for the per-axis figure.
     samples = {name: simulate(scenario, [name], seed=base_seed, traces=True)
                for name in estimators}
     time_s = bound.time_s[::every]
     bound_rms = np.degrees(np.sqrt(np.trace(bound.posterior[::every], axis1=1, axis2=2)))
     return ConsistencyResult(scenario=scenario, time_s=time_s, summary=summary, anees=anees,
-                             bound_rms_deg=bound_rms, bound=bound, samples=samples)
+                             bound_rms_deg=bound_rms, bound=bound, samples=samples,
+                             diverged_step={name: per_run[name]["diverged_step"]
+                                            for name in estimators})
+
+
+def _summary_row(record: dict, bound_rms_deg: float, level: float) -> tuple[dict, object]:
+    """One estimator's row of the table, and its ANEES over time (or None),
+    from its per-run figures. Runs that diverged are counted and left out of
+    every average; an estimator that diverged in any run is not consistent."""
+    kept = record["diverged_step"] < 0
+    n_runs, lost = int(kept.sum()), int((~kept).sum())
+    row = {"runs": n_runs, "diverged": lost,
+           "rms_deg": float(np.sqrt(np.mean(record["rms_deg"][kept] ** 2))) if n_runs
+           else np.nan, "bound_rms_deg": bound_rms_deg}
+    row["efficiency"] = row["rms_deg"] / row["bound_rms_deg"]
+    anees = None
+    if "nees_samples" in record and n_runs:
+        band = anees_band(n_runs, 3, level)
+        row.update(anees=float(np.mean(record["nees_time_average"][kept])), anees_low=band[0],
+                   anees_high=band[1])
+        row["verdict"] = verdict(row["anees"], band)
+        anees = record["nees_samples"][kept].mean(axis=0)
+    else:
+        row.update(anees=np.nan, anees_low=np.nan, anees_high=np.nan,
+                   verdict="no covariance" if n_runs else "no run")
+    if lost:
+        row["verdict"] = f"diverged in {lost} of {n_runs + lost} runs"
+    if "nis_mean" in record and n_runs:
+        row["anis"] = float(np.mean(record["nis_mean"][kept]))
+        row["nis_dof"] = record["nis_dof"]
+    return row, anees
 
 
 def _map(function, arguments, workers: int, progress_bar):

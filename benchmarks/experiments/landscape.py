@@ -75,8 +75,20 @@ class Landscape:
 
     @property
     def best_index(self) -> int:
-        """Grid index of the lowest mean loss (error std)."""
-        return int(np.argmin(self.table["std_deg"].to_numpy()))
+        """Grid index of the lowest mean loss (error std), among the values
+        where no run diverged."""
+        losses = self.table["std_deg"].to_numpy()
+        if np.all(np.isnan(losses)):
+            raise InvalidParameterError("pc_exponent", [float(self.pc_values[0]),
+                                                        float(self.pc_values[-1])],
+                                        "the EKF diverged at every grid value; choose "
+                                        "another range")
+        return int(np.nanargmin(losses))
+
+    @property
+    def diverged_step(self) -> np.ndarray:
+        """Every run's diverged step (-1: it did not), as in the engine."""
+        return self.runs["diverged_step"].to_numpy()
 
     @property
     def best_pc_exponent(self) -> float:
@@ -95,7 +107,8 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
     with progress(total=len(runs), desc="landscape", unit="run", quiet=quiet) as bar:
         batch = run_chunked(scenario, runs, ["ekf"], progress_bar=bar)
     records = pd.DataFrame({"pc_exponent": grid_pc, "seed": grid_seed,
-                            **batch.statistics["ekf"]})
+                            **batch.statistics["ekf"],
+                            "diverged_step": batch.diverged_step["ekf"]})
     first = make_runs(scenario, seeds[0], pc_exponent=pc_values)
     truth = simulate_truth(scenario)
     curves = run_batch(scenario, first, ["ekf"], keep_traces=True).estimates["ekf"]
@@ -105,8 +118,11 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
     reference_curves = {
         ESTIMATORS[name].label: attitude_error_deg(truth.q_true, references.estimates[name][0])
         for name in ("dead-reckoning", "dead-reckoning-resets")}
-    table = records.groupby("pc_exponent", sort=False)[list(LANDSCAPE_COLUMNS[1:-1])].mean()
-    table["runs"] = records.groupby("pc_exponent", sort=False).size()
+    groups = records.groupby("pc_exponent", sort=False)
+    table = groups[list(LANDSCAPE_COLUMNS[1:-1])].mean()
+    # A grid value where any run diverged has no mean (NaN), not the others' mean.
+    table[groups["diverged_step"].max() >= 0] = np.nan
+    table["runs"] = groups.size()
     return Landscape(pc_values=pc_values, seeds=seeds, runs=records,
                      table=table.reset_index(), time_s=truth.time_s, ekf_curves=ekf_curves,
                      reference_curves=reference_curves, bound_mean_deg=bound_mean_deg(scenario))
@@ -127,7 +143,8 @@ def _draw(landscape: Landscape, index: int):
     curves["EKF"] = landscape.ekf_curves[index]
     plot_errors(left, landscape.time_s, curves)
     ekf_line = left.get_lines()[-1]
-    upper = max(np.max(landscape.ekf_curves), *(np.max(c) for c in curves.values()))
+    upper = np.nanmax([np.nanmax(landscape.ekf_curves, initial=0.0),
+                       *(np.nanmax(c, initial=0.0) for c in curves.values())])
     left.set_ylim(0, 1.05 * upper)
     left.set_title(f"Absolute Attitude Error, pc exponent = {landscape.pc_values[index]:g}")
     for column, label in PANEL_STATISTICS:

@@ -179,6 +179,8 @@ class Replay:
                          "max_deg": float(error[scored].max()),
                          "final_deg": float(error[scored][-1]),
                          "final_bias_error_degps": bias_error})
+            if (self.run.diverged_step or {}).get(name, -1) >= 0:     # no number to score
+                rows[-1].update({column: np.nan for column in SUMMARY_COLUMNS[1:]})
         return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
 
 
@@ -201,10 +203,11 @@ class ReplayData:
 
 def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
                 noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0,
-                settings=None) -> ReplayData:
+                settings=None, allow_imports=()) -> ReplayData:
     """``dataset`` (see :func:`open_dataset`) made ready for any estimator;
     ``settings``, a TOML file of ``[estimators.NAME]`` sections, overrides
-    what :func:`replay_scenario` derives."""
+    what :func:`replay_scenario` derives (importing only the users' modules
+    named in ``allow_imports``, see :meth:`Scenario.from_toml`)."""
     recording, attribution = open_dataset(dataset)
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
@@ -212,7 +215,7 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     recording = recording.from_sample(start)
     scenario = replay_scenario(recording, interval_s, noise_deg)
     if settings is not None:
-        scenario = scenario.with_estimator_settings(settings)
+        scenario = scenario.with_estimator_settings(settings, allow_imports=allow_imports)
     readings = pseudo_star_tracker(recording, scenario, seed)
     sensors = SensorData(omega_meas_radps=recording.gyro_radps,
                          star_tracker_quat=readings.quat, available=readings.available)
@@ -236,7 +239,7 @@ def run_replay(data: ReplayData, estimators=DEFAULT_ESTIMATORS, seed: int = 0,
                quiet: bool = True) -> Replay:
     """Run ``estimators`` on data from :func:`load_replay` (made with ``seed``)."""
     sensors = data.sensors
-    estimates, errors, labels, traces = {}, {}, {}, {}
+    estimates, errors, labels, traces, diverged = {}, {}, {}, {}, {}
     for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
         estimator = build_estimator(name, data.scenario)
         traces[name] = estimator.track(sensors.omega_meas_radps, sensors.star_tracker_quat,
@@ -244,8 +247,10 @@ def run_replay(data: ReplayData, estimators=DEFAULT_ESTIMATORS, seed: int = 0,
         estimates[name] = traces[name].quat
         errors[name] = attitude_error_deg(data.truth.q_true, estimates[name])
         labels[name] = estimator.label
+        diverged[name] = -1 if estimator.diverged_step is None else estimator.diverged_step
     run = RunResult(scenario=data.scenario, seed=seed, truth=data.truth, sensors=sensors,
-                    estimates=estimates, error_deg=errors, labels=labels, traces=traces)
+                    estimates=estimates, error_deg=errors, labels=labels, traces=traces,
+                    diverged_step=diverged)
     return Replay(run=run, recording=data.recording, start_sample=data.start_sample,
                   rest_bias_radps=data.rest_bias_radps, attribution=data.attribution)
 

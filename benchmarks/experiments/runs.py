@@ -47,6 +47,13 @@ SWEEP_PARAMETERS = {
 SWEEP_COLUMNS = ("param", "value") + STAT_COLUMNS
 
 
+def run_statistics(result: RunResult, name: str) -> dict:
+    """``name``'s error statistics in ``result`` (NaN if it diverged), and
+    ``diverged_step`` (-1 if it did not)."""
+    return {**error_statistics(result.error_deg[name]),
+            "diverged_step": result.diverged_step[name]}
+
+
 def run_one(scenario: Scenario, estimator: str, seed: int, out: Path) -> dict:
     """Run one estimator; write ``NAME.csv`` (the trace) and ``NAME.png``."""
     result = simulate(scenario, [estimator], seed=seed)
@@ -56,7 +63,7 @@ def run_one(scenario: Scenario, estimator: str, seed: int, out: Path) -> dict:
     write_csv(out / f"{estimator}.csv", TRACE_COLUMNS, (list(map(float, row)) for row in table))
     write_figure(out / f"{estimator}.png",
                  comparison_figure(result.time_s, {result.labels[estimator]: error}))
-    return error_statistics(error)
+    return run_statistics(result, estimator)
 
 
 def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMATORS,
@@ -72,7 +79,7 @@ def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMA
     """
     workshop = scenario.is_workshop_sensors
     result = simulate(scenario, estimators, seed=seed, traces=not workshop)
-    stats = {name: error_statistics(error) for name, error in result.error_deg.items()}
+    stats = {name: run_statistics(result, name) for name in result.error_deg}
     if summary_name:
         write_summary(out / summary_name, stats)
     if workshop:
@@ -132,7 +139,7 @@ def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out
                                 quiet=quiet):
         result = simulate(case, [estimator], seed=seed)
         error = result.error_deg[estimator]
-        rows.append({"param": param, "value": float(value), **error_statistics(error)})
+        rows.append({"param": param, "value": float(value), **run_statistics(result, estimator)})
         curves[spec.legend.format(value=value, label=result.labels[estimator])] = error
         time_s = result.time_s
     write_csv(out / "sweep.csv", SWEEP_COLUMNS, ([row[c] for c in SWEEP_COLUMNS] for row in rows))

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -111,7 +112,10 @@ class EkfLoss:
         return run_chunked(self.scenario, runs, ["ekf"]).statistics["ekf"]["std_deg"]
 
     def __call__(self, pc_exponent: float) -> float:
-        return float(np.mean(self.run_losses(pc_exponent)))
+        """The mean loss, or infinity if the EKF diverged in any run (its
+        loss is NaN: never a number the minimiser could prefer)."""
+        losses = self.run_losses(pc_exponent)
+        return float(np.mean(losses)) if np.all(np.isfinite(losses)) else math.inf
 
 
 @dataclass
@@ -123,11 +127,18 @@ class TuneResult:
     iterations: list
     message: str
     single_seed_optima: dict | None = None
+    #: Evaluations where the EKF diverged in some run (an infinite loss).
+    diverged_evaluations: int = 0
 
     def as_json(self) -> dict:
-        data = {"pc_exponent": self.pc_exponent, "loss_deg": self.loss_deg,
+        """The result as JSON values: an infinite (diverged) loss is null."""
+        def number(value):
+            return value if math.isfinite(value) else None
+        iterations = [{**row, "f": number(row["f"])} for row in self.iterations]
+        data = {"pc_exponent": self.pc_exponent, "loss_deg": number(self.loss_deg),
                 "evaluations": self.evaluations, "seeds": list(self.seeds),
-                "iterations": self.iterations, "message": self.message}
+                "iterations": iterations, "message": self.message,
+                "diverged_evaluations": self.diverged_evaluations}
         if self.single_seed_optima is not None:
             data["single_seed_optima"] = self.single_seed_optima
         return data
@@ -150,7 +161,9 @@ def tune_pc_exponent(scenario: Scenario, seeds=(0,), bounds=DEFAULT_BOUNDS,
             return objective(x)
         log = minimize_bounded(counted, bounds, xtol)
     result = TuneResult(pc_exponent=log.x, loss_deg=log.fun, evaluations=log.evaluations,
-                        seeds=seeds, iterations=log.iterations, message=log.message)
+                        seeds=seeds, iterations=log.iterations, message=log.message,
+                        diverged_evaluations=sum(not math.isfinite(row["f"])
+                                                 for row in log.iterations))
     if len(seeds) > 1:
         optima = [minimize_bounded(loss_factory(scenario, (seed,)), bounds, xtol).x
                   for seed in progress(seeds, desc="single-seed optima", quiet=quiet)]

@@ -15,6 +15,7 @@ from benchmarks import experiments
 from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_landscape
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_text
+from benchmarks.bounds import check_bound_inputs
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.experiments.tuning import (
@@ -125,6 +126,7 @@ def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
     scenario = scenario or Scenario()
     out = Path(out)
     check_activities(scenario)
+    check_bound_inputs(scenario)      # step 9 draws the bound: refuse before step 1
     started = time.perf_counter()
     bar = progress(total=STEPS, desc="workshop", unit="step", quiet=quiet)
     sections = []

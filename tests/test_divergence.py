@@ -1,0 +1,309 @@
+"""Never a silently wrong number: diverged runs, foreign chunks, malformed
+engine input, and the command line's answers to them."""
+import math
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from benchmarks import Scenario, simulate
+from benchmarks.cli import main
+from benchmarks.divergence import EXIT_DIVERGED
+from benchmarks.engine import RunTable, make_runs, run_batch, run_chunked
+from benchmarks.engine.campaign import CHUNKS, MANIFEST, Campaign, chunk_path, run_campaign
+from benchmarks.experiments.tuning import EkfLoss, tune_pc_exponent
+from benchmarks.metrics import STAT_COLUMNS, error_statistics
+from dynamics.validation import MAX_SEED, InvalidParameterError
+from estimators import DeadReckoning
+from estimators.base import InvalidMeasurementError
+
+
+SHORT = Scenario(tstop=2.0)
+#: e^709 is finite, but the EKF's covariance overflows within two steps.
+DIVERGING_PC = 709.0
+
+
+def one_diverging_table(n_runs=5, bad=2):
+    pc = np.full(n_runs, SHORT.pc_exponent)
+    pc[bad] = DIVERGING_PC
+    return make_runs(SHORT, np.arange(n_runs), pc_exponent=pc)
+
+
+def test_one_diverged_run_of_n_is_counted_nan_and_the_rest_are_right():
+    batch = run_batch(SHORT, one_diverging_table(), ["dead-reckoning", "ekf"])
+    steps = batch.diverged_step["ekf"]
+    assert (steps >= 0).tolist() == [False, False, True, False, False]
+    assert (batch.diverged_step["dead-reckoning"] == -1).all()
+    for column in STAT_COLUMNS:
+        assert math.isnan(batch.statistics["ekf"][column][2])       # never 0
+    healthy = run_batch(SHORT, make_runs(SHORT, [0, 1, 3, 4]), ["ekf"]).statistics["ekf"]
+    for column in STAT_COLUMNS:
+        np.testing.assert_array_equal(batch.statistics["ekf"][column][[0, 1, 3, 4]],
+                                      healthy[column])
+
+
+def test_both_paths_give_the_same_verdict_at_the_same_step():
+    batch = run_batch(SHORT, one_diverging_table(), ["ekf"], keep_traces=True)
+    for seed in range(5):
+        pc = DIVERGING_PC if seed == 2 else SHORT.pc_exponent
+        result = simulate(SHORT.replace(pc_exponent=pc), ["ekf"], seed=seed)
+        assert result.diverged_step["ekf"] == batch.diverged_step["ekf"][seed]
+        engine = batch.estimates["ekf"][seed]
+        np.testing.assert_allclose(result.estimates["ekf"], engine, atol=1e-9, rtol=0)
+        assert np.array_equal(np.isnan(result.estimates["ekf"]), np.isnan(engine))
+        stats = error_statistics(result.error_deg["ekf"])
+        for column in STAT_COLUMNS:
+            np.testing.assert_allclose(stats[column], batch.statistics["ekf"][column][seed],
+                                       rtol=1e-6, atol=1e-9)    # NaN equals NaN here
+    assert batch.diverged_step["ekf"][2] == 0      # trace(e^709 I) overflows at once
+
+
+def test_consistency_streams_nan_for_a_diverged_run_and_counts_it():
+    from benchmarks.experiments.consistency import _summary_row
+    batch = run_batch(SHORT, one_diverging_table(), ["ekf"], consistency=True)
+    record = batch.consistency["ekf"]
+    assert np.isnan(record["nees_time_average"][2]) and np.isnan(record["nis_mean"][2])
+    assert np.isfinite(np.delete(record["nees_time_average"], 2)).all()
+    row, anees = _summary_row({"rms_deg": batch.statistics["ekf"]["rms_deg"],
+                               "diverged_step": batch.diverged_step["ekf"],
+                               **{key: record[key] for key in ("nees_samples",
+                                                               "nees_time_average",
+                                                               "nis_mean", "nis_dof")}},
+                              bound_rms_deg=1.0, level=0.95)
+    assert row["runs"] == 4 and row["diverged"] == 1
+    assert row["verdict"] == "diverged in 1 of 5 runs"
+    assert np.isfinite(row["rms_deg"]) and np.isfinite(anees).all()
+
+
+def test_montecarlo_exits_non_zero_on_divergence_unless_allowed(tmp_path, capsys):
+    argv = ["montecarlo", "--estimators", "dead-reckoning,ekf", "--runs", "3", "--tstop", "1",
+            "--pc-exponent", "709", "--quiet"]
+    assert main(argv + ["--out", str(tmp_path / "a")]) == EXIT_DIVERGED
+    err = capsys.readouterr().err
+    assert "ekf diverged in 3 of 3 runs (first at step 0, t = 0 s)" in err
+    assert "--allow-divergence" in err and "Traceback" not in err
+    lines = (tmp_path / "a" / "montecarlo.csv").read_text().splitlines()
+    ekf = [line.split(",") for line in lines if ",ekf," in line]
+    assert len(ekf) == 3 and all(row[3] == "nan" and row[-1] == "0" for row in ekf)
+    assert main(argv + ["--out", str(tmp_path / "b"), "--allow-divergence"]) == 0
+
+
+def test_per_run_commands_report_divergence(tmp_path, capsys):
+    assert main(["compare", "--pc-exponent", "709", "--tstop", "1", "--quiet",
+                 "--out", str(tmp_path / "c")]) == EXIT_DIVERGED
+    captured = capsys.readouterr()
+    assert "ekf diverged in 1 of 1 runs" in captured.err
+    assert "nan" in captured.out.splitlines()[-2]            # the ekf row of the table
+    assert main(["consistency", "--estimators", "ekf,mekf", "--runs", "2", "--tstop", "1",
+                 "--pc-exponent", "709", "--quiet", "--out", str(tmp_path / "k")]) \
+        == EXIT_DIVERGED
+    table = capsys.readouterr().out
+    assert "diverged in 2 of 2 runs" in table and "consistent" in table   # the MEKF's row
+
+
+def test_the_tuner_counts_a_diverged_candidate_as_an_infinite_loss():
+    assert EkfLoss(SHORT, (0,))(DIVERGING_PC) == math.inf
+    assert math.isfinite(EkfLoss(SHORT, (0,))(-8.7))
+    # Up to about 705.7 the EKF runs (it follows the tracker); above, P = Σ e^pc overflows.
+    result = tune_pc_exponent(SHORT, (0,), bounds=(700.0, 709.0), quiet=True)
+    diverged = [row for row in result.iterations if row["f"] == math.inf]
+    assert result.diverged_evaluations == len(diverged) >= 1
+    assert all(row["x"] > 705.0 for row in diverged)
+    assert math.isfinite(result.loss_deg)
+    assert result.pc_exponent < min(row["x"] for row in diverged)
+    assert EkfLoss(SHORT, (0,))(result.pc_exponent) == result.loss_deg
+    assert all(row["f"] is None for row in result.as_json()["iterations"]
+               if row["x"] in {d["x"] for d in diverged})
+
+
+def test_a_step_that_raises_linalgerror_marks_divergence():
+    class Breaks(DeadReckoning):
+        def _step(self, omega, reading=None):
+            if self.step_index == 4:
+                raise np.linalg.LinAlgError("not positive definite")
+            return super()._step(omega, reading)
+
+    estimates = Breaks(dt=0.01).run(np.zeros((8, 3)), np.tile([1.0, 0, 0, 0], (8, 1)),
+                                    np.zeros(8, dtype=bool))
+    assert np.isfinite(estimates[:3]).all() and np.isnan(estimates[3:]).all()
+
+
+# --- Campaigns know their own chunks ---
+
+def _campaign(**changes):
+    fields = dict(scenario=Scenario(tstop=1.0), estimators=("ekf",), runs=4, base_seed=0,
+                  chunk_runs=2)
+    fields.update(changes)
+    return Campaign(**fields)
+
+
+@pytest.mark.parametrize("other, what", [
+    (dict(base_seed=10), "other settings"),
+    (dict(scenario=Scenario(tstop=1.0, gyro_noise=2e-5)), "other settings")])
+def test_resume_refuses_a_chunk_of_another_campaign(tmp_path, other, what):
+    mine, theirs = tmp_path / "mine", tmp_path / "theirs"
+    run_campaign(_campaign(), mine)
+    run_campaign(_campaign(**other), theirs)
+    shutil.copy(chunk_path(theirs, 0, 2), chunk_path(mine, 0, 2))
+    with pytest.raises(InvalidParameterError, match=rf"runs-000000000-000000002.npz belongs "
+                                                    rf"to another campaign \({what}\)"):
+        run_campaign(_campaign(), mine, resume=True)
+
+
+def test_resume_refuses_a_chunk_with_the_wrong_seeds(tmp_path):
+    run_campaign(_campaign(), tmp_path)
+    # The second chunk renamed as the first: same fingerprint, other seeds.
+    shutil.copy(chunk_path(tmp_path, 2, 4), chunk_path(tmp_path, 0, 2))
+    with pytest.raises(InvalidParameterError, match=r"\(other seeds\)"):
+        run_campaign(_campaign(), tmp_path, resume=True)
+
+
+def test_a_refused_campaign_leaves_no_manifest(tmp_path, monkeypatch):
+    import benchmarks.engine.campaign as campaign_module
+
+    def refuse(*args):
+        raise InvalidParameterError("gyro_noise", 1, "refused during the run")
+    monkeypatch.setattr(campaign_module, "compute_chunk", refuse)
+    with pytest.raises(InvalidParameterError):
+        run_campaign(_campaign(), tmp_path / "a")
+    assert not (tmp_path / "a" / MANIFEST).exists()
+    monkeypatch.undo()
+    run_campaign(_campaign(), tmp_path / "a")       # the corrected rerun is accepted
+    with pytest.raises(InvalidParameterError, match="runs"):
+        run_campaign(_campaign(runs=0), tmp_path / "b")
+    assert not (tmp_path / "b").exists()
+
+
+def test_the_last_seed_is_exact(tmp_path):
+    out = tmp_path / "mc"
+    assert main(["montecarlo", "--estimators", "ekf", "--runs", "1", "--seed", str(MAX_SEED),
+                 "--tstop", "0.5", "--quiet", "--out", str(out)]) == 0
+    assert (out / "montecarlo.csv").read_text().splitlines()[1].split(",")[1] == str(MAX_SEED)
+
+
+# --- The engine's public API checks its arguments ---
+
+def test_unequal_columns_raise_valueerror_without_crashing_the_process():
+    code = """
+import numpy as np
+from benchmarks import Scenario
+from benchmarks.engine import RunTable, run_batch
+scenario = Scenario(tstop=0.5)
+runs = RunTable(np.arange(3), np.full(1, 1e-5), np.full(3, 1e-6), np.full(5, 0.2),
+                np.full(3, -8.7))
+try:
+    run_batch(scenario, runs, ["ekf", "mekf"])
+except ValueError as err:
+    print("ValueError:", err)
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "ValueError: runs = " in done.stdout and "same length" in done.stdout
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: run_batch(SHORT, RunTable(*[np.array([])] * 5), ["ekf"]), "runs"),
+    (lambda: run_batch(SHORT, make_runs(SHORT, [0]), "ekf"), "estimators"),
+    (lambda: run_batch(SHORT, make_runs(SHORT, [0]), []), "estimators"),
+    (lambda: run_batch(SHORT, make_runs(SHORT, [0]), ["ekf"], block_steps=0), "block_steps"),
+    (lambda: run_chunked(SHORT, make_runs(SHORT, [0]), ["ekf"], chunk_runs=0), "chunk_runs"),
+    (lambda: run_batch(SHORT, [0, 1], ["ekf"]), "runs"),
+    (lambda: run_batch(SHORT, RunTable(np.arange(2), np.array([1e-5, np.nan]),
+                                       np.full(2, 1e-6), np.full(2, 0.2), np.full(2, -8.7)),
+                       ["ekf"]), "gyro_noise"),
+])
+def test_bad_engine_arguments_name_themselves(call, name):
+    with pytest.raises(ValueError, match=rf"^{name}"):
+        call()
+
+
+_COLUMN = st.one_of(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=0, max_size=3)
+    .map(np.array),
+    st.lists(st.integers(-3, 3), min_size=0, max_size=3).map(np.array),
+    st.lists(st.booleans(), min_size=1, max_size=3).map(np.array),
+    st.lists(st.text(max_size=2), min_size=1, max_size=2).map(np.array),
+    st.lists(st.complex_numbers(max_magnitude=1), min_size=1, max_size=2).map(np.array),
+    st.just(np.zeros((2, 2))))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(columns=st.tuples(_COLUMN, _COLUMN, _COLUMN, _COLUMN, _COLUMN))
+def test_random_malformed_tables_give_a_valueerror_or_the_right_answer(columns):
+    """Property: whatever the table, the engine refuses it with a ValueError
+    or computes what the validated constructor's table computes."""
+    scenario = Scenario(tstop=0.05)
+    try:
+        batch = run_batch(scenario, RunTable(*columns), ["dead-reckoning", "ekf"])
+    except ValueError:
+        return
+    reference = run_batch(scenario, make_runs(scenario, columns[0], **dict(zip(
+        ("gyro_noise", "star_tracker_noise", "time_between_measurements", "pc_exponent"),
+        columns[1:]))), ["dead-reckoning", "ekf"])
+    for name in batch.estimators:
+        for column in STAT_COLUMNS:
+            np.testing.assert_array_equal(batch.statistics[name][column],
+                                          reference.statistics[name][column])
+
+
+# --- The Python API validates at its door ---
+
+def test_records_of_mismatched_lengths_are_refused_by_name():
+    estimator = DeadReckoning(dt=0.01)
+    star, flags = np.tile([1.0, 0, 0, 0], (5, 1)), np.zeros(5, dtype=bool)
+    with pytest.raises(InvalidMeasurementError, match=r"^star_tracker_quat of shape = \(5, 4\)"):
+        estimator.run(np.zeros((6, 3)), star, np.zeros(6, dtype=bool))
+    with pytest.raises(InvalidMeasurementError, match=r"^available of shape = \(7,\)"):
+        estimator.track(np.zeros((5, 3)), star, np.zeros(7, dtype=bool))
+    with pytest.raises(InvalidMeasurementError, match="must be booleans"):
+        estimator.run(np.zeros((5, 3)), star, np.zeros(5))
+    with pytest.raises(InvalidMeasurementError, match="must be real numbers"):
+        estimator.run(np.zeros((5, 3)) + 1j, star, flags)
+
+
+def test_an_absurd_finite_rate_is_refused_at_its_step_or_skipped():
+    rates = np.zeros((5, 3))
+    rates[3] = [1e300, 0.0, 0.0]
+    star, flags = np.tile([1.0, 0, 0, 0], (5, 1)), np.zeros(5, dtype=bool)
+    with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps at step 3 .*1000"):
+        DeadReckoning(dt=0.01).run(rates, star, flags)
+    skipping = DeadReckoning(dt=0.01, on_invalid="skip")
+    estimates = skipping.run(rates, star, flags)
+    assert skipping.skipped["rate"] == 1 and np.isfinite(estimates).all()
+    assert skipping.diverged_step is None
+
+
+# --- Command-line input that used to be refused wrongly, or accepted wrongly ---
+
+def test_overrides_are_checked_together(tmp_path):
+    assert main(["run", "--estimator", "dead-reckoning", "--tstop", "0.001", "--dt", "1e-4",
+                 "--quiet", "--out", str(tmp_path)]) == 0
+
+
+@pytest.mark.parametrize("argv, first_line", [
+    (["sweep", "--estimator", "dead-reckoning", "--param", "star-tracker-noise",
+      "--values", "1e-6,1e-5"], "param = 'star-tracker-noise': has no effect on dead-reckoning"),
+    (["compare", "--estimators", "dead-reckoning,mekf", "--pc-exponent", "-5"],
+     "pc_exponent = -5.0: has no effect on dead-reckoning, mekf; it is read only by ekf"),
+    (["compare", "--scenario", "scenarios/flight.toml", "--star-tracker-noise", "1e-5"],
+     "star_tracker_noise = 1e-05: has no effect with the rotation star tracker"),
+    (["consistency", "--star-tracker-noise", "0", "--runs", "2"],
+     "star_tracker_noise = 0.0: must be > 0 on every axis for the bound"),
+    (["workshop", "--star-tracker-noise", "0"],
+     "star_tracker_noise = 0.0: must be > 0 on every axis for the bound"),
+    (["montecarlo", "--chunk-size", "100000000"], "chunk_size = 100000000: a chunk of"),
+])
+def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, argv,
+                                                 first_line):
+    from pathlib import Path
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    out = tmp_path / "o"
+    assert main(argv + ["--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"attitude-bench: error: {first_line}") and err.count("\n") == 1
+    assert not out.exists()
