@@ -46,7 +46,7 @@ class _Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        number = r"((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf(inity)?)"
+        number = r"((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf(inity)?|nan)"
         # Also a comma-separated list that starts negative: --values -8.7,-10.9
         self._negative_number_matcher = re.compile(
             rf"^-{number}(,\s*[-+]?{number})*$", re.IGNORECASE)
@@ -66,6 +66,12 @@ def _whole(name: str, minimum: int, maximum: int = MAX_SEED):
                 f"{name} = {text!r}: must be a whole number from {minimum} to {maximum}")
         return value
     return parse
+
+
+def _folder(text: str) -> Path:
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"out = {text!r}: must name a folder (. for this one)")
+    return Path(text)
 
 
 def _number(text: str) -> float:
@@ -153,7 +159,7 @@ def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
     if seed:
         parser.add_argument("--seed", type=_whole("seed", 0), default=0,
                             help="sensor noise seed (default 0)")
-    parser.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
+    parser.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_divergence_option(parser)
@@ -290,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="a TOML file of [estimators.NAME] sections overriding the "
                         "settings derived from the recording")
     _add_import_option(replay)
-    replay.add_argument("--out", type=Path, default=Path("results"), metavar="DIR",
+    replay.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
     replay.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_divergence_option(replay)
@@ -366,7 +372,11 @@ def check_effects(args, scenario: Scenario | None) -> None:
     flags = {name: flag for name, flag in SCENARIO_FLAGS.items()
              if getattr(args, name, None) is not None}
     if args.command == "sweep":
-        flags[SWEEP_PARAMETERS[args.param].field] = "--param " + args.param
+        swept = SWEEP_PARAMETERS[args.param].field
+        if swept in flags:
+            raise UsageError(f"{swept} = {getattr(args, swept)!r}: the sweep sets it "
+                             f"(--param {args.param}); leave {flags[swept]} out")
+        flags[swept] = "--param " + args.param
     for field_name, flag in flags.items():
         reason = ineffective_reason(field_name, scenario, names)
         if reason:
@@ -430,8 +440,9 @@ def command_tune(args, scenario):
         print(f"single-seed optima: 5% {spread['p5']:.3f}, 50% {spread['p50']:.3f}, "
               f"95% {spread['p95']:.3f}")
     if result.diverged_evaluations:
-        print(f"{result.diverged_evaluations} of {result.evaluations} evaluations diverged in "
-              "some run and counted as an infinite loss")
+        print(f"{PROG}: warning: the ekf diverged at {result.diverged_evaluations} of "
+              f"{result.evaluations} evaluations (pc_exponent values), each counted as an "
+              "infinite loss; the optimum did not diverge", file=sys.stderr)
     experiments.write_json(args.out / "tune.json", result.as_json())
     _, stats = experiments.compare(scenario.replace(pc_exponent=result.pc_exponent),
                                    result.seeds[0], args.out, figure_name="tune.png",
@@ -454,9 +465,10 @@ def command_landscape(args, scenario):
 
 def command_animate(args, scenario):
     name = args.estimator or "truth"
-    path = experiments.animate(scenario, args.estimator, args.seed, args.out, args.every,
-                               quiet=args.quiet)
+    path, diverged = experiments.animate(scenario, args.estimator, args.seed, args.out,
+                                         args.every, quiet=args.quiet)
     print(f"wrote {path} and {path.with_suffix('.png')} ({name})")
+    return report_of(scenario.dt, {args.estimator: diverged}) if args.estimator else None
 
 
 def _check_seed_range(args) -> None:
@@ -509,7 +521,10 @@ def command_workshop(args, scenario):
         report = run_flight_study(scenario, args.out, quiet=args.quiet)
     else:
         from benchmarks.experiments.workshop import run_workshop
-        report = run_workshop(scenario, args.out, quiet=args.quiet)
+        divergence = DivergenceReport(scenario.dt)
+        report = run_workshop(scenario, args.out, quiet=args.quiet, divergence=divergence)
+        print(f"wrote {report}")
+        return divergence
     print(f"wrote {report}")
 
 

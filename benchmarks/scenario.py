@@ -78,6 +78,9 @@ MAX_RATE_RADPS = 100.0
 #: The largest gyro noise σ per sample, rad/s: readings then stay far inside
 #: the ±1000 rad/s an estimator accepts (estimators.base.MAX_RATE_RADPS).
 MAX_GYRO_NOISE_RADPS = 10.0
+#: The largest star tracker noise σ per quaternion component (the workshop
+#: model): a unit quaternion's components are at most 1.
+MAX_STAR_NOISE = 10.0
 #: Longest time grid, in steps. The engine's memory no longer grows with the
 #: run, but its time does: at about ten million run-steps a second, one run
 #: of this many steps is a quarter of an hour of the whole machine.
@@ -200,6 +203,13 @@ class Scenario:
                 f"{MAX_GYRO_NOISE_RADPS ** 2 * self.dt:g} with dt = {self.dt:g})")
         set_("star_tracker_noise", finite_number("star_tracker_noise", self.star_tracker_noise,
                                                  minimum=0.0))
+        if self.star_tracker_noise / self.dt > MAX_STAR_NOISE ** 2:
+            raise InvalidParameterError(
+                "star_tracker_noise", self.star_tracker_noise, f"makes the reading noise "
+                f"√(p/dt) = {math.sqrt(self.star_tracker_noise / self.dt):.3g} per quaternion "
+                f"component; at most {MAX_STAR_NOISE:g}, beyond which a reading is noise alone "
+                f"(star_tracker_noise <= {MAX_STAR_NOISE ** 2 * self.dt:g} with dt = "
+                f"{self.dt:g})")
         set_("time_between_measurements", finite_number(
             "time_between_measurements", self.time_between_measurements, strictly_positive=True))
         steps_between_readings(self.time_between_measurements, self.dt)
@@ -232,9 +242,8 @@ class Scenario:
         """The σ the sensors square into variances: refused here while the
         square would overflow (the sensors check the rest)."""
         standard_deviation("gyro_bias_random_walk", self.gyro_bias_random_walk)
-        if np.ndim(self.star_tracker_sigma_arcsec) == 1:
-            axis_standard_deviations("star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec,
-                                     len(self.star_tracker_sigma_arcsec))
+        if np.ndim(self.star_tracker_sigma_arcsec) == 1:     # one σ per sensor axis
+            axis_standard_deviations("star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec)
 
     def build_gyro(self) -> Gyro:
         """The gyro this scenario describes."""

@@ -21,6 +21,7 @@ from benchmarks.metrics import attitude_error_deg
 from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
+from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS, AttitudeEstimator, resolve_estimator
 from sensors.star_tracker import RotationStarTracker
 
@@ -166,7 +167,11 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         (:meth:`~estimators.AttitudeEstimator.track`), in ``RunResult.traces``.
     """
     scenario = scenario or Scenario()
+    if isinstance(estimators, str):
+        raise InvalidParameterError("estimators", estimators, "must be a list of names, e.g. "
+                                    f"[{estimators!r}], not a single string")
     estimators = list(estimators)
+    seed = int(seed_values("seed", seed))
     check_memory(scenario, per_run_bytes(scenario.n_steps, len(estimators), traces),
                  streaming_bytes=engine_bytes(scenario.n_steps))
     truth = simulate_truth(scenario)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynamics.validation import (
+    MAX_RATE_RADPS,
     InvalidParameterError,
     axis_standard_deviations,
     covariance_matrix,
@@ -46,10 +47,6 @@ from dynamics.validation import (
 ON_INVALID = ("raise", "skip")
 #: Which estimate a filter's step returns: before or after that step's reading.
 OUTPUTS = ("prior", "posterior")
-#: The largest body rate a measurement may report, per axis: ten times what a
-#: scenario's truth may turn at (100 rad/s), beyond any spacecraft or hand-held
-#: IMU; a larger finite rate (1e300 rad/s) turns dead reckoning into NaN.
-MAX_RATE_RADPS = 1000.0
 
 
 class InvalidMeasurementError(InvalidParameterError):
@@ -293,8 +290,10 @@ class AttitudeEstimator:
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
         nis = None
         for k in range(n):
+            skipped = self.skipped["reading"]
             quat[k] = self.step(omega[k], star[k] if available[k] else None)
-            innovation = self.innovation_nis if available[k] else None
+            used = available[k] and self.skipped["reading"] == skipped
+            innovation = self.innovation_nis if used and self.diverged_step is None else None
             if innovation is not None:
                 if nis is None:
                     nis = np.full(n, np.nan)

@@ -19,10 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import MAX_RATE_RADPS, InvalidParameterError
 
 #: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
 #: movement flags (N,) and the sampling rate; ``info`` is optional.
+#: The sampling rates a recording may have, Hz.
+MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 1e6
 REQUIRED_KEYS = ("imu_gyr_radps", "opt_quat", "movement", "sampling_rate_hz")
 #: A reference quaternion may be off unit length by this much (rounding of
 #: the recording, not a different convention or scale).
@@ -133,10 +135,17 @@ def load_recording(path, name: str | None = None) -> Recording:
     if rate.shape != () or not np.isfinite(rate) or rate <= 0:
         shown = rate.tolist() if rate.size < 5 else f"an array of shape {rate.shape}"
         refuse(f"sampling_rate_hz = {shown!r} must be one positive number (Hz)")
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        refuse(f"sampling_rate_hz = {float(rate):g} must be within {MIN_RATE_HZ:g} to "
+               f"{MAX_RATE_HZ:g} Hz (an IMU's rate)")
     gyro = gyro.astype(float)
     bad = np.flatnonzero(~np.isfinite(gyro).all(axis=1))
     if len(bad):
         refuse(f"imu_gyr_radps must be finite; row {bad[0]} is {gyro[bad[0]].tolist()}")
+    fast = np.flatnonzero(np.abs(gyro).max(axis=1) > MAX_RATE_RADPS)
+    if len(fast):
+        refuse(f"imu_gyr_radps must be within ±{MAX_RATE_RADPS:g} rad/s (as an estimator "
+               f"accepts); row {fast[0]} is {gyro[fast[0]].tolist()}")
     reference = reference.astype(float)
     present = ~np.isnan(reference).any(axis=1)
     if not present.any():

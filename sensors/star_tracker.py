@@ -48,10 +48,18 @@ class StarTrackerReadings:
     available: np.ndarray
 
 
+#: The longest interval between readings, in steps (a run has at most 1e10).
+MAX_STEPS_BETWEEN = 1e12
+
+
 def steps_between_readings(time_between_measurements: float, dt: float) -> int:
     """``m = T_st / Δt`` as an int; rejects a ``T_st`` that is not a positive
     whole multiple of ``Δt``."""
     ratio = time_between_measurements / dt
+    if not ratio < MAX_STEPS_BETWEEN:        # round(inf) would overflow
+        raise InvalidParameterError(
+            "time_between_measurements", time_between_measurements,
+            f"must be at most {MAX_STEPS_BETWEEN:.0e} steps of dt = {dt:g}")
     steps = round(ratio)
     if steps < 1 or abs(ratio - steps) > _WHOLE_MULTIPLE_TOLERANCE * max(1.0, ratio):
         raise InvalidParameterError(

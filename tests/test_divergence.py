@@ -297,6 +297,23 @@ def test_overrides_are_checked_together(tmp_path):
     (["workshop", "--star-tracker-noise", "0"],
      "star_tracker_noise = 0.0: must be > 0 on every axis for the bound"),
     (["montecarlo", "--chunk-size", "100000000"], "chunk_size = 100000000: a chunk of"),
+    # Found by the audit: overflows that were tracebacks, values that were dropped.
+    (["run", "--estimator", "ekf", "--time-between-measurements", "1e308"],
+     "time_between_measurements = 1e+308: must be at most 1e+12 steps"),
+    (["replay", "--star-tracker-interval", "1e308"], "star_tracker_interval = 1e+308: must be "
+     "shorter than the recording"),
+    (["replay", "--star-tracker-noise-deg", "1e308"], "star_tracker_noise_deg = 1e+308: must "
+     "be at most 90°"),
+    (["compare", "--star-tracker-noise", "1e308"], "star_tracker_noise = 1e+308: makes the "
+     "reading noise"),
+    (["tune", "--bounds", "0", "710"], "bounds = 710.0: must be <= 709"),
+    (["sweep", "--estimator", "ekf", "--param", "pc-exponent", "--values", "-8,-9",
+      "--pc-exponent", "-9"], "pc_exponent = -9.0: the sweep sets it"),
+    (["sweep", "--estimator", "ekf", "--param", "pc-exponent", "--values", "-8,nan"],
+     "pc_exponent = nan: must be finite"),
+    (["landscape", "--pc-step", "1e308"], "pc_step = 1e+308: must be at most pc_max - pc_min"),
+    (["montecarlo", "--scheduler", ""], "scheduler = '': must be an address"),
+    (["compare", "--out", ""], "argument --out: out = '': must name a folder"),
 ])
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, argv,
                                                  first_line):
@@ -307,3 +324,81 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, 
     err = capsys.readouterr().err
     assert err.startswith(f"attitude-bench: error: {first_line}") and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_a_scenario_file_imports_a_module_only_with_consent(tmp_path, monkeypatch, capsys):
+    """The module writes a marker file when imported: without consent it must not be."""
+    marker = tmp_path / "imported.txt"
+    (tmp_path / "noisyfilters.py").write_text(
+        f"open({str(marker)!r}, 'w').write('ran')\n"
+        "from estimators import DeadReckoning\n"
+        "class Mine(DeadReckoning):\n    name = 'noisyfilters:Mine'\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    scenario = tmp_path / "s.toml"
+    scenario.write_text('tstop = 1.0\n[estimators."noisyfilters:Mine"]\nrate_timing = '
+                        '"step-average"\n')
+    argv = ["compare", "--scenario", str(scenario), "--quiet"]
+    assert main(argv + ["--out", str(tmp_path / "a")]) == 2
+    assert "--allow-import noisyfilters" in capsys.readouterr().err
+    assert not marker.exists() and "noisyfilters" not in sys.modules
+    assert main(argv + ["--out", str(tmp_path / "b"), "--allow-import", "noisyfilters"]) == 0
+    assert marker.exists()
+
+
+@pytest.mark.parametrize("change, rule", [
+    ({"sampling_rate_hz": np.array(1e-300)}, "sampling_rate_hz = 1e-300 must be within 0.01"),
+    ({"sampling_rate_hz": np.array(1e308)}, "sampling_rate_hz = 1e+308 must be within 0.01"),
+    ({"imu_gyr_radps": "huge"}, "imu_gyr_radps must be within ±1000 rad/s"),
+])
+def test_recordings_beyond_what_an_estimator_takes_are_refused(tmp_path, capsys, change, rule):
+    from benchmarks.shipped import shipped_file
+    with np.load(shipped_file("datasets/broad/02_undisturbed_slow_rotation_B.npz")) as data:
+        arrays = dict(data)
+    for key, value in change.items():
+        if value == "huge":
+            value = arrays[key].copy()
+            value[5] = [1e300, 0.0, 0.0]
+        arrays[key] = value
+    np.savez(tmp_path / "r.npz", **arrays)
+    assert main(["replay", "--dataset", str(tmp_path / "r.npz"), "--quiet",
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert rule in err and err.count("\n") == 1 and not (tmp_path / "o").exists()
+
+
+def test_animate_and_workshop_report_divergence(tmp_path, capsys):
+    assert main(["animate", "--estimator", "ekf", "--pc-exponent", "709", "--tstop", "1",
+                 "--quiet", "--out", str(tmp_path / "a")]) == EXIT_DIVERGED
+    assert (tmp_path / "a" / "attitude_ekf.gif").exists()      # the truth, the estimate gone
+    assert "ekf diverged in 1 of 1 runs" in capsys.readouterr().err
+    assert main(["workshop", "--pc-exponent", "709", "--tstop", "2", "--quiet",
+                 "--out", str(tmp_path / "w")]) == EXIT_DIVERGED
+    assert "ekf diverged" in capsys.readouterr().err
+    report = (tmp_path / "w" / "report.md").read_text()
+    assert "(ekf diverged: no error to rank)" in report
+
+
+def test_resume_refuses_a_chunk_of_a_campaign_with_other_estimators(tmp_path):
+    mine, theirs = tmp_path / "mine", tmp_path / "theirs"
+    run_campaign(_campaign(estimators=("dead-reckoning", "ekf")), mine)
+    run_campaign(_campaign(), theirs)                   # ekf alone: fewer columns
+    shutil.copy(chunk_path(theirs, 0, 2), chunk_path(mine, 0, 2))
+    with pytest.raises(InvalidParameterError, match="belongs to another campaign"):
+        run_campaign(_campaign(estimators=("dead-reckoning", "ekf")), mine, resume=True)
+    assert chunk_path(mine, 0, 2).exists()              # somebody's result: not deleted
+
+
+def test_skipped_readings_have_no_nis_and_bad_seeds_name_themselves():
+    from estimators import MultiplicativeEKF, QuaternionEKF
+    star = np.tile([1.0, 0, 0, 0], (6, 1))
+    star[2] = 0.0                                      # a zero-norm reading, skipped
+    flags = np.ones(6, dtype=bool)
+    for cls in (QuaternionEKF, MultiplicativeEKF):
+        trace = cls(dt=0.01, on_invalid="skip").track(np.zeros((6, 3)), star, flags)
+        assert np.isnan(trace.nis[2]) and np.isfinite(np.delete(trace.nis, 2)).all()
+    with pytest.raises(InvalidParameterError, match=r"^seed"):
+        make_runs(SHORT, [-1])
+    with pytest.raises(InvalidParameterError, match=r"^seed"):
+        simulate(SHORT, ["ekf"], seed=-1)
+    with pytest.raises(InvalidParameterError, match=r"^estimators = 'ekf'"):
+        simulate(SHORT, "ekf")

@@ -139,8 +139,9 @@ def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
         raise InvalidParameterError(name, settings[name],
                                     f"is not a per-run setting; known: {', '.join(PER_RUN_SETTINGS)}")
     columns = {name: settings.get(name, getattr(scenario, name)) for name in PER_RUN_SETTINGS}
+    seeds = seed_values("seed", seeds)
     try:
-        seeds, *values = np.broadcast_arrays(seed_values("seed", seeds),
+        seeds, *values = np.broadcast_arrays(seeds,
                                              *(np.asarray(columns[n]) for n in PER_RUN_SETTINGS))
     except ValueError:
         raise InvalidParameterError("settings", {n: np.shape(columns[n]) for n in columns},

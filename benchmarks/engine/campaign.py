@@ -159,7 +159,7 @@ def _dask_client(workers: int, scheduler: str | None):
             "workers" if workers else "scheduler", workers or scheduler,
             "needs Dask; install it with pip install '.[distributed]'") from None
     logging.getLogger("distributed").setLevel(logging.ERROR)
-    if scheduler:
+    if scheduler is not None:
         if not _ADDRESS.match(scheduler):
             raise InvalidParameterError("scheduler", scheduler,
                                         "must be an address such as tcp://host:8786")
@@ -198,7 +198,8 @@ def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | Non
     out = Path(out)
     check_campaign(campaign)
     # Connect first: a scheduler that cannot be reached leaves nothing behind.
-    client, cluster = _dask_client(workers, scheduler) if (workers or scheduler) else (None, None)
+    remote = workers or scheduler is not None
+    client, cluster = _dask_client(workers, scheduler) if remote else (None, None)
     try:
         fresh = _prepare(campaign, out, resume)
         todo = [(start, stop) for start, stop in campaign.chunks()
@@ -255,6 +256,7 @@ def _chunk_ok(campaign: Campaign, path: Path, runs: int) -> bool:
     fingerprint, or other seeds) is refused: it is somebody's result."""
     if not path.exists():
         return False
+    found, seeds = None, None
     try:
         with np.load(path) as data:
             keys = [f"{name}/{column}" for name in campaign.estimators for column in CHUNK_COLUMNS]
@@ -263,14 +265,14 @@ def _chunk_ok(campaign: Campaign, path: Path, runs: int) -> bool:
             seeds = data["seed"] if ok else None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile):
         ok = False
-    if not ok:
+    mine = found == campaign.fingerprint()
+    if not ok and (mine or found is None):    # damaged on its way to or on the disk
         path.unlink()
         return False
     start = int(path.stem.split("-")[1])
     expected = seed_range(campaign.base_seed + start, runs)
-    if found != campaign.fingerprint() or not np.array_equal(seeds, expected):
-        what = ("other seeds" if found == campaign.fingerprint()
-                else "other settings" if found else "no fingerprint")
+    if not mine or not np.array_equal(seeds, expected):
+        what = ("other seeds" if mine else "other settings" if found else "no fingerprint")
         raise InvalidParameterError(
             "resume", str(path.parent.parent), f"chunk {CHUNKS}/{path.name} belongs to another "
             f"campaign ({what}); remove it to compute it again, or choose another --out")

@@ -40,6 +40,9 @@ def pc_grid(pc_min: float, pc_max: float, pc_step: float) -> np.ndarray:
     pc_step = finite_number("pc_step", pc_step, strictly_positive=True)
     if pc_max < pc_min:
         raise InvalidParameterError("pc_max", pc_max, f"must be >= pc_min = {pc_min:g}")
+    if pc_step > pc_max - pc_min > 0:
+        raise InvalidParameterError("pc_step", pc_step, f"must be at most pc_max - pc_min = "
+                                    f"{pc_max - pc_min:g}, or the grid would stop at pc_min")
     count = int(np.floor((pc_max - pc_min) / pc_step + 1e-9)) + 1
     if count > MAX_GRID_POINTS:
         raise InvalidParameterError("pc_step", pc_step,

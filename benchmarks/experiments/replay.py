@@ -79,9 +79,17 @@ def open_dataset(dataset: str) -> tuple[Recording, str | None]:
     return load_recording(dataset), None
 
 
+#: The largest σ of the pseudo star tracker per axis, degrees.
+MAX_NOISE_DEG = 90.0
+
+
 def interval_steps(recording: Recording, interval_s: float) -> int:
     """``interval_s`` in whole samples of ``recording``, checked."""
     interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
+    if not interval_s / recording.dt < recording.n_samples:     # round(inf) would overflow
+        raise InvalidParameterError("star_tracker_interval", interval_s,
+                                    f"must be shorter than the recording "
+                                    f"({recording.n_samples * recording.dt:.1f} s)")
     steps = max(1, round(interval_s / recording.dt))
     if steps >= recording.n_samples:
         raise InvalidParameterError("star_tracker_interval", interval_s,
@@ -110,6 +118,10 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
     """
     steps = interval_steps(recording, interval_s)
     noise_deg = finite_number("star_tracker_noise_deg", noise_deg, strictly_positive=True)
+    if noise_deg > MAX_NOISE_DEG:
+        raise InvalidParameterError("star_tracker_noise_deg", noise_deg,
+                                    f"must be at most {MAX_NOISE_DEG:g}°: beyond it a reading "
+                                    "says nothing of the attitude")
     dt = recording.dt
     rest = recording.gyro_radps[recording.rest_samples]
     noise_power = float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1 else 0.0

@@ -152,9 +152,10 @@ def write_json(path: Path, data: dict) -> None:
 
 
 def animate(scenario: Scenario, estimator: str | None, seed: int, out: Path, every: int = 50,
-            quiet: bool = False) -> Path:
+            quiet: bool = False) -> tuple[Path, int]:
     """The 3-D attitude animation ``attitude_NAME.gif`` (``attitude_truth.gif``
-    without an estimator) and its last frame as PNG; returns the GIF's path."""
+    without an estimator) and its last frame as PNG; returns the GIF's path
+    and the step where the estimator diverged (-1: it did not, or none ran)."""
     from benchmarks.figures.animation import frame_indices, write_attitude_animation
     frames = len(frame_indices(scenario.n_steps, every))   # validates every before writing
     result = simulate(scenario, [estimator] if estimator else [], seed=seed)
@@ -164,4 +165,4 @@ def animate(scenario: Scenario, estimator: str | None, seed: int, out: Path, eve
                   quiet=quiet) as bar:
         write_attitude_animation(result.time_s, result.truth.q_true, q_est, gif,
                                  gif.with_suffix(".png"), every=every, progress_bar=bar)
-    return gif
+    return gif, result.diverged_step[estimator] if estimator else -1

@@ -28,7 +28,7 @@ from scipy.optimize import minimize_scalar
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.engine import make_runs, run_chunked
-from dynamics.validation import InvalidParameterError, finite_number
+from dynamics.validation import InvalidParameterError, finite_number, process_exponent
 
 DEFAULT_BOUNDS = (-16.0, 0.0)
 DEFAULT_XTOL = 0.01
@@ -79,8 +79,8 @@ def minimize_bounded(func, bounds=DEFAULT_BOUNDS, xtol: float = DEFAULT_XTOL) ->
 
 
 def validate_bounds(bounds) -> tuple[float, float]:
-    low = finite_number("bounds", bounds[0])
-    high = finite_number("bounds", bounds[1])
+    low = process_exponent("bounds", bounds[0])      # exp(bound) must be finite
+    high = process_exponent("bounds", bounds[1])
     if not low < high:
         raise InvalidParameterError("bounds", [low, high], "must be LO HI with LO < HI")
     return low, high

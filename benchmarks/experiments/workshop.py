@@ -115,14 +115,30 @@ def matrix_text(matrix) -> str:
 
 def ranking_text(stats: dict) -> str:
     """Which estimator had the lowest mean error in this run, in words."""
-    best = min(stats, key=lambda name: stats[name]["mean_deg"])
+    lost = [name for name in stats if not np.isfinite(stats[name]["mean_deg"])]
+    scored = [name for name in stats if name not in lost]
+    diverged = f" ({', '.join(lost)} diverged: no error to rank)" if lost else ""
+    if not scored:
+        return f"Every estimator diverged{diverged}."
+    best = min(scored, key=lambda name: stats[name]["mean_deg"])
     label = "The EKF" if best == "ekf" else f"Here {best}, not the EKF,"
-    return f"{label} has the lowest mean error of the three ({stats[best]['mean_deg']:.3g}°)."
+    return (f"{label} has the lowest mean error of the {len(scored)} that ran to the end "
+            f"({stats[best]['mean_deg']:.3g}°){diverged}." if lost else
+            f"{label} has the lowest mean error of the three ({stats[best]['mean_deg']:.3g}°).")
+
+
+def _count(divergence, stats: dict) -> None:
+    """Add the runs of ``stats`` ({name: statistics}) to ``divergence`` if kept."""
+    if divergence is not None:
+        for name, row in stats.items():
+            divergence.add(name, row["diverged_step"])
 
 
 def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
-                 quiet: bool = False) -> Path:
-    """Run the exercise and write ``out/report.md``; returns its path."""
+                 quiet: bool = False, divergence=None) -> Path:
+    """Run the exercise and write ``out/report.md``; returns its path.
+    ``divergence`` (a :class:`~benchmarks.divergence.DivergenceReport`), if
+    given, counts every estimator run of the comparisons that diverged."""
     scenario = scenario or Scenario()
     out = Path(out)
     check_activities(scenario)
@@ -152,6 +168,7 @@ accuracy and checked against the Jacobi-elliptic closed form).
     # 2. Dead reckoning.
     folder = step("02-dead-reckoning")
     dr_stats = experiments.run_one(scenario, "dead-reckoning", SEED, folder)
+    _count(divergence, {"dead-reckoning": dr_stats})
     experiments.animate(scenario, "dead-reckoning", SEED, folder, quiet=True)
     sections.append(f"""## 2. Dead reckoning
 
@@ -186,6 +203,7 @@ times the mean error).
     _, stats = experiments.compare(scenario, SEED, folder,
                                    estimators=("dead-reckoning", "dead-reckoning-resets"))
     reading_rms = reading_error_rms_deg(scenario)
+    _count(divergence, stats)
     dead_rms, resets_rms = stats["dead-reckoning"]["rms_deg"], \
         stats["dead-reckoning-resets"]["rms_deg"]
     sections.append(f"""## 4. Dead reckoning with star-tracker resets
@@ -219,6 +237,7 @@ the error is still the star tracker's own.
     # 6. EKF.
     folder = step("06-ekf")
     _, ekf_stats = experiments.compare(scenario, SEED, folder)
+    _count(divergence, ekf_stats)
     sections.append(f"""## 6. The extended Kalman filter
 
 The EKF blends both sensors, weighting the gyro's prediction by the process
@@ -249,6 +268,7 @@ A smaller process covariance trusts the gyro more and the star tracker less.
     experiments.write_json(folder / "tune.json", tune.as_json())
     _, tuned = experiments.compare(scenario.replace(pc_exponent=tune.pc_exponent), SEED, folder,
                                    figure_name="tune.png", summary_name="summary.csv")
+    _count(divergence, tuned)
     sections.append(f"""## 8. Activity 3b — tuning with a bounded minimiser
 
 Brent's bounded method (MATLAB's `fminbnd`, scipy's

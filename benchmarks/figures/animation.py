@@ -82,9 +82,16 @@ class AttitudeView:
 
     def show(self, time_s: float, q_true, q_est=None):
         self._place(self.true_body, self.true_axes, q_true)
+        diverged = self.with_estimate and not np.isfinite(q_est).all()
         if self.with_estimate:
-            self._place(self.est_body, self.est_axes, q_est)
-        self.subtitle.set_text(f"Time = {time_s:.1f}")
+            # A diverged estimator (NaN) has no attitude to draw: it vanishes.
+            self.est_body.set_visible(not diverged)
+            for line in self.est_axes:
+                line.set_visible(not diverged)
+            if not diverged:
+                self._place(self.est_body, self.est_axes, q_est)
+        self.subtitle.set_text(f"Time = {time_s:.1f} s" + (" (estimate diverged)" if diverged
+                                                             else ""))
 
 
 def frame_indices(n_steps: int, every: int) -> np.ndarray:
