@@ -173,14 +173,34 @@ def _add_divergence_option(parser: argparse.ArgumentParser) -> None:
                         f"{EXIT_DIVERGED})")
 
 
+def _estimator_name(text: str) -> str:
+    """One estimator: a registry name or a user's ``package.module:ClassName``."""
+    from benchmarks.simulation import resolve_estimator
+    try:
+        resolve_estimator(text)
+    except InvalidParameterError as err:
+        raise argparse.ArgumentTypeError(f"estimator = {text!r}: {err.rule}") from None
+    return text
+
+
 def _estimator_option(parser, required=True):
-    parser.add_argument("--estimator", required=required, choices=tuple(ESTIMATORS),
-                        metavar="NAME", help=f"one of {', '.join(ESTIMATORS)}")
+    parser.add_argument("--estimator", required=required, type=_estimator_name,
+                        metavar="NAME", help=f"one of {', '.join(ESTIMATORS)}, or "
+                        "package.module:ClassName for your own estimator")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("attitude-bench")
+    except PackageNotFoundError:       # run from a source tree that is not installed
+        return "(not installed)"
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Compare spacecraft attitude estimators on the "
                      "Kalman-filter workshop's tumbling-spacecraft scenario.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                      parser_class=_Parser)
 
@@ -192,7 +212,8 @@ def build_parser() -> argparse.ArgumentParser:
                                   "write compare.png and summary.csv")
     compare.add_argument("--estimators", type=_estimator_list,
                          default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
-                         help=f"any of {', '.join(ESTIMATORS)} (default: the workshop's three)")
+                         help=f"any of {', '.join(ESTIMATORS)} or package.module:ClassName "
+                         "(default: the workshop's three)")
     _add_common(compare)
 
     sweep = commands.add_parser("sweep", help="one estimator, one setting varied; "
@@ -580,8 +601,9 @@ COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_swe
             "workshop": command_workshop, "replay": command_replay}
 
 
-#: Commands that run on the streaming engine alone (their memory is flat).
-ENGINE_COMMANDS = ("montecarlo", "tune")
+#: Commands that run on the streaming engine alone (their memory is flat);
+#: montecarlo's grows with its chunks (checked on its own).
+ENGINE_COMMANDS = ("tune",)
 
 
 def check_resources(args, scenario) -> None:
@@ -605,8 +627,7 @@ def check_resources(args, scenario) -> None:
         return
     estimators = len(getattr(args, "estimators", ()) or ()) or 3
     traced = args.command in ("consistency", "compare", "workshop")
-    check_memory(scenario, per_run_bytes(n_steps, estimators, traced),
-                 streaming_bytes=None if args.command == "montecarlo" else streaming)
+    check_memory(scenario, per_run_bytes(n_steps, estimators, traced), streaming_bytes=streaming)
 
 
 #: The files each command writes into --out (checked before any work).

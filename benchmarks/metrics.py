@@ -1,4 +1,4 @@
-"""Summary statistics of an attitude error history (SPEC "What is measured").
+"""Summary statistics of an attitude error history (the workshop model, "What is measured").
 
 The workshop's loss is the sample standard deviation (``ddof = 1``) of the
 error over all ``N`` samples; the other statistics are reported beside it.
@@ -16,7 +16,7 @@ STAT_COLUMNS = ("mean_deg", "median_deg", "std_deg", "three_sigma_deg", "rms_deg
 
 
 def attitude_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
-    """The sign-invariant attitude error of SPEC, in degrees, for ``(..., 4)`` stacks."""
+    """The workshop model's sign-invariant attitude error, degrees, for ``(..., 4)`` stacks."""
     return np.degrees(attitude_error_rad(q_true, q_est))
 
 

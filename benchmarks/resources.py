@@ -20,6 +20,10 @@ from dynamics.validation import InvalidParameterError
 PER_RUN_BYTES_PER_STEP = 240
 ESTIMATOR_BYTES_PER_STEP = 40
 TRACED_ESTIMATOR_BYTES_PER_STEP = 240
+#: Runs of up to this many steps take their truth whole from a cache (64 bytes
+#: per step: 32 MB here, see benchmarks.simulation.truth_blocks); longer ones
+#: integrate it block by block, so their memory stays flat.
+TRUTH_CACHE_STEPS = 500_000
 #: Making the truth whole costs ~150 bytes per step (the integrator's samples
 #: and their copy); the engine does so only up to TRUTH_CACHE_STEPS steps.
 TRUTH_BYTES_PER_STEP = 150
@@ -45,7 +49,6 @@ def per_run_bytes(n_steps: int, estimators: int, traced: bool = False) -> int:
 def engine_bytes(n_steps: int, chunk_runs: int = ENGINE_CHUNK_RUNS) -> int:
     """What the engine holds for chunks of ``chunk_runs`` runs of ``n_steps``:
     flat in the run's length above the truth cache."""
-    from benchmarks.simulation import TRUTH_CACHE_STEPS
     return (min(n_steps, TRUTH_CACHE_STEPS) * TRUTH_BYTES_PER_STEP
             + ENGINE_CHUNK_BYTES * max(chunk_runs, ENGINE_CHUNK_RUNS) // ENGINE_CHUNK_RUNS)
 

@@ -1,6 +1,6 @@
 """Scenarios: every setting of a run, validated where it enters.
 
-:class:`Scenario` holds SPEC's defaults ("Default parameters"), so
+:class:`Scenario` holds the workshop's defaults ("Default parameters"), so
 ``Scenario()`` is the workshop exercise, and the settings that go beyond it:
 the gyro's bias model (:mod:`sensors.gyro`), the rotation-noise star tracker
 (:mod:`sensors.star_tracker`), and each estimator's own options.

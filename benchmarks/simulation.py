@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from benchmarks.metrics import attitude_error_deg
-from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
+from benchmarks.resources import TRUTH_CACHE_STEPS, check_memory, engine_bytes, per_run_bytes
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
 from dynamics.validation import InvalidParameterError, seed_values
@@ -83,10 +83,6 @@ def simulate_truth(scenario: Scenario) -> RigidBodyTruth:
                          scenario.initial_rate_radps.tobytes())
 
 
-#: Runs of up to this many steps take their truth from :func:`simulate_truth`
-#: (cached, 64 bytes per step: 32 MB here) in :func:`truth_blocks`; longer
-#: ones integrate it block by block, so their memory stays flat.
-TRUTH_CACHE_STEPS = 500_000
 
 
 def truth_blocks(scenario: Scenario, block_steps: int, cache_steps: int = TRUTH_CACHE_STEPS):

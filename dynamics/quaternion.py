@@ -100,7 +100,7 @@ def attitude_error_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
 
     Sign-invariant: ``q`` and ``-q`` give zero error; NaN where an estimate
     is not finite. Both inputs are taken as
-    unit quaternions (the workshop metric; see SPEC "What is measured").
+    unit quaternions (the workshop metric; see the workshop model, "What is measured").
     Being an arccos near 1, it cannot resolve angles below about 1e-7 rad
     (6e-6 degrees): identical attitudes can show an error of that size.
     """

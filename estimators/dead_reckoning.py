@@ -3,7 +3,7 @@ r"""Dead reckoning: integrate the gyro, ignore the star tracker.
 .. math:: \hat q_k = f(\hat q_{k-1}, \tilde\omega_k), \qquad \hat q_{-1} = q_0,
 
 with ``f`` the normalised first-order step of :mod:`estimators.model`
-(workshop model, SPEC "The three estimators", item 1). Gyro white noise of
+(the workshop model, "The three estimators", item 1). Gyro white noise of
 power ``p`` makes the error grow as an angle random walk: after ``t``
 seconds each axis has drifted by about ``√(p t)`` radians (Markley &
 Crassidis 2014, §6.2.2).

@@ -8,7 +8,7 @@ r"""Dead reckoning with star-tracker resets.
     \end{cases}
 
 with ``f`` the normalised first-order step of :mod:`estimators.model`
-(workshop model, SPEC "The three estimators", item 2). The error is that of
+(the workshop model, "The three estimators", item 2). The error is that of
 the star tracker at each reading plus the gyro's angle random walk since the
 last one.
 """

@@ -1,6 +1,6 @@
 r"""Additive extended Kalman filter on the four quaternion components.
 
-The workshop's EKF (SPEC, "The three estimators", item 3) treats the
+The workshop's EKF (the workshop model, "The three estimators", item 3) treats the
 quaternion as an ordinary 4-vector, built on filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` with ``dim_x = dim_z = 4``:
 

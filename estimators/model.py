@@ -11,7 +11,7 @@ One first-order step of the kinematics followed by normalisation:
 
 with :math:`\Omega(\omega)` the 4x4 matrix of right multiplication by the
 pure quaternion :math:`[0, \omega]`. Its Jacobian, *including the
-normalisation* (SPEC, "The three estimators"), is
+normalisation* (the workshop model, "The three estimators"), is
 
 .. math::
 

@@ -26,7 +26,7 @@ uses the bias at both ends of the step.
 The noise power :math:`p` of the workshop (Simulink's band-limited white
 noise, variance :math:`p/\Delta t` per sample) *is* :math:`\sigma_v^2`. With
 :math:`\sigma_u = 0`, :math:`\beta_0 = 0` and :math:`K = 0` the model is the
-workshop gyro of SPEC "Sensors", :math:`\tilde\omega_k = \omega_k + n_k`,
+workshop gyro of the workshop model, "Sensors", :math:`\tilde\omega_k = \omega_k + n_k`,
 :math:`n_k \sim \mathcal N(0, (p/\Delta t) I_3)`, and draws exactly the same
 numbers (3 normals per step; with :math:`\sigma_u > 0` it draws 6 per step,
 :math:`[N_{v,k}, N_{u,k}]`, in row order).

@@ -7,7 +7,7 @@ error is a small rotation measured in arcseconds.
           v_k \sim \mathcal N\!\left(0, \tfrac{p_s}{\Delta t} I_4\right),
 
 with ``p_s`` the star tracker noise power, and raises ``available[k]``.
-Between readings the last one is held (workshop model, SPEC "Sensors"). One
+Between readings the last one is held (the workshop model, "Sensors"). One
 ``v_k`` is drawn per reading, in time order, and none between readings: the
 Simulink noise block runs at ``Δt`` but only its samples at reading steps
 ever reach the estimators, and drawing the unused ones would triple the cost

@@ -5,14 +5,7 @@ from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 from benchmarks import Scenario, simulate
-from benchmarks.experiments.consistency import (
-    anees_band,
-    fraction_inside_3sigma,
-    monte_carlo,
-    nees,
-    tidy_frame,
-    verdict,
-)
+from benchmarks.experiments.consistency import anees_band, nees, verdict
 
 N_RUNS = 50
 STEPS = 200
@@ -67,31 +60,6 @@ def test_band_is_the_chi_square_quantile_over_n():
     assert verdict(2.9, (low, high)) == "consistent"
     assert verdict(high * 1.01, (low, high)) == "optimistic"
     assert verdict(low * 0.99, (low, high)) == "pessimistic"
-
-
-def test_fraction_inside_3_sigma_per_axis(rng):
-    covariance = np.diag([1.0, 4.0, 9.0])
-    errors = rng.multivariate_normal(np.zeros(3), covariance, 100_000)
-    inside = fraction_inside_3sigma(errors, np.broadcast_to(covariance, (100_000, 3, 3)))
-    # 0.9973 for a Gaussian; binomial σ = √(0.0027 · 0.9973 / 1e5) = 1.6e-4, 5σ.
-    assert np.all(np.abs(inside - 0.9973) < 8e-4)
-    assert fraction_inside_3sigma(errors, np.broadcast_to(covariance / 4, (100_000, 3, 3)))[0] < 0.9
-
-
-def test_monte_carlo_summary_on_the_flight_filters():
-    scenario = Scenario.from_toml(
-        __import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
-    ).replace(tstop=120.0)
-    results = [simulate(scenario, ["dead-reckoning", "mekf"], seed=seed, traces=True)
-               for seed in range(6)]
-    assert monte_carlo(results, "dead-reckoning") is None     # it reports no covariance
-    summary = monte_carlo(results, "mekf", settle_steps=100)
-    assert summary["verdict"] == "consistent"
-    assert summary["nis_dof"] == 3 and np.isfinite(summary["anis_time_average"])
-    assert summary["inside_3sigma"].shape == (3,) and np.all(summary["inside_3sigma"] > 0.95)
-    frame = tidy_frame(results[0].time_s, {"mekf": summary, "dead-reckoning": None})
-    assert set(frame["estimator"]) == {"mekf"} and len(frame) == len(results[0].time_s)
-    assert {"anees", "anees_low", "anees_high", "anis", "bias_anees"} <= set(frame.columns)
 
 
 def test_consistency_command_prints_the_table_and_writes_csv_and_figure(tmp_path, capsys):

@@ -68,3 +68,29 @@ def test_benchmarks_top_level_stays_small():
     # Past about fifteen modules a flat folder stops explaining itself.
     modules = [p for p in (ROOT / "benchmarks").glob("*.py")]
     assert len(modules) <= 15, sorted(p.name for p in modules)
+
+
+def test_benchmarks_top_level_modules_import_no_circle():
+    """Imports between benchmarks/*.py, function-local ones included, form no circle."""
+    modules = {p.stem: p for p in (ROOT / "benchmarks").glob("*.py") if p.stem != "__init__"}
+    edges = {name: {other for other in modules if other != name and any(
+        imported == f"benchmarks.{other}" or imported.startswith(f"benchmarks.{other}.")
+        for imported in module_imports(path))} for name, path in modules.items()}
+
+    def reaches(start, target, seen=()):
+        return any(step == target or (step not in seen and reaches(step, target, seen + (step,)))
+                   for step in edges[start])
+    circles = sorted(name for name in modules if reaches(name, name))
+    assert not circles, f"import circle through {circles}"
+
+
+def test_no_module_imports_another_modules_private_name():
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            tree = ast.parse(path.read_text(), filename=str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.module:
+                    private = [a.name for a in node.names if a.name.startswith("_")
+                               and not a.name.startswith("__")]
+                    assert not private, f"{path.relative_to(ROOT)} imports {private} " \
+                                        f"from {node.module}"

@@ -1,5 +1,5 @@
 """Exact tier: the truth against the Jacobi-elliptic closed form and the
-conservation laws of a torque-free body (SPEC "Truth")."""
+conservation laws of a torque-free body (the workshop model, "Truth")."""
 import numpy as np
 import pytest
 

@@ -40,7 +40,6 @@ BLOCK_STEPS = 2500
 #: The median histogram: 128 bins per octave (the error's float exponent and
 #: top 7 mantissa bits) from 2⁻²⁰ ≈ 9.5e-7 degrees up, plus one bin below.
 HISTOGRAM_MIN_DEG = 2.0 ** -20
-HISTOGRAM_MAX_DEG = 256.0
 _FIRST_BITS = int(np.array([HISTOGRAM_MIN_DEG]).view(np.int64)[0]) >> 45
 HISTOGRAM_BINS = 1 + 128 * 28
 #: A bin spans at most 2⁻⁷ of its lower edge, which bounds the histogram
@@ -90,7 +89,7 @@ def checked_estimators(estimators) -> tuple:
     """The engine estimators named in ``estimators`` (a list of names), in slot order."""
     if isinstance(estimators, str) or not hasattr(estimators, "__iter__"):
         raise InvalidParameterError("estimators", estimators, "must be a list of names, e.g. "
-                                    f"[{ENGINE_ESTIMATORS[0]!r}], not a single string")
+                                    f"[{estimators!r}], not a single string")
     names = list(estimators)
     for name in names:
         if not isinstance(name, str) or name not in ENGINE_ESTIMATORS:
@@ -439,10 +438,10 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
         star_args = (rotation_model, star_std, steps_between, star_buffer, star_settings[0],
                      star_settings[1], star_settings[2], outage, star_settings[3], uniforms)
         kernels.advance(k0, n_steps - 1, np.ascontiguousarray(truth.q_true),
-                        np.ascontiguousarray(truth.omega_true_radps), dt, gyro_args, star_args, state,
-                        enabled, rows, options, stats, diverged, hist, _FIRST_BITS, traces, keep_traces,
-                        consistency_arrays, bool(health), health_counts, error_every,
-                        error_samples)
+                        np.ascontiguousarray(truth.omega_true_radps), dt, gyro_args, star_args,
+                        state, enabled, rows, options, stats, diverged, hist, _FIRST_BITS,
+                        traces, keep_traces, consistency_arrays, bool(health), health_counts,
+                        error_every, error_samples)
         if progress_bar is not None:
             progress_bar.update(stop - k0)
 

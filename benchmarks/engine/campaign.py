@@ -151,7 +151,7 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
     return not manifest_existed
 
 
-def _dask_client(workers: int, scheduler: str | None):
+def dask_client(workers: int, scheduler: str | None):
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -199,7 +199,7 @@ def run_campaign(campaign: Campaign, out, workers: int = 0, scheduler: str | Non
     check_campaign(campaign)
     # Connect first: a scheduler that cannot be reached leaves nothing behind.
     remote = workers or scheduler is not None
-    client, cluster = _dask_client(workers, scheduler) if remote else (None, None)
+    client, cluster = dask_client(workers, scheduler) if remote else (None, None)
     try:
         fresh = _prepare(campaign, out, resume)
         todo = [(start, stop) for start, stop in campaign.chunks()

@@ -42,7 +42,6 @@ from estimators.mekf import transition_coefficients
 
 #: Estimator slots, in the order of ``estimators.ESTIMATORS``.
 DEAD_RECKONING, RESETS, EKF, MEKF = 0, 1, 2, 3
-N_SLOTS = 4
 #: Per-run streaming accumulators: Welford mean and M2, max, final value.
 MEAN, M2, MAX, FINAL = 0, 1, 2, 3
 N_ACCUMULATORS = 4

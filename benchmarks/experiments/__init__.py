@@ -9,6 +9,7 @@ module                 what it does
 ``consistency``        NEES/NIS campaigns, verdicts, efficiency
 ``workshop``           the whole exercise as a report
 ``flight_study``       the study after it: additive against multiplicative
+``replay``             a recorded gyro against an optical reference
 =====================  ===============================================
 
 The everyday ones are importable from here: ``experiments.compare(...)``.

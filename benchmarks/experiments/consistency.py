@@ -61,12 +61,6 @@ def verdict(anees_value: float, band: tuple[float, float]) -> str:
     return "consistent"
 
 
-def fraction_inside_3sigma(errors: np.ndarray, covariances: np.ndarray) -> np.ndarray:
-    """Per axis, the fraction of samples with ``|e_i| <= 3 √P_ii`` (0.9973 if Gaussian)."""
-    sigma = np.sqrt(np.diagonal(covariances, axis1=-2, axis2=-1))
-    return np.mean(np.abs(errors) <= 3 * sigma, axis=tuple(range(np.ndim(errors) - 1)))
-
-
 def run_errors(result, name: str) -> dict:
     """One run's attitude and bias errors of estimator ``name`` with the
     filter's covariances (from a :func:`~benchmarks.simulation.simulate` run
@@ -78,57 +72,6 @@ def run_errors(result, name: str) -> dict:
     return {"attitude": attitude, "attitude_covariance": trace.attitude_covariance,
             "bias": bias, "bias_covariance": trace.bias_covariance,
             "nis": trace.nis, "nis_dof": trace.nis_dof}
-
-
-def monte_carlo(results, name: str, settle_steps: int = 0, level: float = BAND_LEVEL) -> dict:
-    """Consistency of ``name`` over runs ``results`` (each simulated with traces).
-
-    Returns ANEES over time (attitude, and bias where estimated), its band,
-    ANIS over time at reading steps, the time-averaged figures from
-    ``settle_steps`` on, each axis's fraction inside ±3σ, and the verdict.
-    None for an estimator that reports no covariance.
-    """
-    runs = [run_errors(result, name) for result in results]
-    if runs[0]["attitude_covariance"] is None:
-        return None
-    n_runs = len(runs)
-    attitude_nees = np.array([nees(r["attitude"], r["attitude_covariance"]) for r in runs])
-    summary = {"runs": n_runs, "anees": attitude_nees.mean(axis=0),
-               "band": anees_band(n_runs, 3, level)}
-    summary["anees_time_average"] = float(summary["anees"][settle_steps:].mean())
-    summary["verdict"] = verdict(summary["anees_time_average"], summary["band"])
-    errors = np.array([r["attitude"][settle_steps:] for r in runs])
-    covariances = np.array([r["attitude_covariance"][settle_steps:] for r in runs])
-    summary["inside_3sigma"] = fraction_inside_3sigma(errors, covariances)
-    if runs[0]["bias"] is not None:
-        bias_nees = np.array([nees(r["bias"], r["bias_covariance"]) for r in runs])
-        summary["bias_anees"] = bias_nees.mean(axis=0)
-        summary["bias_anees_time_average"] = float(summary["bias_anees"][settle_steps:].mean())
-    if runs[0]["nis"] is not None:
-        nis = np.array([r["nis"] for r in runs])
-        summary["anis"] = nis.mean(axis=0)
-        summary["nis_dof"] = runs[0]["nis_dof"]
-        summary["nis_band"] = anees_band(n_runs, runs[0]["nis_dof"], level)
-        kept = nis[:, settle_steps:]
-        summary["anis_time_average"] = float(np.nanmean(kept))
-    return summary
-
-
-def tidy_frame(time_s: np.ndarray, summaries: dict) -> pd.DataFrame:
-    """One row per (estimator, time): ANEES with its band, and ANIS where read."""
-    parts = []
-    for name, summary in summaries.items():
-        if summary is None:
-            continue
-        part = pd.DataFrame({"estimator": name, "time_s": time_s, "anees": summary["anees"],
-                             "anees_low": summary["band"][0], "anees_high": summary["band"][1],
-                             "runs": summary["runs"]})
-        if "anis" in summary:
-            part["anis"] = summary["anis"]
-        if "bias_anees" in summary:
-            part["bias_anees"] = summary["bias_anees"]
-        parts.append(part)
-    return pd.concat(parts, ignore_index=True)
 
 
 # --- Campaigns: the engine where an estimator has a kernel, the per-run path otherwise ---
@@ -278,8 +221,8 @@ def _map(function, arguments, workers: int, progress_bar):
             if progress_bar is not None:
                 progress_bar.update(1)
         return out
-    from benchmarks.engine.campaign import _dask_client
-    client, cluster = _dask_client(workers, None)
+    from benchmarks.engine.campaign import dask_client
+    client, cluster = dask_client(workers, None)
     try:
         futures = [client.submit(function, *args, pure=False) for args in arguments]
         out = []
@@ -292,10 +235,6 @@ def _map(function, arguments, workers: int, progress_bar):
         client.close()
         if cluster is not None:
             cluster.close()
-
-
-SUMMARY_COLUMNS = ("runs", "rms_deg", "bound_rms_deg", "efficiency", "anees", "anees_low",
-                   "anees_high", "verdict")
 
 
 def format_summary(summary: dict) -> str:

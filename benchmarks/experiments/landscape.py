@@ -1,4 +1,4 @@
-"""The loss landscape: EKF error statistics across ``pc_exponent`` (SPEC step 9).
+"""The loss landscape: EKF error statistics across ``pc_exponent`` (the workshop's step 9).
 
 For each ``pc_exponent`` on a grid and each seed, the EKF runs on that
 seed's data; each statistic is averaged over the runs. The figure shows,

@@ -20,7 +20,7 @@ from benchmarks.scenario import Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
-from estimators import ESTIMATORS
+from estimators import resolve_estimator
 from sensors.noise import radps_to_deg_per_hr
 
 TRACE_COLUMNS = ("time_s", "q_true_w", "q_true_x", "q_true_y", "q_true_z",
@@ -129,9 +129,7 @@ def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out
     Writes ``sweep.png`` (one error curve per value) and ``sweep.csv`` (one
     row per value); returns those rows.
     """
-    if estimator not in ESTIMATORS:
-        raise InvalidParameterError("estimator", estimator,
-                                    f"must be one of {', '.join(ESTIMATORS)}")
+    resolve_estimator(estimator)                 # a registry name or module:Class
     spec = SWEEP_PARAMETERS[param]
     scenarios = sweep_scenarios(scenario, param, values)
     rows, curves, time_s = [], {}, None

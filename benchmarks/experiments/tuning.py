@@ -10,7 +10,7 @@ iteration table — function count, ``x``, ``f(x)`` and whether the step was
 table is exactly what the algorithm did.
 
 The loss of one run is the sample standard deviation of its attitude error
-(SPEC "What is measured"); over several seeds it is the mean of the runs'
+(the workshop model, "What is measured"); over several seeds it is the mean of the runs'
 losses, so the tuned value fits the noise statistics rather than one
 realisation of the noise.
 """

@@ -1,4 +1,4 @@
-"""The whole exercise in one command: SPEC's steps 1–9 and a Markdown report.
+"""The whole exercise in one command: the workshop's steps 1–9 and a Markdown report.
 
 Each step calls the same function as its command-line counterpart and
 writes into its own folder under ``out``; ``report.md`` tells the story

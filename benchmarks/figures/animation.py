@@ -1,4 +1,4 @@
-"""The spacecraft seen in 3-D, true and estimated attitude together (SPEC steps 1–2).
+"""The spacecraft seen in 3-D, true and estimated attitude together (the workshop's steps 1–2).
 
 The body is a box (the bus) with two solar panels along its body y axis and
 its three body axes drawn as arrows; each frame rotates it by ``R(q)``
