@@ -3,7 +3,7 @@
 Every estimator of the batched engine runs ten million steps (by default) on
 the flight scenario's sensors (:file:`scenarios/flight.toml` lengthened:
 about 11.6 days at 10 Hz), one run per core, with the kernel's health checks
-on (:func:`benchmarks.engine.kernels._check_health`, after every update and
+on (:func:`benchmarks.engine.kernels.common.check_health`, after every update and
 every propagation): |q| within 1e-12 of 1, covariances symmetric to 1e-12 of
 their largest diagonal entry, positive definite, finite. It reports
 

@@ -204,23 +204,23 @@ def test_a_batch_streaming_its_truth_equals_one_holding_it(flight_batch):
 
 
 def test_the_health_checks_count_what_they_should():
-    from benchmarks.engine import kernels
+    from benchmarks.engine.kernels import common as kernels
     counts, factor = np.zeros(kernels.N_HEALTH), np.empty((6, 6))
     good = np.diag([1.0, 2.0, 3.0])
-    kernels._check_health(np.array([1.0, 0, 0, 0]), True, good, 3, counts, factor)
+    kernels.check_health(np.array([1.0, 0, 0, 0]), True, good, 3, counts, factor)
     assert counts[kernels.CHECKS] == 1 and counts[1:kernels.WORST_NORM].sum() == 0
-    kernels._check_health(np.array([1.0 + 1e-9, 0, 0, 0]), True, good, 3, counts, factor)
+    kernels.check_health(np.array([1.0 + 1e-9, 0, 0, 0]), True, good, 3, counts, factor)
     assert counts[kernels.NORM_OFF] == 1 and counts[kernels.WORST_NORM] > 9e-10
-    kernels._check_health(np.array([2.0, 0, 0, 0]), False, good, 3, counts, factor)
+    kernels.check_health(np.array([2.0, 0, 0, 0]), False, good, 3, counts, factor)
     assert counts[kernels.NORM_OFF] == 1                     # not unit by design: not counted
     skewed = good.copy()
     skewed[0, 1] = 1e-6
-    kernels._check_health(np.array([1.0, 0, 0, 0]), True, skewed, 3, counts, factor)
+    kernels.check_health(np.array([1.0, 0, 0, 0]), True, skewed, 3, counts, factor)
     assert counts[kernels.ASYMMETRIC] == 1 and counts[kernels.NOT_POSITIVE_DEFINITE] == 0
     indefinite = np.array([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1.0]])   # eigenvalue -1
-    kernels._check_health(np.array([1.0, 0, 0, 0]), True, indefinite, 3, counts, factor)
+    kernels.check_health(np.array([1.0, 0, 0, 0]), True, indefinite, 3, counts, factor)
     assert counts[kernels.NOT_POSITIVE_DEFINITE] == 1 and counts[kernels.ASYMMETRIC] == 1
-    kernels._check_health(np.array([np.nan, 0, 0, 0]), True, good, 3, counts, factor)
+    kernels.check_health(np.array([np.nan, 0, 0, 0]), True, good, 3, counts, factor)
     assert counts[kernels.NON_FINITE] == 1 and counts[kernels.NORM_OFF] == 2
     assert counts[kernels.CHECKS] == 6
 
@@ -273,7 +273,9 @@ def test_resets_align_a_reading_with_the_prediction_as_the_per_run_class_does():
 def test_the_kernel_compiles_once_whatever_the_block_lengths():
     # A shorter last block used to reach the kernel as a strided view, a
     # second signature and a second cold compile (about 40 s on a fresh machine).
-    from benchmarks.engine import kernels
-    run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), block_steps=333)   # 2001 = 6 x 333 + 3
-    run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), block_steps=1000)
-    assert len(kernels.advance.signatures) == 1, kernels.advance.signatures
+    from benchmarks.engine.kernels import KERNELS, kernel
+    for block_steps in (333, 1000):                 # 2001 = 6 x 333 + 3
+        run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), list(KERNELS),
+                  block_steps=block_steps)
+    for name in KERNELS:
+        assert len(kernel(name).advance.signatures) == 1, (name, kernel(name).advance.signatures)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from benchmarks.engine.kernels import KERNELS, kernel
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
@@ -92,13 +93,13 @@ def checked_estimators(estimators) -> tuple:
                                     f"[{estimators!r}], not a single string")
     names = list(estimators)
     for name in names:
-        if not isinstance(name, str) or name not in ENGINE_ESTIMATORS:
+        if not isinstance(name, str) or name not in KERNELS:
             raise InvalidParameterError("estimators", name,
-                                        f"must be one of {', '.join(ENGINE_ESTIMATORS)}")
+                                        f"must be one of {', '.join(KERNELS)}")
     if not names or len(set(names)) != len(names):
         raise InvalidParameterError("estimators", names, "must name at least one estimator, "
                                     "each once")
-    return tuple(name for name in ENGINE_ESTIMATORS if name in names)
+    return tuple(name for name in KERNELS if name in names)
 
 
 def checked_runs(scenario: Scenario, runs) -> RunTable:
@@ -173,7 +174,7 @@ class BatchResult:
     #: ``nis_mean`` (B,) and ``nis_dof``.
     consistency: dict | None = None
     #: With ``health=True``: per estimator, a dict of ``(B,)`` arrays named as
-    #: :data:`HEALTH_COLUMNS` (see :func:`benchmarks.engine.kernels._check_health`).
+    #: :data:`HEALTH_COLUMNS` (see :func:`benchmarks.engine.kernels.common.check_health`).
     health: dict | None = None
     #: With ``error_every`` = m > 0: ``error_samples[name]`` ``(B, S)``, each
     #: estimator's error (degrees) at steps 0, m, 2m, ... (``sample_time_s``).
@@ -243,44 +244,144 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, uniforms_out, thr
         list(pool.map(fill, np.array_split(np.arange(len(generators)), threads)))
 
 
-#: Every estimator with a kernel, in the kernel's slot order.
-ENGINE_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf")
-
-
-@dataclass(frozen=True)
-class _Estimators:
-    """The settings the kernel needs, read off the per-run classes themselves
-    (built with ``from_scenario``), so the two paths cannot disagree on them."""
-
-    dead_reckoning: object
-    resets: object
-    ekf: object
-    mekf: list      # one MultiplicativeEKF per run (shared where settings repeat)
-
-
-def _reference_estimators(scenario: Scenario, runs: RunTable, with_mekf: bool) -> _Estimators:
-    cache = {}
-    mekf = []
-    for i in range(len(runs) if with_mekf else 0):
-        key = tuple(float(getattr(runs, name)[i]) for name in
-                    ("gyro_noise", "star_tracker_noise", "time_between_measurements"))
-        if key not in cache:
-            case = scenario.replace(gyro_noise=key[0], star_tracker_noise=key[1],
-                                    time_between_measurements=key[2])
-            cache[key] = ESTIMATORS["mekf"].from_scenario(case)
-        mekf.append(cache[key])
-    return _Estimators(dead_reckoning=ESTIMATORS["dead-reckoning"].from_scenario(scenario),
-                       resets=ESTIMATORS["dead-reckoning-resets"].from_scenario(scenario),
-                       ekf=ESTIMATORS["ekf"].from_scenario(scenario), mekf=mekf)
-
-
-#: The health counters' names, in the kernel's order (kernels.CHECKS ...).
+#: Every estimator with a kernel, in the engine's order (the kernel registry's).
+ENGINE_ESTIMATORS = tuple(KERNELS)
+#: The health counters' names, in the kernel's order (common.CHECKS ...).
 HEALTH_COLUMNS = ("checks", "norm_off", "asymmetric", "not_positive_definite", "non_finite",
                   "worst_norm_deviation", "worst_relative_asymmetry")
 
 
-#: Estimators whose kernels stream NEES and NIS (they report a covariance).
-CONSISTENCY_ESTIMATORS = ("ekf", "mekf")
+def per_run_estimators(scenario: Scenario, runs: RunTable, name: str) -> list:
+    """Estimator ``name`` as each run's settings build it (``from_scenario``),
+    shared where the settings repeat: the kernels read their settings here."""
+    cache, built = {}, []
+    for i in range(len(runs)):
+        key = tuple(float(getattr(runs, setting)[i]) for setting in PER_RUN_SETTINGS)
+        if key not in cache:
+            case = scenario.replace(**dict(zip(PER_RUN_SETTINGS, key)))
+            cache[key] = ESTIMATORS[name].from_scenario(case)
+        built.append(cache[key])
+    return built
+
+
+@dataclass
+class _Sensors:
+    """The sensors' settings for every run (a :class:`Block`'s sensor fields
+    but the noise), their generators and the length of a noise block."""
+
+    settings: dict
+    tracker: object              # the scenario's star tracker (its outages)
+    initial_bias: np.ndarray     # (B, 3) the gyro's true bias at the start
+    generators: list
+    block_steps: int
+    threads: int
+
+    def state(self):
+        """A fresh :class:`~benchmarks.engine.kernels.sensors.SensorState`
+        (each kernel advances its own copy of the true bias)."""
+        from benchmarks.engine.kernels.sensors import SensorState
+        return SensorState(bias=self.initial_bias.copy(), bias_last=self.initial_bias.copy())
+
+
+def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int) -> _Sensors:
+    """The per-run path's arithmetic, value by value: √(p/dt + σ_u²dt/12) and the
+    tracker's σ, its readings' interval, and the generators of each run's seed."""
+    n_runs, dt = len(runs), scenario.dt
+    gyro = scenario.build_gyro()
+    tracker = scenario.build_star_tracker()
+    rotation = isinstance(tracker, RotationStarTracker)
+    steps_between = np.array([steps_between_readings(t, dt)
+                              for t in runs.time_between_measurements], dtype=np.int64)
+    # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
+    block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps))
+    readings = -(-block_steps // int(steps_between.min())) + 1
+    dropout = float(tracker.dropout_probability) if rotation else 0.0
+    settings = dict(
+        gyro_std=np.array([gyro.reading_std(p, dt, gyro.bias_random_walk)
+                           for p in runs.gyro_noise]),
+        gyro_normals=np.empty((n_runs, block_steps, gyro.normals_per_step)),
+        bias_step_std=gyro.bias_step_std,
+        gyro_scale=(np.zeros((3, 3)) if gyro.scale_misalignment is None
+                    else np.ascontiguousarray(gyro.scale_misalignment)),
+        has_scale=gyro.scale_misalignment is not None, has_bias=gyro.has_bias_model,
+        rotation_model=rotation,
+        star_std=np.array([math.sqrt(p / dt) for p in runs.star_tracker_noise]),
+        steps_between=steps_between,
+        star_normals=np.empty((n_runs, readings, 3 if rotation else 4)),
+        sigma_rad=np.ascontiguousarray(tracker.sigma_rad) if rotation else np.zeros(3),
+        sensor_to_body=np.ascontiguousarray(tracker.sensor_to_body) if rotation else np.eye(3),
+        canonical=rotation and tracker.sign == "canonical", dropout_probability=dropout,
+        dropout_uniforms=np.empty((n_runs, readings if dropout > 0 else 0)))
+    return _Sensors(settings=settings, tracker=tracker,
+                    initial_bias=np.tile(gyro.initial_bias_radps, (n_runs, 1)),
+                    generators=[sensor_generators(int(seed)) for seed in runs.seeds],
+                    block_steps=block_steps, threads=threads)
+
+
+def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth):
+    """The block of steps from ``k0`` with ``truth``: its normals drawn, in the
+    per-run path's order, and the tracker's outages over it."""
+    from benchmarks.engine.kernels.common import Block
+    settings = dict(sensors.settings)
+    stop = k0 + len(truth.time_s)
+    normals = settings["gyro_normals"]
+    if stop - k0 != normals.shape[1]:
+        # The last, shorter block gets a buffer of its own: a strided view
+        # would compile the kernels a second time (about 40 s, cold).
+        settings["gyro_normals"] = normals = np.empty((normals.shape[0], stop - k0,
+                                                       normals.shape[2]))
+    # Readings fall at k ≡ 0 (mod m) in [k0, stop); floor division makes
+    # (-1) // m = -1, so the reading at k = 0 is counted too.
+    steps_between = settings["steps_between"]
+    counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
+    _fill_normals(sensors.generators, normals, settings["star_normals"], counts,
+                  settings["dropout_uniforms"], sensors.threads)
+    outage = (sensors.tracker.in_outage(truth.time_s) if settings["rotation_model"]
+              else np.zeros(stop - k0, dtype=bool))
+    return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
+                 q_true=np.ascontiguousarray(truth.q_true),
+                 omega_true=np.ascontiguousarray(truth.omega_true_radps), outage=outage,
+                 **settings)
+
+
+def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
+            nees_every: int, settle_steps: int, health: bool, error_every: int):
+    """The kernels' outputs, one row per estimator in ``names``."""
+    from benchmarks.engine.kernels.common import N_ACCUMULATORS, N_HEALTH, Record
+    rows = len(names)
+    n_samples = -(-n_steps // nees_every) if consistency else 0
+    return Record(
+        stats=np.zeros((rows, n_runs, N_ACCUMULATORS)),
+        diverged=np.full((rows, n_runs), -1, dtype=np.int64),
+        hist=np.zeros((rows, n_runs, HISTOGRAM_BINS), dtype=np.uint32),
+        hist_first_bits=_FIRST_BITS,
+        traces=(np.zeros((rows, n_runs, n_steps, 4)) if keep_traces
+                else np.zeros((rows, 0, 0, 4))),
+        keep_traces=bool(keep_traces), error_every=error_every,
+        error_samples=np.zeros((rows, n_runs, -(-n_steps // error_every) if error_every else 0)),
+        consistency=bool(consistency), nees_every=nees_every,
+        settle=min(settle_steps, n_steps - 1),
+        nees_samples=np.zeros((rows, n_runs, n_samples)), nees_sum=np.zeros((rows, n_runs)),
+        nis_sum=np.zeros((rows, n_runs)), nis_count=np.zeros((rows, n_runs)),
+        check_health=bool(health), health=np.zeros((rows, n_runs if health else 0, N_HEALTH)))
+
+
+def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict, record,
+             cache_steps: int, progress_bar) -> dict:
+    """Every run through the whole time grid, block by block (the truth too,
+    integrated as it goes for long runs): the block's noise drawn on every
+    core, then each kernel advances every run through it (each makes the
+    sensors' readings from the noise itself: measured, that costs no more
+    than sharing them). Returns each kernel's sensor state."""
+    readings = {name: sensors.state() for name in kernels}
+    for k0, truth in zip(range(0, scenario.n_steps, sensors.block_steps),
+                         truth_blocks(scenario, sensors.block_steps, cache_steps)):
+        block = _block(sensors, scenario, k0, truth)
+        for row, name in enumerate(kernels):
+            kernels[name].advance(block, readings[name], states[name], record, row)
+        if progress_bar is not None:
+            progress_bar.update(block.steps)
+    return readings
 
 
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
@@ -302,15 +403,14 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     keep_traces : bool
         Keep ``(B, N, 4)`` estimates per estimator; the median is then exact.
     block_steps : int
-        Steps per kernel call (results do not depend on it).
+        Steps of noise drawn at a time (results do not depend on it).
     threads : int, optional
         Threads drawing random numbers (default: one per core).
     consistency : bool
-        Stream the attitude NEES of the estimators in
-        :data:`CONSISTENCY_ESTIMATORS` (sampled every ``nees_every`` steps,
-        and its per-run average from ``settle_steps`` on) and their
-        star-tracker NIS (per-run average); see ``BatchResult.consistency``.
-        No traces are needed.
+        Stream the attitude NEES of the estimators whose kernels report a
+        covariance (sampled every ``nees_every`` steps, and its per-run
+        average from ``settle_steps`` on) and their star-tracker NIS
+        (per-run average); see ``BatchResult.consistency``. No traces are needed.
     cache_steps : int
         Longest run whose truth is taken whole from the cache; longer runs
         integrate it block by block (the same numbers), so memory stays flat.
@@ -326,179 +426,88 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     progress_bar : tqdm-like, optional
         Updated with the steps of each block as it is done.
     """
-    from benchmarks.engine import kernels
     from numba import get_num_threads
-
-    # Every argument is checked before compiled code sees it: the kernel
-    # trusts shapes and lengths, so a bad table would read or write out of bounds.
+    # Every argument is checked before compiled code sees it: the kernels
+    # trust shapes and lengths, so a bad table would read or write out of bounds.
     runs = checked_runs(scenario, runs)
-    estimators = checked_estimators(estimators)
-    block_steps, nees_every, cache_steps, error_every = (
+    names = checked_estimators(estimators)
+    block_steps, nees_every, cache_steps, error_every, settle_steps = (
         whole_number("block_steps", block_steps, 1), whole_number("nees_every", nees_every, 1),
-        whole_number("cache_steps", cache_steps, 0), whole_number("error_every", error_every, 0))
-    settle_steps = whole_number("settle_steps", settle_steps, 0)
-    if threads is not None:
-        threads = whole_number("threads", threads, 1)
-    n_runs, n_steps, dt = len(runs), scenario.n_steps, scenario.dt
-    threads = get_num_threads() if threads is None else threads
-    enabled = np.array([name in estimators for name in ENGINE_ESTIMATORS])
-    reference = _reference_estimators(scenario, runs, "mekf" in estimators)
+        whole_number("cache_steps", cache_steps, 0), whole_number("error_every", error_every, 0),
+        whole_number("settle_steps", settle_steps, 0))
+    threads = get_num_threads() if threads is None else whole_number("threads", threads, 1)
+    kernels = {name: kernel(name) for name in names}
+    objects = {name: per_run_estimators(scenario, runs, name) for name in names}
+    states = {name: kernels[name].initial_state(objects[name]) for name in names}
+    record = _record(names, len(runs), scenario.n_steps, keep_traces, consistency, nees_every,
+                     settle_steps, health, error_every)
+    readings = _advance(scenario, _sensors(scenario, runs, block_steps, threads), kernels,
+                        states, record, cache_steps, progress_bar)
+    return _result(scenario, runs, kernels, objects, states, record,
+                   next(iter(readings.values())))
 
-    # The per-run path's arithmetic, value by value: √(p/dt + σ_u²dt/12) and math.exp.
-    gyro = scenario.build_gyro()
-    gyro_std = np.array([gyro.reading_std(p, dt, gyro.bias_random_walk) for p in runs.gyro_noise])
-    star_tracker = scenario.build_star_tracker()
-    rotation_model = isinstance(star_tracker, RotationStarTracker)
-    star_std = np.array([math.sqrt(p / dt) for p in runs.star_tracker_noise])
-    steps_between = np.array([steps_between_readings(t, dt)
-                              for t in runs.time_between_measurements], dtype=np.int64)
-    q_variance = np.array([math.exp(pc) for pc in runs.pc_exponent])
-    generators = [sensor_generators(int(seed)) for seed in runs.seeds]
 
-    bias_true = np.tile(gyro.initial_bias_radps, (n_runs, 1))
-    bias_last = bias_true.copy()
-    scale = (np.zeros((3, 3)) if gyro.scale_misalignment is None
-             else np.ascontiguousarray(gyro.scale_misalignment))
-    if rotation_model:
-        star_settings = (np.ascontiguousarray(star_tracker.sigma_rad),
-                         np.ascontiguousarray(star_tracker.sensor_to_body),
-                         star_tracker.sign == "canonical",
-                         float(star_tracker.dropout_probability))
+def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchResult:
+    # ``sensors``: a kernel's SensorState (every kernel's holds the same numbers).
+    """The batch's numbers as :class:`BatchResult` reports them."""
+    names, n_steps = tuple(kernels), scenario.n_steps
+    statistics = {name: _statistics(scenario, record, row, n_steps)
+                  for row, name in enumerate(names)}
+    checked = {name: _consistency(record, row, n_steps, scenario.dt,
+                                  kernels[name].nis_dof(objects[name]))
+               for row, name in enumerate(names) if record.consistency
+               and getattr(kernels[name], "REPORTS_COVARIANCE", False)}
+    final = {"gyro_bias_radps": sensors.bias_last}
+    for name in names:
+        extra = getattr(kernels[name], "final", None)
+        if extra is not None and extra(states[name], objects[name]):
+            final[name] = extra(states[name], objects[name])
+    error_every = record.error_every
+    return BatchResult(
+        runs=runs, estimators=names, statistics=statistics,
+        diverged_step={name: record.diverged[row].copy() for row, name in enumerate(names)},
+        estimates={name: record.traces[row] for row, name in enumerate(names)}
+        if record.keep_traces else None,
+        final=final, consistency=checked or None,
+        health={name: dict(zip(HEALTH_COLUMNS, record.health[row].T.copy()))
+                for row, name in enumerate(names)} if record.check_health else None,
+        error_samples={name: record.error_samples[row] for row, name in enumerate(names)}
+        if error_every else None,
+        sample_time_s=np.arange(0, n_steps, error_every) * scenario.dt if error_every else None)
+
+
+def _statistics(scenario: Scenario, record, row: int, n_steps: int) -> dict:
+    """One estimator's per-run statistics from its accumulators (NaN where diverged)."""
+    from benchmarks.engine.kernels.common import FINAL, M2, MAX, MEAN
+    stats = record.stats[row]
+    mean, m2 = stats[:, MEAN], stats[:, M2]
+    std = np.sqrt(m2 / (n_steps - 1)) if n_steps > 1 else np.zeros(len(mean))
+    if record.keep_traces:
+        errors = attitude_error_deg(simulate_truth(scenario).q_true, record.traces[row])
+        median = np.median(errors, axis=1)
     else:
-        star_settings = (np.zeros(3), np.eye(3), False, 0.0)
+        median = histogram_median(record.hist[row].astype(np.int64), n_steps)
+    columns = {"mean_deg": mean.copy(), "median_deg": median, "std_deg": std,
+               "three_sigma_deg": 3.0 * std, "rms_deg": np.sqrt(mean * mean + m2 / n_steps),
+               "max_deg": stats[:, MAX].copy(), "final_deg": stats[:, FINAL].copy()}
+    for column in STAT_COLUMNS:     # a diverged run has no statistics
+        columns[column][record.diverged[row] >= 0] = np.nan
+    return columns
 
-    dr, resets, ekf = reference.dead_reckoning, reference.resets, reference.ekf
-    q_dr = np.tile(dr.initial_attitude, (n_runs, 1))
-    q_resets = np.tile(resets.initial_attitude, (n_runs, 1))
-    previous_rate = np.zeros((n_runs, 3))
-    x_ekf = np.tile(ekf.initial_attitude, (n_runs, 1))
-    P_ekf = np.tile(ekf.initial_covariance * np.eye(4), (n_runs, 1, 1))
-    R = np.ascontiguousarray(ekf.R)
-    mekf = reference.mekf
-    q_mekf = np.array([m.initial_attitude for m in mekf]).reshape(-1, 4)
-    beta_mekf = np.array([m.initial_bias_radps for m in mekf]).reshape(-1, 3)
-    P_mekf = np.array([m.initial_covariance for m in mekf]).reshape(-1, 6, 6)
-    mekf_noise = np.array([m.gyro_noise for m in mekf], dtype=float)
-    mekf_bias_rw = np.array([m.gyro_bias_random_walk for m in mekf], dtype=float)
-    R_mekf = np.array([m.R for m in mekf]).reshape(-1, 3, 3)
-    beta_mekf_last = beta_mekf.copy()
-    P_mekf_last = P_mekf.copy()
-    state = (q_dr, q_resets, previous_rate, x_ekf, P_ekf, q_variance, R, q_mekf, beta_mekf,
-             P_mekf, mekf_noise, mekf_bias_rw, R_mekf, beta_mekf_last, P_mekf_last)
-    options = (dr.rate_timing == "step-average", resets.rate_timing == "step-average",
-               ekf.output == "posterior", bool(mekf) and mekf[0].output == "posterior",
-               resets.align_sign, ekf.align_sign)
 
-    # Accumulators only for the estimators that run: row[slot] is each one's row.
-    rows = np.cumsum(enabled) - 1
-    stats = np.zeros((len(estimators), n_runs, kernels.N_ACCUMULATORS))
-    diverged = np.full((len(estimators), n_runs), -1, dtype=np.int64)
-    hist = np.zeros((len(estimators), n_runs, HISTOGRAM_BINS), dtype=np.uint32)
-    traces = (np.zeros((len(estimators), n_runs, n_steps, 4)) if keep_traces
-              else np.zeros((len(estimators), 0, 0, 4)))
-    nees_every = max(1, int(nees_every))
-    settle_steps = min(max(0, int(settle_steps)), n_steps - 1)
-    n_samples = -(-n_steps // nees_every) if consistency else 0
-    consistency_arrays = (bool(consistency), nees_every, settle_steps,
-                          np.zeros((len(estimators), n_runs, n_samples)),
-                          np.zeros((len(estimators), n_runs)), np.zeros((len(estimators), n_runs)),
-                          np.zeros((len(estimators), n_runs)))
-
-    health_counts = np.zeros((len(estimators), n_runs if health else 0, kernels.N_HEALTH))
-    error_every = max(0, int(error_every))
-    error_samples = np.zeros((len(estimators), n_runs,
-                              -(-n_steps // error_every) if error_every else 0))
-
-    # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
-    columns = gyro.normals_per_step
-    block_steps = max(1, min(int(block_steps) * 3 // columns, n_steps))
-    blocks = [(k0, min(k0 + block_steps, n_steps)) for k0 in range(0, n_steps, block_steps)]
-    max_readings = -(-block_steps // int(steps_between.min())) + 1
-    gyro_buffer = np.empty((n_runs, block_steps, columns))
-    star_buffer = np.empty((n_runs, max_readings, 3 if rotation_model else 4))
-    uniforms = np.empty((n_runs, max_readings if star_settings[3] > 0 else 0))
-
-    # The truth comes in the same blocks (integrated as it goes for long runs).
-    # Draw a block's noise on every core, then advance every run through it.
-    for (k0, stop), truth in zip(blocks, truth_blocks(scenario, block_steps, cache_steps)):
-        # Readings fall at k ≡ 0 (mod m) in [k0, stop); floor division makes
-        # (-1) // m = -1, so the reading at k = 0 is counted too.
-        star_counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
-        block_gyro = gyro_buffer[:, :stop - k0]
-        if not block_gyro.flags.c_contiguous:
-            # The last, shorter block gets a buffer of its own: a strided view
-            # would compile the kernel a second time (about 40 s, cold).
-            gyro_buffer = block_gyro = np.empty((n_runs, stop - k0, columns))
-        _fill_normals(generators, block_gyro, star_buffer, star_counts, uniforms, threads)
-        gyro_args = (gyro_std, block_gyro, gyro.bias_step_std, scale,
-                     gyro.scale_misalignment is not None, gyro.has_bias_model, bias_true,
-                     bias_last)
-        outage = (star_tracker.in_outage(truth.time_s) if rotation_model
-                  else np.zeros(stop - k0, dtype=bool))
-        star_args = (rotation_model, star_std, steps_between, star_buffer, star_settings[0],
-                     star_settings[1], star_settings[2], outage, star_settings[3], uniforms)
-        kernels.advance(k0, n_steps - 1, np.ascontiguousarray(truth.q_true),
-                        np.ascontiguousarray(truth.omega_true_radps), dt, gyro_args, star_args,
-                        state, enabled, rows, options, stats, diverged, hist, _FIRST_BITS,
-                        traces, keep_traces, consistency_arrays, bool(health), health_counts,
-                        error_every, error_samples)
-        if progress_bar is not None:
-            progress_bar.update(stop - k0)
-
-    statistics, estimates = {}, ({} if keep_traces else None)
-    for slot, name in zip(rows[enabled], estimators):
-        mean, m2 = stats[slot, :, kernels.MEAN], stats[slot, :, kernels.M2]
-        std = np.sqrt(m2 / (n_steps - 1)) if n_steps > 1 else np.zeros(n_runs)
-        if keep_traces:
-            estimates[name] = traces[slot]
-            errors = attitude_error_deg(simulate_truth(scenario).q_true, traces[slot])
-            median = np.median(errors, axis=1)
-        else:
-            median = histogram_median(hist[slot].astype(np.int64), n_steps)
-        statistics[name] = {
-            "mean_deg": mean.copy(),
-            "median_deg": median,
-            "std_deg": std,
-            "three_sigma_deg": 3.0 * std,
-            "rms_deg": np.sqrt(mean * mean + m2 / n_steps),
-            "max_deg": stats[slot, :, kernels.MAX].copy(),
-            "final_deg": stats[slot, :, kernels.FINAL].copy(),
-        }
-        for column in STAT_COLUMNS:     # a diverged run has no statistics
-            statistics[name][column][diverged[slot] >= 0] = np.nan
-    checked = {}
-    if consistency:
-        _, _, _, samples, nees_sum, nis_sum, nis_count = consistency_arrays
-        for slot, name in zip(rows[enabled], estimators):
-            if name not in CONSISTENCY_ESTIMATORS:
-                continue
-            lost = diverged[slot] >= 0
-            checked[name] = {
-                "time_s": np.arange(0, n_steps, nees_every) * dt,
-                "nees_samples": _nan_from(samples[slot], np.where(
-                    lost, -(-diverged[slot] // nees_every), -1)),
-                "nees_time_average": np.where(lost, np.nan,
-                                              nees_sum[slot] / (n_steps - settle_steps)),
-                "nis_mean": np.where(lost, np.nan,
-                                     nis_sum[slot] / np.maximum(nis_count[slot], 1)),
-                "nis_dof": (reference.ekf if name == "ekf" else mekf[0]).dim_z}
-    final = {"gyro_bias_radps": bias_last}
-    if "mekf" in estimators:
-        final["mekf"] = {"bias_radps": beta_mekf_last, "covariance": P_mekf_last}
-    checked_health = None
-    if health:
-        checked_health = {name: dict(zip(HEALTH_COLUMNS, health_counts[slot].T.copy()))
-                          for slot, name in zip(rows[enabled], estimators)}
-    sampled = None
-    if error_every:
-        sampled = {name: error_samples[slot] for slot, name in zip(rows[enabled], estimators)}
-    return BatchResult(runs=runs, estimators=estimators, statistics=statistics,
-                       diverged_step={name: diverged[slot].copy()
-                                      for slot, name in zip(rows[enabled], estimators)},
-                       estimates=estimates, final=final, consistency=checked or None,
-                       health=checked_health, error_samples=sampled,
-                       sample_time_s=np.arange(0, n_steps, error_every) * dt if error_every
-                       else None)
+def _consistency(record, row: int, n_steps: int, dt: float, nis_dof: int) -> dict:
+    """One estimator's streamed NEES and NIS (NaN where the run diverged)."""
+    diverged = record.diverged[row]
+    lost = diverged >= 0
+    every = record.nees_every
+    return {"time_s": np.arange(0, n_steps, every) * dt,
+            "nees_samples": _nan_from(record.nees_samples[row],
+                                      np.where(lost, -(-diverged // every), -1)),
+            "nees_time_average": np.where(lost, np.nan,
+                                          record.nees_sum[row] / (n_steps - record.settle)),
+            "nis_mean": np.where(lost, np.nan,
+                                 record.nis_sum[row] / np.maximum(record.nis_count[row], 1)),
+            "nis_dof": nis_dof}
 
 
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,

@@ -1,0 +1,57 @@
+r"""Compiled kernels of the batched engine: one module per estimator, each
+advancing every run of a batch through a block of steps.
+
+Why compiled: the estimators' arithmetic is tiny (4-vectors, 4x4 and 6x6
+covariances), so on the per-run path nearly all the time goes to Python and
+numpy's call overhead, not to arithmetic. numba compiles each kernel's loop
+to machine code; one run is one iteration of a ``prange`` loop (spread over
+the cores), its steps a plain loop with small scratch arrays.
+
+What a kernel module declares (``dead_reckoning.py`` is the shortest):
+
+* ``NAME``, the registry name of the per-run estimator it twins;
+* ``State``, its state as named arrays, and ``initial_state(estimators)``,
+  which reads every setting off the per-run objects (one per run, built by
+  ``from_scenario``), so the two paths can never disagree;
+* ``advance(block, sensors, state, record, row)``, compiled: every run
+  through a :class:`~benchmarks.engine.kernels.common.Block` (the truth and
+  the noise of its sensors, whose readings
+  :mod:`~benchmarks.engine.kernels.sensors` makes, advancing the
+  :class:`~benchmarks.engine.kernels.sensors.SensorState` ``sensors``), its
+  errors written into row ``row`` of the
+  :class:`~benchmarks.engine.kernels.common.Record`
+  (:func:`~benchmarks.engine.kernels.common.record_error`);
+* optionally ``REPORTS_COVARIANCE = True`` with ``nis_dof(estimators)`` (it
+  streams NEES and NIS), and ``final(state, estimators)`` (what it reports
+  at the last step besides the statistics).
+
+:data:`KERNELS` maps a name to its module, in the engine's order. Adding an
+estimator to the engine is its kernel module plus one line here. Each
+formula is the same, in the same order, as its per-run reference, which
+stays the readable definition; the tests hold the two paths to 1e-9 at
+every step. Runs never interact (no reductions across the batch, no
+fast-math reassociation), so a run's numbers are bit-identical whatever
+batch it is computed in.
+
+Inside ``advance`` the loop touches plain arrays only: numba drops writes
+into a named tuple's arrays made inside a parallel loop, and every read of a
+field there costs a reference count (the loop took three times as long).
+"""
+from __future__ import annotations
+
+import importlib
+
+#: Registry name → kernel module (its import path; numba loads on first use).
+KERNELS = {
+    "dead-reckoning": "benchmarks.engine.kernels.dead_reckoning",
+    "dead-reckoning-resets": "benchmarks.engine.kernels.resets",
+    "ekf": "benchmarks.engine.kernels.ekf",
+    "mekf": "benchmarks.engine.kernels.mekf",
+}
+
+
+def kernel(name: str):
+    """The kernel module of estimator ``name`` (a module registered as an
+    object, as a test's toy kernel is, is returned as it is)."""
+    module = KERNELS[name]
+    return importlib.import_module(module) if isinstance(module, str) else module

@@ -1,0 +1,438 @@
+r"""What every engine kernel shares: the error bookkeeping (streaming
+statistics, the median histogram, traces, divergence), the small linear
+algebra, the quaternion steps, the NEES and the health checks.
+
+Each formula is the same, in the same order, as its reference on the
+per-run path (named in each docstring), so the kernels reproduce it to
+rounding. Division by zero follows numpy's IEEE rules
+(``error_model="numpy"``), as on the per-run path, which also spares a check
+on every division.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+
+class Record(NamedTuple):
+    """What the kernels write, one row per estimator run (``rows`` × B):
+    the streaming statistics, the step each run diverged (-1: never), the
+    median histogram, and optionally traces, sampled errors, the NEES and
+    NIS sums and the health counters."""
+
+    stats: np.ndarray            # (rows, B, N_ACCUMULATORS)
+    diverged: np.ndarray         # (rows, B) int64
+    hist: np.ndarray             # (rows, B, bins) uint32
+    hist_first_bits: int
+    traces: np.ndarray           # (rows, B, N, 4), or (rows, 0, 0, 4) when not kept
+    keep_traces: bool
+    error_every: int             # keep the error every that many steps (0: not)
+    error_samples: np.ndarray    # (rows, B, S)
+    consistency: bool            # stream NEES and NIS
+    nees_every: int
+    settle: int                  # first step of the NEES time average
+    nees_samples: np.ndarray     # (rows, B, S)
+    nees_sum: np.ndarray         # (rows, B)
+    nis_sum: np.ndarray          # (rows, B)
+    nis_count: np.ndarray        # (rows, B)
+    check_health: bool
+    health: np.ndarray           # (rows, B, N_HEALTH), or (rows, 0, N_HEALTH)
+
+
+class Block(NamedTuple):
+    """A block of ``steps`` steps from step ``k0``, as every estimator kernel
+    reads it: the truth, and the noise its sensors' readings are made of
+    (:mod:`benchmarks.engine.kernels.sensors`), one row per run. Flat: numba's
+    parallel loops take no tuple nested in a tuple."""
+
+    k0: int                      # the first step
+    steps: int
+    last_step: int               # the run's last step (N - 1)
+    dt: float
+    q_true: np.ndarray           # (T, 4)
+    omega_true: np.ndarray       # (T, 3) rad/s
+    # The gyro (sensors.Gyro): per-sample σ, this block's normals (white
+    # noise, then the bias walk's), the bias walk's step σ, K = scale and misalignment.
+    gyro_std: np.ndarray         # (B,) rad/s
+    gyro_normals: np.ndarray     # (B, T, 3 or 6)
+    bias_step_std: float
+    gyro_scale: np.ndarray       # (3, 3)
+    has_scale: bool
+    has_bias: bool
+    # The star tracker (sensors.StarTracker or RotationStarTracker): readings
+    # at k ≡ 0 (mod m), this block's normals taken in order, and the uniforms
+    # of its dropouts.
+    rotation_model: bool
+    star_std: np.ndarray         # (B,) per-component σ of the workshop model
+    steps_between: np.ndarray    # (B,) int64
+    star_normals: np.ndarray     # (B, readings in this block, 3 or 4)
+    sigma_rad: np.ndarray        # (3,) the rotation model's σ per sensor axis
+    sensor_to_body: np.ndarray   # (3, 3)
+    canonical: bool
+    outage: np.ndarray           # (T,) bool
+    dropout_probability: float
+    dropout_uniforms: np.ndarray  # (B, readings in this block)
+
+
+#: Per-run streaming accumulators: Welford mean and M2, max, final value.
+MEAN, M2, MAX, FINAL = 0, 1, 2, 3
+N_ACCUMULATORS = 4
+#: Histogram bins keep 7 mantissa bits: 128 bins per octave of error.
+HISTOGRAM_SHIFT = 52 - 7
+_RAD_TO_DEG = 180.0 / math.pi
+
+# fdlibm's e_acos.c coefficients (Sun Microsystems, 1993): asin(√z)/√z - 1 ≈ z p(z)/q(z).
+_PS0 = 1.66666666666666657415e-01
+_PS1 = -3.25565818622400915405e-01
+_PS2 = 2.01212532134862925881e-01
+_PS3 = -4.00555345006794114027e-02
+_PS4 = 7.91534994289814532176e-04
+_PS5 = 3.47933107596021167570e-05
+_QS1 = -2.40339491173441421878e+00
+_QS2 = 2.02094576023350569471e+00
+_QS3 = -6.88283971605453293030e-01
+_QS4 = 7.70381505559019352791e-02
+_HIGH_WORD_MASK = np.int64(-4294967296)   # clears the low 32 bits of a double
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def acos(x, bits, bits_int):
+    """arccos(x) for 0 <= x <= 1, within 1 ulp of the C library's.
+
+    The attitude error needs one arccos per step per estimator, and the C
+    library's call was a fifth of the kernel's time. Nearly all attitude
+    errors are below 120°, i.e. x > 0.5, where fdlibm's branch
+    acos(x) = 2 asin(√((1 - x)/2)) with its rational approximation is
+    inlined here; elsewhere the library is called.
+    """
+    if x >= 1.0:
+        return 0.0
+    if x <= 0.5:
+        return math.acos(x)
+    z = (1.0 - x) * 0.5
+    s = math.sqrt(z)
+    bits[0] = s
+    bits_int[0] = bits_int[0] & _HIGH_WORD_MASK
+    df = bits[0]
+    c = (z - df * df) / (s + df)
+    p = z * (_PS0 + z * (_PS1 + z * (_PS2 + z * (_PS3 + z * (_PS4 + z * _PS5)))))
+    q = 1.0 + z * (_QS1 + z * (_QS2 + z * (_QS3 + z * _QS4)))
+    return 2.0 * (df + (p / q) * s + c)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def propagate(q, w, half_dt, out, jacobian, want_jacobian):
+    """out = f(q, ω); jacobian = ∂f/∂q if asked (see estimators.model)."""
+    p, qq, r = w[0], w[1], w[2]
+    # A = I + (dt/2) Ω(ω), Ω the right-product matrix of [0, ω].
+    a00, a01, a02, a03 = 1.0, -half_dt * p, -half_dt * qq, -half_dt * r
+    a10, a11, a12, a13 = half_dt * p, 1.0, half_dt * r, -half_dt * qq
+    a20, a21, a22, a23 = half_dt * qq, -half_dt * r, 1.0, half_dt * p
+    a30, a31, a32, a33 = half_dt * r, half_dt * qq, -half_dt * p, 1.0
+    g0 = a00 * q[0] + a01 * q[1] + a02 * q[2] + a03 * q[3]
+    g1 = a10 * q[0] + a11 * q[1] + a12 * q[2] + a13 * q[3]
+    g2 = a20 * q[0] + a21 * q[1] + a22 * q[2] + a23 * q[3]
+    g3 = a30 * q[0] + a31 * q[1] + a32 * q[2] + a33 * q[3]
+    norm = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3)
+    n0, n1, n2, n3 = g0 / norm, g1 / norm, g2 / norm, g3 / norm
+    out[0], out[1], out[2], out[3] = n0, n1, n2, n3
+    inv_norm = 1.0 / norm   # one division for the 16 entries of F (≤ 1 ulp apart)
+    if want_jacobian:
+        # F = (A - n (nᵀ A)) / |g|
+        c0 = n0 * a00 + n1 * a10 + n2 * a20 + n3 * a30
+        c1 = n0 * a01 + n1 * a11 + n2 * a21 + n3 * a31
+        c2 = n0 * a02 + n1 * a12 + n2 * a22 + n3 * a32
+        c3 = n0 * a03 + n1 * a13 + n2 * a23 + n3 * a33
+        a = ((a00, a01, a02, a03), (a10, a11, a12, a13),
+             (a20, a21, a22, a23), (a30, a31, a32, a33))
+        n = (n0, n1, n2, n3)
+        c = (c0, c1, c2, c3)
+        for i in range(4):
+            for j in range(4):
+                jacobian[i, j] = (a[i][j] - n[i] * c[j]) * inv_norm
+
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def error_arrays(record, row):
+    """Estimator ``row``'s slices of the record that :func:`record_error` and
+    the health checks write, taken out of the tuple (before a kernel's
+    parallel loop: see the kernels package's docstring)."""
+    return (record.stats[row], record.hist[row], record.hist_first_bits, record.traces[row],
+            record.keep_traces, record.error_every, record.error_samples[row],
+            record.diverged[row], record.check_health, record.health[row])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def nees_arrays(record, row):
+    """Estimator ``row``'s NEES and NIS accumulators, likewise."""
+    return (record.consistency, record.nees_every, record.settle, record.nees_samples[row],
+            record.nees_sum[row], record.nis_sum[row], record.nis_count[row])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples):
+    """Step ``k`` is where ``run`` stopped being finite, unless it already had:
+    from ``k`` on its estimate and error are NaN
+    (estimators.base.AttitudeEstimator.state_is_finite)."""
+    if diverged[run] < 0:
+        diverged[run] = k
+    if keep_traces:
+        for i in range(4):
+            traces[run, k, i] = math.nan
+    if error_every and k % error_every == 0:
+        samples[run, k // error_every] = math.nan
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def finite_state(q, n_q, P, n):
+    """The divergence test of estimators.base.AttitudeEstimator.state_is_finite:
+    the sum of the first ``n_q`` state entries and the trace of the leading
+    ``n`` x ``n`` covariance block are finite (a NaN or infinity anywhere in
+    them makes its sum non-finite)."""
+    total = 0.0
+    for i in range(n_q):
+        total += q[i]
+    trace = 0.0
+    for i in range(n):
+        trace += P[i, i]
+    return math.isfinite(total) and math.isfinite(trace)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def record_error(run, k, q_true_k, q, stats, hist, first_bits, traces, keep_traces,
+                 error_every, samples, diverged, bits, bits_int):
+    """Error of estimate ``q`` at step ``k``, folded into the run's accumulators
+    (estimator ``row``'s slices of the :class:`Record`: ``stats``, ``hist``,
+    ``traces``, ``samples``, ``diverged``), kept every ``error_every`` steps if
+    that is not 0. A non-finite estimate marks the run diverged
+    (:func:`mark_diverged`): its error is NaN, never the 0 that
+    ``min(1, NaN)`` would give."""
+    dot = abs(q_true_k[0] * q[0] + q_true_k[1] * q[1] + q_true_k[2] * q[2]
+              + q_true_k[3] * q[3])
+    if diverged[run] >= 0 or not math.isfinite(dot):
+        mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+        return
+    inv_count = 1.0 / (k + 1)     # Welford's 1/n
+    error = 2.0 * acos(min(1.0, dot), bits, bits_int) * _RAD_TO_DEG
+    delta = error - stats[run, MEAN]
+    stats[run, MEAN] += delta * inv_count
+    stats[run, M2] += delta * (error - stats[run, MEAN])
+    if error > stats[run, MAX] or k == 0:
+        stats[run, MAX] = error
+    stats[run, FINAL] = error
+    # Histogram bin from the float's bit pattern (exponent and top mantissa
+    # bits), monotone in the error: a log-like binning without calling log.
+    bits[0] = error
+    index = (bits_int[0] >> HISTOGRAM_SHIFT) - first_bits + 1
+    if index < 0:
+        index = 0
+    elif index >= hist.shape[1]:
+        index = hist.shape[1] - 1
+    hist[run, index] += 1
+    if keep_traces:
+        for i in range(4):
+            traces[run, k, i] = q[i]
+    if error_every and k % error_every == 0:
+        samples[run, k // error_every] = error
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def matmul4(a, b, out):
+    """out = a b for 4x4 arrays (out distinct from a and b)."""
+    for i in range(4):
+        for j in range(4):
+            total = 0.0
+            for m in range(4):
+                total += a[i, m] * b[m, j]
+            out[i, j] = total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def gauss_jordan(S, inverse, n):
+    """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
+    partial pivoting; S is positive definite."""
+    for i in range(n):
+        for j in range(n):
+            inverse[i, j] = 1.0 if i == j else 0.0
+    for col in range(n):
+        pivot = col
+        for row in range(col + 1, n):
+            if abs(S[row, col]) > abs(S[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for j in range(n):
+                S[col, j], S[pivot, j] = S[pivot, j], S[col, j]
+                inverse[col, j], inverse[pivot, j] = inverse[pivot, j], inverse[col, j]
+        diagonal = S[col, col]
+        for j in range(n):
+            S[col, j] /= diagonal
+            inverse[col, j] /= diagonal
+        for row in range(n):
+            if row != col:
+                factor = S[row, col]
+                for j in range(n):
+                    S[row, j] -= factor * S[col, j]
+                    inverse[row, j] -= factor * inverse[col, j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def quadratic_form(y, inverse, n):
+    """yᵀ S⁻¹ y for the first n entries of ``y`` (the NIS and the NEES)."""
+    total = 0.0
+    for i in range(n):
+        for j in range(n):
+            total += y[i] * inverse[i, j] * y[j]
+    return total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def quat_exp(t0, t1, t2, out):
+    """out = δq(θ), the exponential map of dynamics.quaternion.quat_from_rotvec."""
+    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if angle < 1e-4:
+        half_sinc = 0.5 - angle * angle / 48.0
+    else:
+        half_sinc = math.sin(0.5 * angle) / angle
+    out[0] = math.cos(0.5 * angle)
+    out[1] = half_sinc * t0
+    out[2] = half_sinc * t1
+    out[3] = half_sinc * t2
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def quat_times_normalized(q, d, out):
+    """out = (q ⊗ d) / |q ⊗ d| (Hamilton product); out may be q."""
+    w = q[0] * d[0] - q[1] * d[1] - q[2] * d[2] - q[3] * d[3]
+    x = q[0] * d[1] + q[1] * d[0] + q[2] * d[3] - q[3] * d[2]
+    y = q[0] * d[2] - q[1] * d[3] + q[2] * d[0] + q[3] * d[1]
+    z = q[0] * d[3] + q[1] * d[2] - q[2] * d[1] + q[3] * d[0]
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def log_error(q, p, norm):
+    """The rotation vector of ``(q⁻¹ ⊗ p) / norm``, aligned to ``w >= 0``
+    (dynamics.quaternion.rotvec_from_quat): the body-frame error from ``q`` to ``p``."""
+    w = q[0] * p[0] + q[1] * p[1] + q[2] * p[2] + q[3] * p[3]
+    v0 = q[0] * p[1] - q[1] * p[0] - q[2] * p[3] + q[3] * p[2]
+    v1 = q[0] * p[2] + q[1] * p[3] - q[2] * p[0] - q[3] * p[1]
+    v2 = q[0] * p[3] - q[1] * p[2] + q[2] * p[1] - q[3] * p[0]
+    if w < 0:
+        w, v0, v1, v2 = -w, -v0, -v1, -v2
+    w, v0, v1, v2 = w / norm, v0 / norm, v1 / norm, v2 / norm
+    vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if vector_norm < 1e-12:
+        scale = 2.0 / max(w, 1e-300)
+    else:
+        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
+    return scale * v0, scale * v1, scale * v2
+
+
+@njit(cache=True, error_model="numpy")
+def nees(q_true_k, q, C, scratch):
+    """eᵀ C⁻¹ e with e = log(q̂⁻¹ ⊗ q) the body-frame error of estimate ``q``
+    and ``C`` its 3x3 covariance (benchmarks.experiments.consistency.nees)."""
+    # The EKF's estimate is not unit: normalise it inside the log.
+    e = log_error(q, q_true_k, math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]))
+    S = scratch[0]
+    inverse = scratch[1]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = C[i, j]
+    gauss_jordan(S, inverse, 3)
+    return quadratic_form(e, inverse, 3)
+
+
+@njit(cache=True, error_model="numpy")
+def projected_covariance(x, P, out):
+    """4 Ξ(q̂)ᵀ P Ξ(q̂) at the normalised q̂ (estimators.QuaternionEKF.attitude_covariance)."""
+    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    w, a, b, c = x[0] / norm, x[1] / norm, x[2] / norm, x[3] / norm
+    xi = ((-a, -b, -c), (w, -c, b), (c, w, -a), (-b, a, w))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for m in range(4):
+                inner = 0.0
+                for n in range(4):
+                    inner += P[m, n] * xi[n][j]
+                total += xi[m][i] * inner
+            out[i, j] = 4.0 * total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def fold_nees(run, k, value, every, settle, samples, nees_sum):
+    """Add a NEES value to the run's time average (from the settle step) and
+    keep it at the sampled steps."""
+    if k >= settle:
+        nees_sum[run] += value
+    if k % every == 0 and k // every < samples.shape[1]:
+        samples[run, k // every] = value
+
+
+#: Health counters per estimator and run (``run_batch(health=True)``): the
+#: checks made, then how many found |q| off 1 by more than
+#: :data:`NORM_TOLERANCE`, a covariance not symmetric to
+#: :data:`SYMMETRY_TOLERANCE` of its largest diagonal entry, one not positive
+#: definite (a Cholesky pivot <= 0), a NaN or infinity; then the largest
+#: ||q| - 1| and the largest relative asymmetry seen.
+CHECKS, NORM_OFF, ASYMMETRIC, NOT_POSITIVE_DEFINITE, NON_FINITE = 0, 1, 2, 3, 4
+WORST_NORM, WORST_ASYMMETRY = 5, 6
+N_HEALTH = 7
+NORM_TOLERANCE = 1e-12
+SYMMETRY_TOLERANCE = 1e-12
+
+
+@njit(cache=True, error_model="numpy")
+def check_health(q, unit, P, n, counts, factor):
+    """Fold one check of estimate ``q`` (unit by design if ``unit``) and the
+    leading ``n`` x ``n`` block of ``P`` (n = 0: no covariance) into ``counts``."""
+    counts[CHECKS] += 1
+    finite = True
+    for i in range(4):
+        if not math.isfinite(q[i]):
+            finite = False
+    if unit:
+        deviation = abs(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1.0)
+        if not deviation <= NORM_TOLERANCE:
+            counts[NORM_OFF] += 1
+        if deviation > counts[WORST_NORM]:
+            counts[WORST_NORM] = deviation
+    if n:
+        scale = 0.0
+        for i in range(n):
+            scale = max(scale, abs(P[i, i]))
+        asymmetry = 0.0
+        for i in range(n):
+            for j in range(n):
+                if not math.isfinite(P[i, j]):
+                    finite = False
+                asymmetry = max(asymmetry, abs(P[i, j] - P[j, i]))
+        relative = asymmetry / scale if scale > 0.0 else asymmetry
+        if not relative <= SYMMETRY_TOLERANCE:
+            counts[ASYMMETRIC] += 1
+        if relative > counts[WORST_ASYMMETRY]:
+            counts[WORST_ASYMMETRY] = relative
+        # Cholesky of the symmetric part: positive definite iff every pivot > 0.
+        for j in range(n):
+            total = P[j, j]
+            for m in range(j):
+                total -= factor[j, m] * factor[j, m]
+            if not total > 0.0:
+                counts[NOT_POSITIVE_DEFINITE] += 1
+                break
+            factor[j, j] = math.sqrt(total)
+            for i in range(j + 1, n):
+                value = 0.5 * (P[i, j] + P[j, i])
+                for m in range(j):
+                    value -= factor[i, m] * factor[j, m]
+                factor[i, j] = value / factor[j, j]
+    if not finite:
+        counts[NON_FINITE] += 1
+
+

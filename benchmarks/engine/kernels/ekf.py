@@ -1,0 +1,169 @@
+"""The workshop's additive quaternion EKF in the engine:
+:class:`estimators.QuaternionEKF` — filterpy's update with ``H = I`` (Joseph
+form), then the nonlinear predict with the exact Jacobian."""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
+                                              fold_nees, gauss_jordan, mark_diverged, matmul4,
+                                              nees, nees_arrays, projected_covariance,
+                                              propagate, quadratic_form, record_error)
+from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
+                                               star_arrays, star_step)
+
+NAME = "ekf"
+#: It reports a covariance: its kernel streams NEES and NIS.
+REPORTS_COVARIANCE = True
+
+
+class State(NamedTuple):
+    x: np.ndarray                # (B, 4)
+    P: np.ndarray                # (B, 4, 4)
+    q_variance: np.ndarray       # (B,) Q = q_variance I4, read off each run's filter
+    R: np.ndarray                # (4, 4)
+    posterior: bool
+    align_sign: bool
+
+
+def initial_state(estimators) -> State:
+    """From the per-run objects (``from_scenario``), one per run: every
+    setting is read off them, Q included, so the two paths cannot disagree."""
+    first = estimators[0]
+    return State(x=np.array([e.initial_attitude for e in estimators]),
+                 P=np.array([e.initial_covariance * np.eye(4) for e in estimators]),
+                 q_variance=np.array([e.Q[0, 0] for e in estimators]),
+                 R=np.ascontiguousarray(first.R), posterior=first.output == "posterior",
+                 align_sign=first.align_sign)
+
+
+def nis_dof(estimators) -> int:
+    return estimators[0].dim_z
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ekf_update(x, P, z, R, scratch):
+    """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
+    P = (I - K) P (I - K)ᵀ + K R Kᵀ."""
+    S = scratch[0]
+    inverse = scratch[1]
+    K = scratch[2]
+    IK = scratch[3]
+    T = scratch[4]
+    for i in range(4):
+        for j in range(4):
+            S[i, j] = P[i, j] + R[i, j]
+    gauss_jordan(S, inverse, 4)
+    matmul4(P, inverse, K)
+    y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
+    nis = quadratic_form((y0, y1, y2, y3), inverse, 4)
+    for i in range(4):
+        x[i] = x[i] + (K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2 + K[i, 3] * y3)
+    for i in range(4):
+        for j in range(4):
+            IK[i, j] = (1.0 if i == j else 0.0) - K[i, j]
+    # T = (I - K) P ; P = T (I - K)ᵀ + (K R) Kᵀ
+    matmul4(IK, P, T)
+    KR = S   # S is no longer needed
+    matmul4(K, R, KR)
+    for i in range(4):
+        for j in range(4):
+            first = 0.0
+            second = 0.0
+            for m in range(4):
+                first += T[i, m] * IK[j, m]
+                second += KR[i, m] * K[j, m]
+            P[i, j] = first + second
+    return nis
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
+    """x = f(x, ω); P = F P Fᵀ + Q with F the exact Jacobian at the pre-step x."""
+    propagate(x, w, half_dt, x, F, True)
+    FP = scratch[0]
+    for i in range(4):
+        for j in range(4):
+            FP[i, j] = F[i, 0] * P[0, j] + F[i, 1] * P[1, j] + F[i, 2] * P[2, j] \
+                + F[i, 3] * P[3, j]
+    # P is symmetric: compute the upper triangle and mirror it.
+    for i in range(4):
+        for j in range(i, 4):
+            value = FP[i, 0] * F[j, 0] + FP[i, 1] * F[j, 1] + FP[i, 2] * F[j, 2] \
+                + FP[i, 3] * F[j, 3]
+            P[i, j] = value
+            P[j, i] = value
+        P[i, i] += q_variance
+
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def advance(block, sensors, state, record, row):
+    """Every run through ``block``: update with each reading, then predict."""
+    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
+        block.q_true
+    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_step_std, bias,
+     bias_last) = gyro_arrays(block, sensors)
+    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
+     outage, dropout_probability, uniforms) = star_arrays(block)
+    (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
+     health) = error_arrays(record, row)
+    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum,
+     nis_count) = nees_arrays(record, row)
+    x_all, P_all, q_variance, R = state.x, state.P, state.q_variance, state.R
+    posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
+    for run in prange(x_all.shape[0]):
+        w, z, dq = np.empty(3), np.empty(4), np.empty(4)
+        prior, aligned = np.empty(4), np.empty(4)
+        F = np.empty((4, 4))
+        scratch = np.empty((5, 4, 4))
+        scratch6 = np.empty((7, 6, 6))
+        projected = np.empty((3, 3))
+        bits = np.empty(1)
+        bits_int = bits.view(np.int64)
+        factor = np.empty((6, 6))
+        x, P = x_all[run], P_all[run]
+        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        for j in range(steps):
+            k = k0 + j
+            gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
+                         has_bias, bias_step_std, bias, bias_last)
+            available, countdown, reading = star_step(
+                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
+                steps_between, star_normals, sigma_rad, mount, canonical, outage,
+                dropout_probability, uniforms)
+            for i in range(4):
+                prior[i] = x[i]
+            if streaming and not posterior:
+                projected_covariance(x, P, projected)
+                fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every, settle,
+                          nees_samples, nees_sum)
+            if available:
+                flip = align_sign and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2]
+                                       + x[3] * z[3]) < 0
+                for i in range(4):
+                    aligned[i] = -z[i] if flip else z[i]
+                nis = _ekf_update(x, P, aligned, R, scratch)
+                if check:   # the additive update leaves |x| off 1 by design
+                    check_health(x, False, P, 4, health[run], factor)
+                if streaming:
+                    nis_sum[run] += nis
+                    nis_count[run] += 1
+            if posterior:
+                for i in range(4):
+                    prior[i] = x[i]
+                if streaming:
+                    projected_covariance(x, P, projected)
+                    fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every,
+                              settle, nees_samples, nees_sum)
+            record_error(run, k, q_true[j], prior, stats, hist, first_bits, traces, keep_traces,
+                         error_every, samples, diverged, bits, bits_int)
+            _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
+            if not finite_state(x, 4, P, 4):
+                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+            if check:
+                check_health(x, True, P, 4, health[run], factor)
+

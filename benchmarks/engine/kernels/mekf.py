@@ -1,0 +1,241 @@
+"""The multiplicative EKF in the engine: :class:`estimators.MultiplicativeEKF`
+— :func:`estimators.mekf.discrete_error_model`, filterpy's Joseph update with
+``H = [I 0]``, the reset, and the exact quaternion step."""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
+                                              fold_nees, gauss_jordan, log_error, mark_diverged,
+                                              nees, nees_arrays, quadratic_form, quat_exp,
+                                              quat_times_normalized, record_error)
+from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
+                                               star_arrays, star_step)
+from estimators.mekf import transition_coefficients
+
+NAME = "mekf"
+#: It reports a covariance: its kernel streams NEES and NIS.
+REPORTS_COVARIANCE = True
+
+
+class State(NamedTuple):
+    q: np.ndarray                # (B, 4)
+    beta: np.ndarray             # (B, 3) the bias estimate, rad/s
+    P: np.ndarray                # (B, 6, 6)
+    noise: np.ndarray            # (B,) σ_v², each run's filter's
+    bias_rw: np.ndarray          # (B,) σ_u
+    R: np.ndarray                # (B, 3, 3)
+    beta_last: np.ndarray        # (B, 3) the output bias at the last step
+    P_last: np.ndarray           # (B, 6, 6) and its covariance
+    posterior: bool
+
+
+def initial_state(estimators) -> State:
+    """From the per-run objects (``from_scenario``), one per run."""
+    beta = np.array([e.initial_bias_radps for e in estimators]).reshape(-1, 3)
+    P = np.array([e.initial_covariance for e in estimators]).reshape(-1, 6, 6)
+    return State(q=np.array([e.initial_attitude for e in estimators]).reshape(-1, 4),
+                 beta=beta, P=P,
+                 noise=np.array([e.gyro_noise for e in estimators], dtype=float),
+                 bias_rw=np.array([e.gyro_bias_random_walk for e in estimators], dtype=float),
+                 R=np.array([e.R for e in estimators]).reshape(-1, 3, 3),
+                 beta_last=beta.copy(), P_last=P.copy(),
+                 posterior=estimators[0].output == "posterior")
+
+
+def nis_dof(estimators) -> int:
+    return estimators[0].dim_z
+
+
+def final(state, estimators) -> dict:
+    """The output bias estimate and its 6x6 covariance at the last step."""
+    return {"bias_radps": state.beta_last, "covariance": state.P_last}
+
+
+#: The MEKF's transition coefficients: the per-run function itself, compiled
+#: (plain scalar arithmetic, so one definition serves both paths).
+_transition_coefficients = njit(cache=True, inline="always",
+                                error_model="numpy")(transition_coefficients)
+
+
+@njit(cache=True, error_model="numpy")
+def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
+    """q ⊗ δq(ω̂Δt), P = Φ P Φᵀ + Q with Φ = [[A, B], [0, I]] (estimators.mekf)."""
+    o0, o1, o2 = w_meas[0] - beta[0], w_meas[1] - beta[1], w_meas[2] - beta[2]
+    rate = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    s1, c2, s3, q5, q4 = _transition_coefficients(rate, dt)
+    W = scratch[0]
+    W2 = scratch[1]
+    A = scratch[2]
+    Bm = scratch[3]
+    Q11 = scratch[4]
+    Q12 = scratch[5]
+    W[0, 0], W[0, 1], W[0, 2] = 0.0, -o2, o1
+    W[1, 0], W[1, 1], W[1, 2] = o2, 0.0, -o0
+    W[2, 0], W[2, 1], W[2, 2] = -o1, o0, 0.0
+    su2 = bias_rw * bias_rw
+    for i in range(3):
+        for j in range(3):
+            W2[i, j] = W[i, 0] * W[0, j] + W[i, 1] * W[1, j] + W[i, 2] * W[2, j]
+    for i in range(3):
+        for j in range(3):
+            eye = 1.0 if i == j else 0.0
+            A[i, j] = eye - s1 * W[i, j] + c2 * W2[i, j]
+            Bm[i, j] = -(dt * eye - c2 * W[i, j] + s3 * W2[i, j])
+            Q11[i, j] = noise * dt * eye + su2 * (dt * dt * dt / 3.0 * eye + q5 * W2[i, j])
+            Q12[i, j] = -su2 * (0.5 * dt * dt * eye - s3 * W[i, j] + q4 * W2[i, j])
+    # FP = Φ P: the top three rows A P_top + B P_bottom, the bottom three P's own.
+    FP = scratch[6]
+    for i in range(3):
+        for j in range(6):
+            FP[i, j] = (A[i, 0] * P[0, j] + A[i, 1] * P[1, j] + A[i, 2] * P[2, j]
+                        + Bm[i, 0] * P[3, j] + Bm[i, 1] * P[4, j] + Bm[i, 2] * P[5, j])
+    for i in range(3, 6):
+        for j in range(6):
+            FP[i, j] = P[i, j]
+    # P = FP Φᵀ + Q, upper triangle mirrored (P is symmetric).
+    for i in range(6):
+        for j in range(i, 6):
+            if j < 3:
+                value = (FP[i, 0] * A[j, 0] + FP[i, 1] * A[j, 1] + FP[i, 2] * A[j, 2]
+                         + FP[i, 3] * Bm[j, 0] + FP[i, 4] * Bm[j, 1] + FP[i, 5] * Bm[j, 2])
+            else:
+                value = FP[i, j]
+            if i < 3 and j < 3:
+                value += Q11[i, j]
+            elif i < 3:
+                value += Q12[i, j - 3]
+            elif j >= 3:
+                value += su2 * dt if i == j else 0.0
+            P[i, j] = value
+            P[j, i] = value
+    quat_exp(o0 * dt, o1 * dt, o2 * dt, dq)
+    quat_times_normalized(q, dq, q)
+
+
+@njit(cache=True, error_model="numpy")
+def _mekf_update(q, beta, P, z, R, scratch, dq):
+    """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
+    # The reading aligned in sign with q̂ is what the alignment inside the log does.
+    y0, y1, y2 = log_error(q, z, 1.0)
+    S = scratch[0]
+    inverse = scratch[1]
+    K = scratch[2]
+    IK = scratch[3]
+    T = scratch[4]
+    KR = scratch[5]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = P[i, j] + R[i, j]
+    gauss_jordan(S, inverse, 3)
+    nis = quadratic_form((y0, y1, y2), inverse, 3)
+    # K = P Hᵀ S⁻¹ (6x3): P's first three columns times S⁻¹.
+    for i in range(6):
+        for j in range(3):
+            K[i, j] = P[i, 0] * inverse[0, j] + P[i, 1] * inverse[1, j] + P[i, 2] * inverse[2, j]
+    dx = scratch[6, 0]
+    for i in range(6):
+        dx[i] = K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2
+    # I - K H: the identity less K in the first three columns.
+    for i in range(6):
+        for j in range(6):
+            IK[i, j] = (1.0 if i == j else 0.0) - (K[i, j] if j < 3 else 0.0)
+    for i in range(6):
+        for j in range(6):
+            total = 0.0
+            for m in range(6):
+                total += IK[i, m] * P[m, j]
+            T[i, j] = total
+        for j in range(3):
+            KR[i, j] = K[i, 0] * R[0, j] + K[i, 1] * R[1, j] + K[i, 2] * R[2, j]
+    for i in range(6):
+        for j in range(6):
+            first = 0.0
+            for m in range(6):
+                first += T[i, m] * IK[j, m]
+            P[i, j] = first + (KR[i, 0] * K[j, 0] + KR[i, 1] * K[j, 1] + KR[i, 2] * K[j, 2])
+    quat_exp(dx[0], dx[1], dx[2], dq)
+    quat_times_normalized(q, dq, q)
+    beta[0] += dx[3]
+    beta[1] += dx[4]
+    beta[2] += dx[5]
+    return nis
+
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _keep_last(beta, P, beta_last, P_last):
+    """The output bias and covariance at the last step, for the final report."""
+    for i in range(3):
+        beta_last[i] = beta[i]
+    for i in range(6):
+        for j in range(6):
+            P_last[i, j] = P[i, j]
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def advance(block, sensors, state, record, row):
+    """Every run through ``block``: update and reset with each reading, then propagate."""
+    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
+        block.q_true
+    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_step_std, bias,
+     bias_last) = gyro_arrays(block, sensors)
+    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
+     outage, dropout_probability, uniforms) = star_arrays(block)
+    (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
+     health) = error_arrays(record, row)
+    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum,
+     nis_count) = nees_arrays(record, row)
+    q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
+    noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
+    beta_last, P_last = state.beta_last, state.P_last
+    for run in prange(q_all.shape[0]):
+        w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
+        scratch6 = np.empty((7, 6, 6))
+        bits = np.empty(1)
+        bits_int = bits.view(np.int64)
+        factor = np.empty((6, 6))
+        q, beta, P = q_all[run], beta_all[run], P_all[run]
+        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        for j in range(steps):
+            k = k0 + j
+            gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
+                         has_bias, bias_step_std, bias, bias_last)
+            available, countdown, reading = star_step(
+                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
+                steps_between, star_normals, sigma_rad, mount, canonical, outage,
+                dropout_probability, uniforms)
+            for i in range(4):
+                out[i] = q[i]
+            if k == last_step and not posterior:
+                _keep_last(beta, P, beta_last[run], P_last[run])
+            if streaming and not posterior:
+                fold_nees(run, k, nees(q_true[j], q, P, scratch6), nees_every, settle,
+                          nees_samples, nees_sum)
+            if available:
+                nis = _mekf_update(q, beta, P, z, R_all[run], scratch6, dq)
+                if check:
+                    check_health(q, True, P, 6, health[run], factor)
+                if streaming:
+                    nis_sum[run] += nis
+                    nis_count[run] += 1
+            if posterior:
+                for i in range(4):
+                    out[i] = q[i]
+                if k == last_step:
+                    _keep_last(beta, P, beta_last[run], P_last[run])
+                if streaming:
+                    fold_nees(run, k, nees(q_true[j], q, P, scratch6), nees_every, settle,
+                              nees_samples, nees_sum)
+            record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
+                         error_every, samples, diverged, bits, bits_int)
+            _mekf_propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq)
+            if not (finite_state(q, 4, P, 6) and finite_state(beta, 3, P, 0)):
+                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+            if check:
+                check_health(q, True, P, 6, health[run], factor)
+

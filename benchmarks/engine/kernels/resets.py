@@ -1,0 +1,91 @@
+"""Dead reckoning with star-tracker resets in the engine:
+:class:`estimators.DeadReckoningWithResets` — the estimate replaced by each
+available reading (in the sign nearest the prediction), integrated between."""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from benchmarks.engine.kernels.common import check_health, error_arrays, propagate, record_error
+from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
+                                               star_arrays, star_step)
+
+NAME = "dead-reckoning-resets"
+
+
+class State(NamedTuple):
+    q: np.ndarray                # (B, 4) the estimate
+    previous_rate: np.ndarray    # (B, 3) the last step's rate (step-average timing)
+    step_average: bool
+    align_sign: bool
+
+
+def initial_state(estimators) -> State:
+    """From the per-run objects (``from_scenario``), one per run."""
+    first = estimators[0]
+    return State(q=np.array([e.initial_attitude for e in estimators]),
+                 previous_rate=np.zeros((len(estimators), 3)),
+                 step_average=first.rate_timing == "step-average", align_sign=first.align_sign)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _predict(q, w, previous_rate, k, step_average, half_dt, out, F):
+    """out = q propagated as the per-run class propagates it at step ``k``."""
+    if not step_average:
+        propagate(q, w, half_dt, out, F, False)
+    elif k > 0:
+        propagate(q, previous_rate, half_dt, out, F, False)
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def advance(block, sensors, state, record, row):
+    """Every run through ``block``: resets to each reading, integrated between."""
+    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
+        block.q_true
+    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_step_std, bias,
+     bias_last) = gyro_arrays(block, sensors)
+    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
+     outage, dropout_probability, uniforms) = star_arrays(block)
+    (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
+     health) = error_arrays(record, row)
+    q_all, previous_all, step_average = state.q, state.previous_rate, state.step_average
+    align_sign, half_dt = state.align_sign, 0.5 * dt
+    for run in prange(q_all.shape[0]):
+        w, z, dq, aligned = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
+        F = np.empty((4, 4))
+        bits = np.empty(1)
+        bits_int = bits.view(np.int64)
+        factor = np.empty((6, 6))
+        q, previous_rate = q_all[run], previous_all[run]
+        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        for j in range(steps):
+            k = k0 + j
+            gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
+                         has_bias, bias_step_std, bias, bias_last)
+            available, countdown, reading = star_step(
+                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
+                steps_between, star_normals, sigma_rad, mount, canonical, outage,
+                dropout_probability, uniforms)
+            if available:
+                flip = False
+                if align_sign:
+                    # The sign nearest the prediction, as the per-run class compares it.
+                    for i in range(4):
+                        aligned[i] = q[i]
+                    _predict(aligned, w, previous_rate, k, step_average, half_dt, aligned, F)
+                    flip = (aligned[0] * z[0] + aligned[1] * z[1] + aligned[2] * z[2]
+                            + aligned[3] * z[3]) < 0
+                for i in range(4):
+                    q[i] = -z[i] if flip else z[i]
+            else:
+                _predict(q, w, previous_rate, k, step_average, half_dt, q, F)
+            record_error(run, k, q_true[j], q, stats, hist, first_bits, traces, keep_traces,
+                         error_every, samples, diverged, bits, bits_int)
+            if check:
+                check_health(q, True, F, 0, health[run], factor)
+            if step_average:
+                for i in range(3):
+                    previous_rate[i] = w[i]
+

@@ -1,0 +1,137 @@
+"""The sensors' draws, shared by every estimator kernel: each step's gyro
+reading and, when one is due, the star tracker's, made from the same standard
+normals the per-run path draws (:class:`sensors.Gyro` with its bias random
+walk, scale and misalignment; :class:`sensors.StarTracker` and
+:class:`sensors.RotationStarTracker` with dropouts, outages and sign).
+
+Every kernel makes the readings itself, inside its own loop, from the block's
+normals: the arithmetic is a few operations a step, and reading the normals
+while the filter computes costs less than a separate pass that would write
+the readings out and read them back (measured: a shared pass, even over
+stretches short enough to stay in the cache, made the workshop's three
+estimators 25 % slower). The readings are the same numbers in every kernel; each
+advances its own copy of the gyro's true bias.
+
+Their arguments are plain arrays, not the block's named tuple: numba drops
+writes into a named tuple's arrays made inside a parallel loop, and every
+read of a field there costs a reference count (measured: the loop took
+three times as long).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from benchmarks.engine.kernels.common import quat_exp, quat_times_normalized
+
+
+class SensorState(NamedTuple):
+    """What the sensors carry from step to step, one row per run: the gyro's
+    true bias (each kernel advances its own copy, the same numbers)."""
+
+    bias: np.ndarray             # (B, 3) the true bias β_k
+    bias_last: np.ndarray        # (B, 3) β at the run's last step
+
+
+@njit(cache=True, error_model="numpy")
+def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias_step_std,
+                 bias, bias_last, last):
+    """w = ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias β (sensors.gyro)."""
+    for i in range(3):
+        w[i] = omega[i]
+    if has_scale:
+        for i in range(3):
+            w[i] = w[i] + (omega[0] * scale_matrix[i, 0] + omega[1] * scale_matrix[i, 1]
+                           + omega[2] * scale_matrix[i, 2])
+    if has_bias:
+        if last:
+            for i in range(3):
+                bias_last[i] = bias[i]
+        for i in range(3):
+            following = bias[i] + bias_step_std * normals[3 + i]
+            w[i] = w[i] + 0.5 * (bias[i] + following)
+            bias[i] = following
+    for i in range(3):
+        w[i] = w[i] + std * normals[i]
+
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def gyro_arrays(block, sensors):
+    """What :func:`gyro_reading` reads, taken out of the block's tuples (before
+    a kernel's parallel loop: see the module's docstring)."""
+    return (block.omega_true, block.gyro_std, block.gyro_normals, block.gyro_scale,
+            block.has_scale, block.has_bias, block.bias_step_std, sensors.bias,
+            sensors.bias_last)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def star_arrays(block):
+    """What :func:`star_reading` reads, likewise."""
+    return (block.rotation_model, block.star_std, block.steps_between, block.star_normals,
+            block.sigma_rad, block.sensor_to_body, block.canonical, block.outage,
+            block.dropout_probability, block.dropout_uniforms)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def first_countdown(k0, m):
+    """Steps from step ``k0`` to the next reading (readings at k ≡ 0 mod
+    ``m``): a countdown, instead of a modulo every step."""
+    return (m - k0 % m) % m
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def gyro_reading(w, run, t, k, last_step, omega, std, normals, scale, has_scale, has_bias,
+                 bias_step_std, bias, bias_last):
+    """The gyro's reading at step ``k`` (index ``t`` of its block) into ``w``:
+    ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias."""
+    if not (has_scale or has_bias):
+        for i in range(3):
+            w[i] = omega[t, i] + std[run] * normals[run, t, i]
+    else:
+        _flight_gyro(w, omega[t], std[run], normals[run, t], scale, has_scale, has_bias,
+                     bias_step_std, bias[run], bias_last[run], k == last_step)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def star_step(z, dq, run, j, countdown, reading, q_true, rotation_model, std, steps_between,
+              normals, sigma, mount, canonical, outage, dropout_probability, uniforms):
+    """The tracker at the block's step ``j``: whether a reading is available
+    (made into ``z`` if one is due), the next countdown and the index of the
+    next reading's normals."""
+    if countdown > 0:
+        return False, countdown - 1, reading
+    available = star_reading(z, dq, run, j, reading, q_true, rotation_model, std, normals,
+                             sigma, mount, canonical, outage, dropout_probability, uniforms)
+    return available, steps_between[run] - 1, reading + 1
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def star_reading(z, dq, run, t, r, q_true, rotation_model, std, normals, sigma, mount,
+                 canonical, outage, dropout_probability, uniforms):
+    """The tracker's reading ``r`` of the block, at its index ``t``, into ``z``;
+    returns whether it is available (outages and dropouts)."""
+    if rotation_model:
+        t0 = sigma[0] * normals[run, r, 0]
+        t1 = sigma[1] * normals[run, r, 1]
+        t2 = sigma[2] * normals[run, r, 2]
+        quat_exp(mount[0, 0] * t0 + mount[0, 1] * t1 + mount[0, 2] * t2,
+                 mount[1, 0] * t0 + mount[1, 1] * t1 + mount[1, 2] * t2,
+                 mount[2, 0] * t0 + mount[2, 1] * t1 + mount[2, 2] * t2, dq)
+        quat_times_normalized(q_true[t], dq, z)
+        if canonical and z[0] < 0:
+            for i in range(4):
+                z[i] = -z[i]
+        available = not outage[t]
+        if dropout_probability > 0.0 and uniforms[run, r] < dropout_probability:
+            available = False
+        return available
+    for i in range(4):
+        z[i] = q_true[t, i] + std[run] * normals[run, r, i]
+    norm = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2] + z[3] * z[3])
+    for i in range(4):
+        z[i] = z[i] / norm
+    return True
