@@ -8,6 +8,7 @@ Conventions (declared once, here): quaternions are scalar-first
 rad/s in the body frame; the kinematics are ``q_dot = 0.5 * q ⊗ [0, ω]``.
 """
 from dynamics.quaternion import (
+    IDENTITY,
     attitude_error_rad,
     attitude_error_vector_rad,
     from_rotation,
@@ -18,6 +19,7 @@ from dynamics.quaternion import (
     quat_from_grp,
     quat_from_rotvec,
     quat_multiply,
+    relative_rotation,
     rotation_matrix,
     rotvec_from_quat,
     skew,
@@ -33,6 +35,7 @@ from dynamics.rigid_body import (
 from dynamics.validation import InvalidParameterError
 
 __all__ = [
+    "IDENTITY",
     "InvalidParameterError",
     "RigidBodyTruth",
     "angular_momentum_body",
@@ -45,6 +48,7 @@ __all__ = [
     "kinetic_energy",
     "normalize",
     "quat_conjugate",
+    "relative_rotation",
     "quat_from_grp",
     "quat_from_rotvec",
     "quat_multiply",

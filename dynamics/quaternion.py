@@ -40,6 +40,16 @@ def quat_multiply(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     ], axis=-1)
 
 
+#: The identity rotation, scalar-first.
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
+
+
+def relative_rotation(q_from: np.ndarray, q_to: np.ndarray) -> np.ndarray:
+    r""":math:`q_\text{from}^{-1} \otimes q_\text{to}`: the rotation, in the body frame
+    of ``q_from``, that takes attitude ``q_from`` to ``q_to`` (unit quaternions)."""
+    return quat_multiply(quat_conjugate(q_from), q_to)
+
+
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
     """Conjugate ``[w, -x, -y, -z]``: the inverse rotation of a unit quaternion."""
     q = np.asarray(q, dtype=float)
@@ -156,7 +166,7 @@ def attitude_error_vector_rad(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarr
     multiplicative EKF). Its norm is :func:`attitude_error_rad`; its components
     are the roll, pitch and yaw errors about the body axes.
     """
-    return rotvec_from_quat(quat_multiply(quat_conjugate(q_est), q_true))
+    return rotvec_from_quat(relative_rotation(q_est, q_true))
 
 
 #: The generalised Rodrigues parameters of Crassidis & Markley (2003):

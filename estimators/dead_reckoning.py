@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynamics.quaternion import IDENTITY
 from dynamics.validation import one_of
 from estimators.base import AttitudeEstimator
 from estimators.model import propagate
 
-IDENTITY = (1.0, 0.0, 0.0, 0.0)
 RATE_TIMINGS = ("workshop", "step-average")
 
 

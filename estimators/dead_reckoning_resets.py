@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynamics.quaternion import IDENTITY
 from dynamics.validation import boolean
-from estimators.dead_reckoning import IDENTITY, DeadReckoning
+from estimators.dead_reckoning import DeadReckoning
 
 
 class DeadReckoningWithResets(DeadReckoning):

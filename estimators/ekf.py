@@ -55,7 +55,7 @@ import math
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from dynamics.quaternion import kinematics_matrix
+from dynamics.quaternion import IDENTITY, kinematics_matrix
 from dynamics.validation import (
     boolean,
     covariance_matrix,
@@ -64,7 +64,6 @@ from dynamics.validation import (
     process_exponent,
 )
 from estimators.base import OUTPUTS, AttitudeEstimator, finite_state
-from estimators.dead_reckoning import IDENTITY
 from estimators.model import propagate_with_jacobian
 
 _IDENTITY_4 = np.eye(4)

@@ -106,9 +106,9 @@ import math
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotvec_from_quat, skew
+from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
+                                 rotvec_from_quat, skew)
 from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
-from estimators.dead_reckoning import IDENTITY
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -234,8 +234,7 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         z = np.asarray(star_tracker_quat, dtype=float)
         if self.q_hat @ z < 0:
             z = -z
-        conjugate = self.q_hat * np.array([1.0, -1.0, -1.0, -1.0])
-        return rotvec_from_quat(quat_multiply(conjugate, z))
+        return rotvec_from_quat(relative_rotation(self.q_hat, z))
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """Kalman update with one reading, then the reset."""

@@ -65,13 +65,12 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from dynamics.quaternion import grp_from_quat, quat_from_grp, quat_from_rotvec, quat_multiply
+from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_from_rotvec,
+                                 quat_multiply, relative_rotation)
 from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
 from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
-from estimators.dead_reckoning import IDENTITY
 from estimators.mekf import discrete_error_model
 
-_CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
 #: n, the filter's state: the attitude error's GRPs and the gyro bias.
 STATE_SIZE = 6
 #: Smallest (n + λ)/n: below it the weights, up to n/(n + λ), exceed 1e8 and
@@ -189,7 +188,7 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
     def _fx(self, x, dt, omega_meas_radps, q_reference_next):
         q = quat_multiply(self.q_hat, quat_from_grp(x[:3]))
         q = quat_multiply(q, quat_from_rotvec((omega_meas_radps - x[3:]) * dt))
-        error = quat_multiply(q_reference_next * _CONJUGATE, _unit(q))
+        error = relative_rotation(q_reference_next, _unit(q))
         return np.concatenate([grp_from_quat(error), x[3:]])
 
     @staticmethod
@@ -206,7 +205,7 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         z = np.asarray(star_tracker_quat, dtype=float)
         if self.q_hat @ z < 0:
             z = -z
-        return grp_from_quat(quat_multiply(self.q_hat * _CONJUGATE, z))
+        return grp_from_quat(relative_rotation(self.q_hat, z))
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """filterpy's unscented update with one reading, then the reset."""
