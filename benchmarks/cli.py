@@ -197,17 +197,15 @@ def _version() -> str:
         return "(not installed)"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description="Compare spacecraft attitude estimators on the "
-                     "Kalman-filter workshop's tumbling-spacecraft scenario.")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                     parser_class=_Parser)
-
+def _parse_run(commands) -> None:
+    """The ``run`` command's arguments."""
     run = commands.add_parser("run", help="run one estimator; write NAME.csv and NAME.png")
     _estimator_option(run)
     _add_common(run)
 
+
+def _parse_compare(commands) -> None:
+    """The ``compare`` command's arguments."""
     compare = commands.add_parser("compare", help="estimators on the same data; "
                                   "write compare.png and summary.csv")
     compare.add_argument("--estimators", type=_estimator_list,
@@ -216,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: the workshop's three)")
     _add_common(compare)
 
+
+def _parse_sweep(commands) -> None:
+    """The ``sweep`` command's arguments."""
     sweep = commands.add_parser("sweep", help="one estimator, one setting varied; "
                                 "write sweep.png and sweep.csv")
     _estimator_option(sweep)
@@ -225,6 +226,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="values of P, comma-separated")
     _add_common(sweep)
 
+
+def _parse_tune(commands) -> None:
+    """The ``tune`` command's arguments."""
     tune = commands.add_parser("tune", help="fminbnd-style tuning of pc_exponent; "
                                "write tune.json and tune.png")
     tune.add_argument("--bounds", nargs=2, type=_number, metavar=("LO", "HI"),
@@ -235,6 +239,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="seeds: 0, 0-19 or 1,5,9 (default 0)")
     _add_common(tune, seed=False)
 
+
+def _parse_landscape(commands) -> None:
+    """The ``landscape`` command's arguments."""
     landscape = commands.add_parser("landscape", help="EKF statistics across pc_exponent; "
                                     "write landscape.csv, .png and .gif")
     landscape.add_argument("--pc-min", type=_number, default=-18.0, metavar="X",
@@ -248,6 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     landscape.add_argument("--no-animation", action="store_true", help="skip landscape.gif")
     _add_common(landscape, seed=False)
 
+
+def _parse_animate(commands) -> None:
+    """The ``animate`` command's arguments."""
     animate = commands.add_parser("animate", help="3-D attitude animation; write "
                                   "attitude_NAME.gif and .png (truth alone without --estimator)")
     _estimator_option(animate, required=False)
@@ -255,6 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="one frame every K steps (default 50)")
     _add_common(animate)
 
+
+def _parse_montecarlo(commands) -> None:
+    """The ``montecarlo`` command's arguments."""
     montecarlo = commands.add_parser("montecarlo", help="many runs on the batched engine; "
                                      "write montecarlo.csv and montecarlo.png")
     montecarlo.add_argument("--estimators", type=_estimator_list,
@@ -276,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
                             help="finish an interrupted campaign in --out")
     _add_common(montecarlo, seed=False)
 
+
+def _parse_consistency(commands) -> None:
+    """The ``consistency`` command's arguments."""
     consistency = commands.add_parser(
         "consistency", help="do the filters know their error? NEES against chi-square bands, "
         "efficiency against the best achievable; write consistency.csv and consistency.png")
@@ -296,6 +312,9 @@ def build_parser() -> argparse.ArgumentParser:
                              help="run those per-run simulations on a local Dask cluster")
     _add_common(consistency, seed=False)
 
+
+def _parse_replay(commands) -> None:
+    """The ``replay`` command's arguments."""
     replay = commands.add_parser(
         "replay", help="a recorded gyro against an optical reference attitude (the BROAD "
         "dataset or your .npz); write replay.png and summary.csv")
@@ -322,12 +341,31 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_divergence_option(replay)
 
+
+def _parse_workshop(commands) -> None:
+    """The ``workshop`` command's arguments."""
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
                                    "with report.md")
     workshop.add_argument("--part", choices=("exercise", "flight"), default="exercise",
                           help="the exercise (default), or the study after it: additive "
                           "against multiplicative filters and the best achievable")
     _add_common(workshop, seed=False)
+
+
+#: Each command's arguments, in the order ``--help`` lists them.
+COMMAND_PARSERS = (_parse_run, _parse_compare, _parse_sweep, _parse_tune, _parse_landscape,
+                   _parse_animate, _parse_montecarlo, _parse_consistency, _parse_replay,
+                   _parse_workshop)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Compare spacecraft attitude estimators on the "
+                     "Kalman-filter workshop's tumbling-spacecraft scenario.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                     parser_class=_Parser)
+    for add in COMMAND_PARSERS:
+        add(commands)
     return parser
 
 
