@@ -279,3 +279,19 @@ def test_the_kernel_compiles_once_whatever_the_block_lengths():
                   block_steps=block_steps)
     for name in KERNELS:
         assert len(kernel(name).advance.signatures) == 1, (name, kernel(name).advance.signatures)
+
+
+def test_a_constant_bias_without_a_walk_reads_no_normals_past_its_row():
+    """A gyro with a bias but no bias walk draws 3 normals a step; the bias
+    step must not read a fourth (past the row: a neighbour's noise, or past
+    the buffer's end, where NaN made a run diverge now and then)."""
+    from benchmarks.engine.kernels.sensors import _flight_gyro
+    buffer = np.full(6, np.nan)
+    buffer[:3] = [0.1, -0.2, 0.3]
+    normals = buffer[:3]                   # the row; NaN right after it
+    w, bias, bias_last = np.empty(3), np.array([1e-4, 0.0, -2e-4]), np.zeros(3)
+    _flight_gyro(w, np.array([0.01, 0.02, 0.03]), 1e-3, normals, np.zeros((3, 3)), False, True,
+                 0.0, bias, bias_last, False)
+    np.testing.assert_array_equal(bias, [1e-4, 0.0, -2e-4])
+    np.testing.assert_allclose(w, [0.01 + 1e-4 + 1e-4, 0.02 - 2e-4, 0.03 - 2e-4 + 3e-4],
+                               rtol=1e-12)

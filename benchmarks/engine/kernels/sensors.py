@@ -50,8 +50,11 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias
         if last:
             for i in range(3):
                 bias_last[i] = bias[i]
+        # Without a bias walk (3 normals a step) the bias stays; reading
+        # normals[3 + i] there would run past the row (and the buffer's end).
+        walk = normals.shape[0] > 3
         for i in range(3):
-            following = bias[i] + bias_step_std * normals[3 + i]
+            following = bias[i] + bias_step_std * normals[3 + i] if walk else bias[i]
             w[i] = w[i] + 0.5 * (bias[i] + following)
             bias[i] = following
     for i in range(3):
