@@ -575,16 +575,15 @@ def command_montecarlo(args, scenario):
 
 
 def command_workshop(args, scenario):
+    divergence = DivergenceReport(scenario.dt)
     if args.part == "flight":
         from benchmarks.experiments.flight_study import run_flight_study
         report = run_flight_study(scenario, args.out, quiet=args.quiet)
     else:
         from benchmarks.experiments.workshop import run_workshop
-        divergence = DivergenceReport(scenario.dt)
         report = run_workshop(scenario, args.out, quiet=args.quiet, divergence=divergence)
-        print(f"wrote {report}")
-        return divergence
     print(f"wrote {report}")
+    return divergence
 
 
 def command_consistency(args, scenario):

@@ -76,7 +76,7 @@ STAR_TRACKER_MODELS = ("workshop", "rotation")
 #: would need billions of steps.
 MAX_RATE_RADPS = 100.0
 #: The largest gyro noise σ per sample, rad/s: readings then stay far inside
-#: the ±1000 rad/s an estimator accepts (estimators.base.MAX_RATE_RADPS).
+#: the ±1000 rad/s an estimator accepts (dynamics.validation.MAX_MEASURED_RATE_RADPS).
 MAX_GYRO_NOISE_RADPS = 10.0
 #: The largest star tracker noise σ per quaternion component (the workshop
 #: model): a unit quaternion's components are at most 1.

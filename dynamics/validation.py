@@ -177,7 +177,7 @@ MAX_SEED = 2 ** 63 - 1
 #: The largest body rate a measurement may report, per axis, rad/s: ten times
 #: what a scenario's truth may turn at (100 rad/s), beyond any spacecraft or
 #: hand-held IMU; a larger finite rate (1e300 rad/s) turns dead reckoning into NaN.
-MAX_RATE_RADPS = 1000.0
+MAX_MEASURED_RATE_RADPS = 1000.0
 
 
 def process_exponent(name: str, value) -> float:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics.validation import MAX_RATE_RADPS, InvalidParameterError
+from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 
 #: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
 #: movement flags (N,) and the sampling rate; ``info`` is optional.
@@ -142,9 +142,9 @@ def load_recording(path, name: str | None = None) -> Recording:
     bad = np.flatnonzero(~np.isfinite(gyro).all(axis=1))
     if len(bad):
         refuse(f"imu_gyr_radps must be finite; row {bad[0]} is {gyro[bad[0]].tolist()}")
-    fast = np.flatnonzero(np.abs(gyro).max(axis=1) > MAX_RATE_RADPS)
+    fast = np.flatnonzero(np.abs(gyro).max(axis=1) > MAX_MEASURED_RATE_RADPS)
     if len(fast):
-        refuse(f"imu_gyr_radps must be within ±{MAX_RATE_RADPS:g} rad/s (as an estimator "
+        refuse(f"imu_gyr_radps must be within ±{MAX_MEASURED_RATE_RADPS:g} rad/s (as an estimator "
                f"accepts); row {fast[0]} is {gyro[fast[0]].tolist()}")
     reference = reference.astype(float)
     present = ~np.isnan(reference).any(axis=1)

@@ -448,8 +448,8 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
 
 
 def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchResult:
-    # ``sensors``: a kernel's SensorState (every kernel's holds the same numbers).
-    """The batch's numbers as :class:`BatchResult` reports them."""
+    """The batch's numbers as :class:`BatchResult` reports them (``sensors``:
+    one kernel's SensorState; every kernel's holds the same numbers)."""
     names, n_steps = tuple(kernels), scenario.n_steps
     statistics = {name: _statistics(scenario, record, row, n_steps)
                   for row, name in enumerate(names)}
@@ -459,9 +459,10 @@ def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchR
                and getattr(kernels[name], "REPORTS_COVARIANCE", False)}
     final = {"gyro_bias_radps": sensors.bias_last}
     for name in names:
-        extra = getattr(kernels[name], "final", None)
-        if extra is not None and extra(states[name], objects[name]):
-            final[name] = extra(states[name], objects[name])
+        report = getattr(kernels[name], "final", None)
+        extra = report(states[name], objects[name]) if report is not None else None
+        if extra:
+            final[name] = extra
     error_every = record.error_every
     return BatchResult(
         runs=runs, estimators=names, statistics=statistics,
