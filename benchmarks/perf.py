@@ -2,13 +2,14 @@
 
 From one run on this machine:
 
-1. the per-run (filterpy) path: seconds for one 50-s run of each estimator
-   (the workshop's three and the MEKF) and its run-steps per second;
-2. the batched engine at batch sizes 1, 64 and 1024 — the EKF alone and all
-   three estimators together, and the MEKF — in run-steps per second (one
+1. the per-run (filterpy) path: seconds for one 50-s run of each registered
+   estimator and its run-steps per second;
+2. the batched engine at batch sizes 1, 64 and 1024 — the EKF alone and the
+   workshop's three estimators together — in run-steps per second (one
    run-step is one run advanced one step, noise drawing included), and its
-   ratio to the filterpy EKF; the MEKF also on the flight scenario's sensors
-   (bias random walk, rotation star tracker);
+   ratio to the filterpy EKF; then every estimator with a kernel at batch
+   1024, on the workshop's sensors (with its ratio to the per-run path) and
+   on the flight scenario's (bias random walk, rotation star tracker);
 3. the wall time of a 73-value × 100-seed loss landscape (its computation);
 4. the peak resident memory and wall time of a 10,000-run statistics-only
    campaign of the default scenario, run as a separate ``attitude-bench
@@ -108,23 +109,25 @@ def main(argv=None) -> int:
         print(f"  {name:<22} {seconds:.3f} s per run   {steps / seconds:>12,.0f} run-steps/s")
     filterpy_rate = steps / per_run["ekf"]
 
-    from benchmarks.engine import make_runs, run_batch
+    from benchmarks.engine import ENGINE_ESTIMATORS, make_runs, run_batch
     start = time.perf_counter()
     run_batch(scenario, make_runs(scenario, [0]))
     print(f"\nbatched engine (kernel compile or cache load: {time.perf_counter() - start:.1f} s):")
     rates = {}
     for batch in (1, 64, 1024):
-        for label, estimators in (("ekf", ("ekf",)), ("all three", WORKSHOP_ESTIMATORS),
-                                  ("mekf", ("mekf",))):
+        for label, estimators in (("ekf", ("ekf",)), ("all three", WORKSHOP_ESTIMATORS)):
             rates[batch, label] = engine_steps_per_second(scenario, batch, estimators,
                                                           args.repeats)
             print(f"  batch {batch:>4}  {label:<9} {rates[batch, label]:>14,.0f} run-steps/s")
     print(f"  ratio, batch 1024 EKF to filterpy EKF: {rates[1024, 'ekf'] / filterpy_rate:.0f}x")
-    print(f"  ratio, batch 1024 MEKF to batch 1024 EKF: "
-          f"{rates[1024, 'mekf'] / rates[1024, 'ekf']:.2f}")
     short_flight = Scenario.from_toml(shipped_file(FLIGHT_SCENARIO)).replace(tstop=500.0)
-    flight_rate = engine_steps_per_second(short_flight, 1024, ("mekf",), args.repeats)
-    print(f"  flight sensors, batch 1024 mekf {flight_rate:>14,.0f} run-steps/s")
+    print("\n  each estimator at batch 1024 (run-steps/s; ratio to its per-run path):")
+    print(f"  {'':<22} {'workshop sensors':>22} {'flight sensors':>16}")
+    for name in ENGINE_ESTIMATORS:
+        workshop = engine_steps_per_second(scenario, 1024, (name,), args.repeats)
+        flight = engine_steps_per_second(short_flight, 1024, (name,), args.repeats)
+        print(f"  {name:<22} {workshop:>14,.0f} {workshop * per_run[name] / steps:>6,.0f}x "
+              f"{flight:>16,.0f}")
 
     print(f"\nlandscape, 73 pc values x 100 seeds: {landscape_seconds(scenario):.1f} s")
     peak_mib, wall = campaign_peak_memory(args.campaign_runs)

@@ -65,9 +65,13 @@ def test_users_estimator_in_compare_montecarlo_and_consistency(tmp_path, monkeyp
     from benchmarks import Scenario, error_statistics, simulate
     expected = error_statistics(simulate(Scenario(tstop=5.0), [spec], seed=2).error_deg[spec])
     assert mine["std_deg"].iloc[2] == expected["std_deg"]
-    assert main(["consistency", "--estimators", f"mekf,{spec}", "--runs", "2", "--out",
-                 str(tmp_path / "k"), *common]) == 0
+    assert main(["consistency", "--estimators", f"mekf,{spec}", "--runs", "3",
+                 "--per-run-limit", "2", "--out", str(tmp_path / "k"), *common]) == 0
     assert "no covariance" in capsys.readouterr().out
+    # An estimator without a kernel runs per run, at most --per-run-limit seeds.
+    frame = pd.read_csv(tmp_path / "k" / "consistency.csv")
+    assert (frame[frame["estimator"] == "mekf"]["runs"] == 3).all()
+    assert (frame[frame["estimator"] == spec]["runs"] == 2).all()
 
 
 def test_bad_user_specs_are_one_line_errors(tmp_path, monkeypatch, capsys):

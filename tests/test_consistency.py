@@ -80,7 +80,9 @@ def test_consistency_command_prints_the_table_and_writes_csv_and_figure(tmp_path
     assert set(frame["estimator"]) == {"dead-reckoning", "dead-reckoning-resets", "ekf", "mekf",
                                        "usque"}
     mekf = frame[frame["estimator"] == "mekf"]
-    assert (mekf["runs"] == 30).all() and (frame[frame["estimator"] == "usque"]["runs"] == 2).all()
+    # Every built-in estimator runs on the engine, so the per-run limit bites
+    # none of them (it limits users' own: tests/test_byo.py).
+    assert (mekf["runs"] == 30).all() and (frame["runs"] == 30).all()
     assert mekf["anees_low"].iloc[0] < 3 < mekf["anees_high"].iloc[0]
     assert (out / "consistency.png").stat().st_size > 10_000
 

@@ -62,6 +62,25 @@ def test_both_paths_give_the_same_verdict_at_the_same_step():
     assert batch.diverged_step["ekf"][2] == 0      # trace(e^709 I) overflows at once
 
 
+def test_usque_diverges_at_the_same_step_on_both_paths():
+    # σ_v² = 1e307 in the filter: Q drives P to overflow, and the update at
+    # the second reading (step 20) finds no Cholesky factor on either path.
+    # (A covariance that loses definiteness by rounding, P − K S Kᵀ with
+    # P ≫ R, may tip either way: the paths sum in different orders.)
+    scenario = SHORT.replace(estimator_options={"usque": {"gyro_noise": 1e307}})
+    batch = run_batch(scenario, make_runs(scenario, [0, 1]), ["usque", "mekf"],
+                      keep_traces=True)
+    assert batch.diverged_step["usque"].tolist() == [20, 20]
+    assert batch.diverged_step["mekf"].tolist() == [-1, -1]
+    for seed in (0, 1):
+        result = simulate(scenario, ["usque"], seed=seed)
+        assert result.diverged_step["usque"] == 20
+        engine = batch.estimates["usque"][seed]
+        assert np.array_equal(np.isnan(result.estimates["usque"]), np.isnan(engine))
+        np.testing.assert_allclose(result.estimates["usque"], engine, atol=1e-9, rtol=0)
+    assert math.isnan(batch.statistics["usque"]["rms_deg"][0])
+
+
 def test_consistency_streams_nan_for_a_diverged_run_and_counts_it():
     from benchmarks.experiments.consistency import _summary_row
     batch = run_batch(SHORT, one_diverging_table(), ["ekf"], consistency=True)

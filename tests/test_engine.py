@@ -106,7 +106,7 @@ FLIGHT = Scenario.from_toml(FLIGHT_FILE).replace(
     star_tracker_sign="canonical", initial_attitude_quat=[0.0, 0.6, 0.0, 0.8],
     gyro_scale_misalignment=[[1e-3, 2e-4, 0.0], [0.0, -5e-4, 1e-4], [3e-4, 0.0, 2e-3]],
     star_tracker_to_body_quat=[0.9, 0.1, -0.3, 0.2])
-ALL = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf")
+ALL = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf", "usque")
 
 
 @pytest.fixture(scope="module")
@@ -128,11 +128,19 @@ def test_flight_engine_equals_the_per_run_path_at_every_step(flight_batch):
         for name in ALL:
             difference = np.abs(batch.estimates[name][i] - reference.estimates[name])
             assert difference.max() < 1e-9, (i, name, difference.max())
-        trace = reference.traces["mekf"]
-        assert np.allclose(batch.final["mekf"]["bias_radps"][i], trace.bias_radps[-1],
-                           rtol=1e-9, atol=1e-18)
-        assert np.allclose(batch.final["mekf"]["covariance"][i][:3, :3],
-                           trace.attitude_covariance[-1], rtol=1e-9, atol=0)
+        # USQUE's sums cancel differently on the two paths: its bias is a
+        # weighted mean of sigma points ±√6 σ_β apart (about 1e-15 rad/s of a
+        # 1e-6 bias), and its first update's P − K S Kᵀ takes from a 0.36 rad²
+        # prior a number equal to it to 3e-8 (eps × 0.36 / 1e-8 ≈ 4e-9 relative).
+        for name, rtol in (("mekf", 1e-9), ("usque", 1e-7)):
+            trace = reference.traces[name]
+            assert np.allclose(batch.final[name]["bias_radps"][i], trace.bias_radps[-1],
+                               rtol=rtol, atol=1e-18)
+            assert np.allclose(batch.final[name]["covariance"][i][:3, :3],
+                               trace.attitude_covariance[-1], rtol=rtol, atol=0)
+            assert np.allclose(batch.attitude_variances[name][i],
+                               np.diagonal(trace.attitude_covariance, axis1=1, axis2=2),
+                               rtol=rtol, atol=0)
         assert np.allclose(batch.final["gyro_bias_radps"][i], reference.sensors.gyro_bias_radps[-1],
                            rtol=1e-12, atol=0)
 
@@ -144,27 +152,29 @@ def test_flight_runs_are_bit_identical_whatever_their_batch(flight_batch):
         assert np.array_equal(alone.estimates[name][0], batch.estimates[name][1])
 
 
-def test_mekf_on_workshop_sensors_equals_the_per_run_path():
+@pytest.mark.parametrize("name", ["mekf", "usque"])
+def test_six_state_filters_on_workshop_sensors_equal_the_per_run_path(name):
     runs = make_runs(SCENARIO, seeds=[2, 3], star_tracker_noise=[1e-6, 4e-6])
-    batch = run_batch(SCENARIO, runs, ["mekf"], keep_traces=True)
+    batch = run_batch(SCENARIO, runs, [name], keep_traces=True)
     for i in range(2):
         case = SCENARIO.replace(star_tracker_noise=float(runs.star_tracker_noise[i]))
-        reference = simulate(case, ["mekf"], seed=int(runs.seeds[i]))
-        assert np.abs(batch.estimates["mekf"][i] - reference.estimates["mekf"]).max() < 1e-9
+        reference = simulate(case, [name], seed=int(runs.seeds[i]))
+        assert np.abs(batch.estimates[name][i] - reference.estimates[name]).max() < 1e-9
 
 
 def test_engine_streams_the_per_run_nees_and_nis(flight_batch):
     from benchmarks.experiments.consistency import nees
     runs, _ = flight_batch
-    batch = run_batch(FLIGHT, runs, ["dead-reckoning", "ekf", "mekf"], consistency=True,
-                      nees_every=7, settle_steps=50)
-    assert set(batch.consistency) == {"ekf", "mekf"}
+    batch = run_batch(FLIGHT, runs, ["dead-reckoning", "ekf", "mekf", "usque"],
+                      consistency=True, nees_every=7, settle_steps=50)
+    assert set(batch.consistency) == {"ekf", "mekf", "usque"}
     for i in range(len(runs)):
         case = FLIGHT.replace(gyro_noise=float(runs.gyro_noise[i]),
                               time_between_measurements=float(runs.time_between_measurements[i]),
                               pc_exponent=float(runs.pc_exponent[i]))
-        reference = simulate(case, ["ekf", "mekf"], seed=int(runs.seeds[i]), traces=True)
-        for name in ("ekf", "mekf"):
+        reference = simulate(case, ["ekf", "mekf", "usque"], seed=int(runs.seeds[i]),
+                             traces=True)
+        for name in ("ekf", "mekf", "usque"):
             trace = reference.traces[name]
             from dynamics.quaternion import attitude_error_vector_rad
             expected = nees(attitude_error_vector_rad(reference.truth.q_true, trace.quat),

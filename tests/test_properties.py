@@ -154,7 +154,11 @@ def engine_cases(draw):
                 "align_sign": draw(st.booleans())},
             "ekf": {"output": draw(st.sampled_from(["prior", "posterior"])),
                     "align_sign": draw(st.booleans())},
-            "mekf": {"output": draw(st.sampled_from(["prior", "posterior"]))}})
+            "mekf": {"output": draw(st.sampled_from(["prior", "posterior"]))},
+            "usque": {"output": draw(st.sampled_from(["prior", "posterior"])),
+                      "alpha": draw(st.sampled_from([1.0, 0.5, 1e-2])),
+                      # κ = 3 − n = -3 is Julier's choice.
+                      "kappa": draw(st.sampled_from([0.0, -3.0, 1.0]))}})
     if draw(st.booleans()):
         # Real trackers: a few arcsec to a few arcmin across the boresight, roll up
         # to ten times worse. (R's conditioning bounds how far the two paths'

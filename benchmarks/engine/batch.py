@@ -166,6 +166,10 @@ class BatchResult:
     #: run's statistics are NaN, never a number.
     diverged_step: dict = None
     estimates: dict | None = None
+    #: With traces, per estimator that reports a covariance: ``(B, N, 3)``, the
+    #: variance (rad²) of each body axis of its output's attitude error at
+    #: every step, NaN from the step it diverged.
+    attitude_variances: dict | None = None
     #: The last step's true gyro bias ``(B, 3)`` and, for the MEKF, its
     #: output bias estimate ``(B, 3)`` and 6x6 covariance ``(B, 6, 6)``.
     final: dict | None = None
@@ -357,7 +361,9 @@ def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bo
         hist_first_bits=_FIRST_BITS,
         traces=(np.zeros((rows, n_runs, n_steps, 4)) if keep_traces
                 else np.zeros((rows, 0, 0, 4))),
-        keep_traces=bool(keep_traces), error_every=error_every,
+        keep_traces=bool(keep_traces),
+        variances=np.zeros((rows, n_runs, n_steps, 3) if keep_traces else (rows, 0, 0, 3)),
+        error_every=error_every,
         error_samples=np.zeros((rows, n_runs, -(-n_steps // error_every) if error_every else 0)),
         consistency=bool(consistency), nees_every=nees_every,
         settle=min(settle_steps, n_steps - 1),
@@ -469,12 +475,23 @@ def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchR
         diverged_step={name: record.diverged[row].copy() for row, name in enumerate(names)},
         estimates={name: record.traces[row] for row, name in enumerate(names)}
         if record.keep_traces else None,
+        attitude_variances={name: _variances(record, row) for row, name in enumerate(names)
+                            if getattr(kernels[name], "REPORTS_COVARIANCE", False)}
+        if record.keep_traces else None,
         final=final, consistency=checked or None,
         health={name: dict(zip(HEALTH_COLUMNS, record.health[row].T.copy()))
                 for row, name in enumerate(names)} if record.check_health else None,
         error_samples={name: record.error_samples[row] for row, name in enumerate(names)}
         if error_every else None,
         sample_time_s=np.arange(0, n_steps, error_every) * scenario.dt if error_every else None)
+
+
+def _variances(record, row: int) -> np.ndarray:
+    """One estimator's kept attitude variances, NaN from the step it diverged."""
+    diverged, variances = record.diverged[row], record.variances[row]
+    steps = np.arange(variances.shape[1])
+    lost = (diverged[:, None] >= 0) & (steps >= diverged[:, None])
+    return np.where(lost[:, :, None], np.nan, variances)
 
 
 def _statistics(scenario: Scenario, record, row: int, n_steps: int) -> dict:

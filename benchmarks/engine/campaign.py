@@ -98,7 +98,7 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
             for column in STAT_COLUMNS:
                 arrays[f"{name}/{column}"] = batch.statistics[name][column]
             arrays[f"{name}/diverged_step"] = batch.diverged_step[name]
-    # Estimators without a kernel (USQUE, users' own) run per run.
+    # Estimators without a kernel (users' own) run per run.
     for name in estimators:
         if name in engine:
             continue

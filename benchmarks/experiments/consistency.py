@@ -76,8 +76,8 @@ def run_errors(result, name: str) -> dict:
 
 # --- Campaigns: the engine where an estimator has a kernel, the per-run path otherwise ---
 
-#: Runs of estimators without a kernel, unless asked for more (each is a full
-#: per-run simulation: USQUE costs about 0.8 ms a step).
+#: Runs of estimators without a kernel (users' own), unless asked for more:
+#: each is a full per-run simulation, a thousand times slower than the engine.
 PER_RUN_LIMIT = 20
 #: NEES samples kept per run (the time series is decimated to about this many).
 NEES_SAMPLES = 1000
@@ -93,8 +93,51 @@ class ConsistencyResult:
     anees: dict                         # name → (S,) ANEES at time_s, or None
     bound_rms_deg: np.ndarray           # (S,) the bound's RMS angle at time_s (posterior)
     bound: object                       # the AttitudeBound over the whole time grid
-    samples: dict                       # name → RunResult of the base seed's run (traces)
+    samples: dict                       # name → TracedRun of the base seed's run
     diverged_step: dict | None = None   # name → (runs,) diverged steps, -1 where none
+
+
+@dataclass(frozen=True)
+class TracedRun:
+    """One run of one estimator as the per-axis figure shows it: its
+    body-frame attitude error and, if it keeps a covariance, its 1σ per axis."""
+
+    label: str
+    time_s: np.ndarray                  # (N,)
+    error_deg: np.ndarray               # (N, 3)
+    sigma_deg: np.ndarray | None        # (N, 3), or None without a covariance
+
+
+def traced_runs(scenario, estimators, seed: int) -> dict:
+    """Each estimator's run of ``seed`` with its error and 1σ at every step:
+    from the engine where it has a kernel (its covariance kept with the
+    traces), else from the per-run path."""
+    from benchmarks.engine.batch import ENGINE_ESTIMATORS, make_runs, run_batch
+    from benchmarks.simulation import build_estimator, simulate, simulate_truth
+    truth = simulate_truth(scenario)
+    engine_names = [name for name in estimators if name in ENGINE_ESTIMATORS]
+    traced = {}
+    if engine_names:
+        batch = run_batch(scenario, make_runs(scenario, [seed]), engine_names, keep_traces=True)
+        for name in engine_names:
+            variances = batch.attitude_variances.get(name)
+            traced[name] = TracedRun(
+                label=build_estimator(name, scenario).label, time_s=truth.time_s,
+                error_deg=np.degrees(attitude_error_vector_rad(truth.q_true,
+                                                               batch.estimates[name][0])),
+                sigma_deg=None if variances is None else np.degrees(np.sqrt(variances[0])))
+    for name in estimators:
+        if name in traced:
+            continue
+        result = simulate(scenario, [name], seed=seed, traces=True)
+        trace = result.traces[name]
+        covariance = trace.attitude_covariance
+        traced[name] = TracedRun(
+            label=result.labels[name], time_s=result.time_s,
+            error_deg=np.degrees(attitude_error_vector_rad(result.truth.q_true, trace.quat)),
+            sigma_deg=None if covariance is None else np.degrees(
+                np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))))
+    return {name: traced[name] for name in estimators}
 
 
 def per_run_consistency(scenario, name: str, seed: int, every: int, settle_steps: int) -> dict:
@@ -128,7 +171,7 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     from benchmarks.bounds import posterior_crb
     from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch,
                                          seed_range)
-    from benchmarks.simulation import build_estimator, simulate
+    from benchmarks.simulation import build_estimator
 
     n_steps = scenario.n_steps
     every = max(1, n_steps // NEES_SAMPLES)
@@ -174,8 +217,7 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
         output = getattr(build_estimator(name, scenario), "output", "posterior")
         summary[name], anees[name] = _summary_row(per_run[name], bound.rms_deg(output), level)
     # One traced run (the base seed) of each estimator for the per-axis figure.
-    samples = {name: simulate(scenario, [name], seed=base_seed, traces=True)
-               for name in estimators}
+    samples = traced_runs(scenario, estimators, base_seed)
     time_s = bound.time_s[::every]
     bound_rms = np.degrees(np.sqrt(np.trace(bound.posterior[::every], axis1=1, axis2=2)))
     return ConsistencyResult(scenario=scenario, time_s=time_s, summary=summary, anees=anees,
@@ -275,14 +317,12 @@ def figure(result: ConsistencyResult):
     from benchmarks.figures.plots import consistency_figure
     errors, sigmas, labels, time_s = {}, {}, {}, None
     for name, sample in result.samples.items():
-        trace = sample.traces[name]
-        labels[name] = sample.labels[name]
+        labels[name] = sample.label
         time_s = sample.time_s
-        if trace.attitude_covariance is None:
+        if sample.sigma_deg is None:
             continue          # the per-axis panels are about envelopes
-        errors[name] = np.degrees(attitude_error_vector_rad(sample.truth.q_true, trace.quat))
-        sigmas[name] = np.degrees(np.sqrt(np.diagonal(trace.attitude_covariance, axis1=1,
-                                                      axis2=2)))
+        errors[name] = sample.error_deg
+        sigmas[name] = sample.sigma_deg
     bound_sigma = np.degrees(np.sqrt(np.diagonal(result.bound.posterior, axis1=1, axis2=2)))
     bands = {name: (row["anees_low"], row["anees_high"]) for name, row in result.summary.items()}
     return consistency_figure(result.time_s, result.anees, bands, errors, sigmas, bound_sigma,

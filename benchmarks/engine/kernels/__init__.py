@@ -47,6 +47,7 @@ KERNELS = {
     "dead-reckoning-resets": "benchmarks.engine.kernels.resets",
     "ekf": "benchmarks.engine.kernels.ekf",
     "mekf": "benchmarks.engine.kernels.mekf",
+    "usque": "benchmarks.engine.kernels.usque",
 }
 
 

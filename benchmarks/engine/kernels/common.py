@@ -29,6 +29,7 @@ class Record(NamedTuple):
     hist_first_bits: int
     traces: np.ndarray           # (rows, B, N, 4), or (rows, 0, 0, 4) when not kept
     keep_traces: bool
+    variances: np.ndarray        # (rows, B, N, 3): with traces, the attitude variances
     error_every: int             # keep the error every that many steps (0: not)
     error_samples: np.ndarray    # (rows, B, S)
     consistency: bool            # stream NEES and NIS
@@ -168,9 +169,11 @@ def error_arrays(record, row):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def nees_arrays(record, row):
-    """Estimator ``row``'s NEES and NIS accumulators, likewise."""
+    """Estimator ``row``'s NEES and NIS accumulators and its kept variances,
+    likewise (what a kernel that reports a covariance writes)."""
     return (record.consistency, record.nees_every, record.settle, record.nees_samples[row],
-            record.nees_sum[row], record.nis_sum[row], record.nis_count[row])
+            record.nees_sum[row], record.nis_sum[row], record.nis_count[row],
+            record.variances[row])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -363,6 +366,15 @@ def projected_covariance(x, P, out):
                     inner += P[m, n] * xi[n][j]
                 total += xi[m][i] * inner
             out[i, j] = 4.0 * total
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def keep_variances(run, k, C, variances, keep_traces):
+    """With traces, the diagonal of the output's 3x3 attitude covariance ``C``
+    (rad², body frame) at step ``k``, for the per-axis ±3σ figures."""
+    if keep_traces:
+        for i in range(3):
+            variances[run, k, i] = C[i, i]
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -9,9 +9,10 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_nees, gauss_jordan, mark_diverged, matmul4,
-                                              nees, nees_arrays, projected_covariance,
-                                              propagate, quadratic_form, record_error)
+                                              fold_nees, gauss_jordan, keep_variances,
+                                              mark_diverged, matmul4, nees, nees_arrays,
+                                              projected_covariance, propagate, quadratic_form,
+                                              record_error)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 
@@ -111,8 +112,8 @@ def advance(block, sensors, state, record, row):
      outage, dropout_probability, uniforms) = star_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
-    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum,
-     nis_count) = nees_arrays(record, row)
+    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
+     variances) = nees_arrays(record, row)
     x_all, P_all, q_variance, R = state.x, state.P, state.q_variance, state.R
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
     for run in prange(x_all.shape[0]):
@@ -137,10 +138,12 @@ def advance(block, sensors, state, record, row):
                 dropout_probability, uniforms)
             for i in range(4):
                 prior[i] = x[i]
-            if streaming and not posterior:
+            if (streaming or keep_traces) and not posterior:
                 projected_covariance(x, P, projected)
-                fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every, settle,
-                          nees_samples, nees_sum)
+                keep_variances(run, k, projected, variances, keep_traces)
+                if streaming:
+                    fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every,
+                              settle, nees_samples, nees_sum)
             if available:
                 flip = align_sign and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2]
                                        + x[3] * z[3]) < 0
@@ -155,8 +158,10 @@ def advance(block, sensors, state, record, row):
             if posterior:
                 for i in range(4):
                     prior[i] = x[i]
-                if streaming:
+                if streaming or keep_traces:
                     projected_covariance(x, P, projected)
+                    keep_variances(run, k, projected, variances, keep_traces)
+                if streaming:
                     fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every,
                               settle, nees_samples, nees_sum)
             record_error(run, k, q_true[j], prior, stats, hist, first_bits, traces, keep_traces,

@@ -10,9 +10,10 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_nees, gauss_jordan, log_error, mark_diverged,
-                                              nees, nees_arrays, quadratic_form, quat_exp,
-                                              quat_times_normalized, record_error)
+                                              fold_nees, gauss_jordan, keep_variances,
+                                              log_error, mark_diverged, nees, nees_arrays,
+                                              quadratic_form, quat_exp, quat_times_normalized,
+                                              record_error)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 from estimators.mekf import transition_coefficients
@@ -188,8 +189,8 @@ def advance(block, sensors, state, record, row):
      outage, dropout_probability, uniforms) = star_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
-    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum,
-     nis_count) = nees_arrays(record, row)
+    (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
+     variances) = nees_arrays(record, row)
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last = state.beta_last, state.P_last
@@ -211,8 +212,10 @@ def advance(block, sensors, state, record, row):
                 dropout_probability, uniforms)
             for i in range(4):
                 out[i] = q[i]
-            if k == last_step and not posterior:
-                _keep_last(beta, P, beta_last[run], P_last[run])
+            if not posterior:
+                keep_variances(run, k, P, variances, keep_traces)
+                if k == last_step:
+                    _keep_last(beta, P, beta_last[run], P_last[run])
             if streaming and not posterior:
                 fold_nees(run, k, nees(q_true[j], q, P, scratch6), nees_every, settle,
                           nees_samples, nees_sum)
@@ -226,6 +229,7 @@ def advance(block, sensors, state, record, row):
             if posterior:
                 for i in range(4):
                     out[i] = q[i]
+                keep_variances(run, k, P, variances, keep_traces)
                 if k == last_step:
                     _keep_last(beta, P, beta_last[run], P_last[run])
                 if streaming:
