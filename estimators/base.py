@@ -141,8 +141,10 @@ class AttitudeEstimator:
     def innovation_nis(self) -> float | None:
         """The normalised innovation squared ``yᵀ S⁻¹ y`` of the last
         star-tracker update, or None. Filters built on filterpy keep ``y``
-        and ``S`` after each update; others return None."""
-        y, S = getattr(self, "y", None), getattr(self, "S", None)
+        and ``S`` after each update (on their ``filter``, or on themselves);
+        others return None."""
+        kept = getattr(self, "filter", self)
+        y, S = getattr(kept, "y", None), getattr(kept, "S", None)
         if y is None or S is None or np.ndim(S) != 2:
             return None
         y = np.ravel(y)
@@ -151,7 +153,7 @@ class AttitudeEstimator:
     @property
     def innovation_dof(self) -> int:
         """Degrees of freedom of :attr:`innovation_nis` (the reading's dimension)."""
-        return int(np.size(getattr(self, "y", ())))
+        return int(np.size(getattr(getattr(self, "filter", self), "y", ())))
 
     def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None
              ) -> np.ndarray:
@@ -357,7 +359,64 @@ def axis_sigmas(name: str, value) -> np.ndarray:
     return axis_standard_deviations(name, value)
 
 
-class AttitudeAndBiasEstimator(AttitudeEstimator):
+class KalmanEstimator(AttitudeEstimator):
+    """An estimator around a filterpy filter, held as :attr:`filter`
+    (composition, not inheritance: filterpy's ``batch_filter`` or
+    ``rts_smoother`` would run on an error state without its reset and return
+    meaningless numbers). After a step, ``filter`` is the place to inspect
+    what filterpy keeps: ``x_prior``, ``P_prior``, ``x_post``, ``P_post``,
+    ``y``, ``S``, ``K``. This base owns what the EKF, the MEKF and USQUE share:
+    the step's template (output the prior, or correct and output the
+    posterior; then propagate) and filterpy's bookkeeping of a reset.
+
+    Subclasses set ``filter`` and ``output`` (``"prior"`` or ``"posterior"``)
+    and implement :meth:`correct`, :meth:`propagate` and :meth:`_record`
+    (keep ``_output``, whose first entry is the estimate); they may override
+    :meth:`_without_reading`.
+    """
+
+    #: The filterpy filter: inspect ``x_prior``, ``P_post``, ``y``, ``S``, ``K`` there.
+    filter: object
+    output: str
+    _output: tuple
+
+    def correct(self, star_tracker_quat: np.ndarray) -> None:
+        """The update with one reading (and, for an error-state filter, its reset)."""
+        raise NotImplementedError
+
+    def propagate(self, omega_meas_radps: np.ndarray) -> None:
+        """The prediction from step ``k`` to ``k + 1`` with the gyro's rate."""
+        raise NotImplementedError
+
+    def _record(self) -> None:
+        """Keep the estimate being output (``_output``)."""
+        raise NotImplementedError
+
+    def _without_reading(self) -> None:
+        """What a step without a reading does in place of :meth:`correct`."""
+
+    def _reset_filter(self, x: np.ndarray, P: np.ndarray) -> None:
+        """filterpy's state, covariance and their prior and posterior copies."""
+        f = self.filter
+        f.x, f.P = x, P
+        f.x_prior, f.P_prior = x.copy(), P.copy()
+        f.x_post, f.P_post = x.copy(), P.copy()
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+        if self.output == "prior":
+            self._record()
+        if star_tracker_quat is not None:
+            self.correct(star_tracker_quat)
+        else:
+            self._without_reading()
+        if self.output == "posterior":
+            self._record()
+        estimate = self._output[0].copy()
+        self.propagate(omega_meas_radps)
+        return estimate
+
+
+class AttitudeAndBiasEstimator(KalmanEstimator):
     """Base of the six-state filters (attitude error and gyro bias, e.g. the
     MEKF and USQUE): at each output they keep ``_output = (q̂, β̂, P)`` with
     ``P`` 6x6, its attitude block first, and answer the interface from it."""

@@ -25,11 +25,12 @@ measurement" off): output the prior ``x̂[k|k-1]`` as ``q̂[k]``; correct with
 ``z_k`` if a reading is available; then predict to ``x̂[k+1|k]`` with
 ``ω̃_k``. ``output="posterior"`` outputs ``x̂[k|k]`` instead.
 
-filterpy's own ``predict`` is linear (``x = F x``); here :meth:`predict_x`
-is overridden so the state goes through the nonlinear ``f`` and ``F`` is
-recomputed from the exact Jacobian at every step (filterpy issue #181 is
-about users having to discover exactly this). The state is kept as a 1-D
-``(4,)`` array, so ``x``, ``x_prior`` and ``x_post`` are 1-D too.
+filterpy's own ``predict`` is linear (``x = F x``); here the filter's
+``predict_x`` is overridden (:class:`WorkshopModelEKF`) so the state goes
+through the nonlinear ``f`` and ``F`` is recomputed from the exact Jacobian
+at every step (filterpy issue #181 is about users having to discover exactly
+this). The state is kept as a 1-D ``(4,)`` array, so ``x``, ``x_prior`` and
+``x_post`` are 1-D too.
 
 This additive filter lets the estimate leave the unit sphere between steps
 and ignores the quaternion's norm constraint in ``P``; the multiplicative EKF
@@ -63,7 +64,7 @@ from dynamics.validation import (
     one_of,
     process_exponent,
 )
-from estimators.base import OUTPUTS, AttitudeEstimator, finite_state
+from estimators.base import OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state
 from estimators.model import propagate_with_jacobian
 
 _IDENTITY_4 = np.eye(4)
@@ -79,8 +80,22 @@ def _measurement_function(x: np.ndarray) -> np.ndarray:
     return x
 
 
-class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
-    """The workshop's additive quaternion EKF (a filterpy ``ExtendedKalmanFilter``).
+class WorkshopModelEKF(ExtendedKalmanFilter):
+    """filterpy's ``ExtendedKalmanFilter`` (``dim_x = dim_z = 4``) whose
+    ``predict_x`` takes the state through the workshop's nonlinear ``f`` with
+    the gyro rate ``u`` (rad/s) and sets ``F`` to the exact Jacobian at the
+    pre-step ``x`` (:func:`estimators.model.propagate_with_jacobian`)."""
+
+    def __init__(self, dt: float):
+        super().__init__(dim_x=4, dim_z=4)
+        self.dt = dt
+
+    def predict_x(self, u=np.zeros(3)) -> None:
+        self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
+
+
+class QuaternionEKF(KalmanEstimator):
+    """The workshop's additive quaternion EKF (on a filterpy ``ExtendedKalmanFilter``).
 
     Parameters
     ----------
@@ -90,8 +105,9 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         Process covariance ``Q = exp(pc_exponent) I₄`` (natural exponent).
     measurement_covariance : float, (4,) or (4, 4)
         ``R``; a scalar means ``R = value · I₄``.
-    initial_state : (4,) array-like
-        ``x̂[0|-1]``, scalar-first; normalised.
+    initial_attitude : (4,) array-like
+        ``x̂[0|-1]``, scalar-first; normalised. (``initial_state``, its
+        former name, is still accepted.)
     initial_covariance : float
         ``P[0|-1] = initial_covariance · I₄``; must be > 0.
     output : {"prior", "posterior"}
@@ -109,73 +125,75 @@ class QuaternionEKF(ExtendedKalmanFilter, AttitudeEstimator):
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`).
 
-    After each :meth:`step` the filterpy attributes are there to inspect:
-    ``x_prior``/``P_prior`` (after the predict), ``x_post``/``P_post``
-    (after the update), ``y``, ``S``, ``K``, ``F``.
+    After each :meth:`step` the filterpy object :attr:`filter` (a
+    :class:`WorkshopModelEKF`) is there to inspect: ``x_prior``/``P_prior``
+    (after the predict), ``x_post``/``P_post`` (after the update), ``y``,
+    ``S``, ``K``, ``F``. ``Q = exp(pc_exponent) I₄`` and ``R`` are its ``Q``
+    and ``R``.
     """
 
     name = "ekf"
     label = "EKF"
-    scenario_defaults = {"initial_state": "initial_state", "pc_exponent": "pc_exponent",
+    scenario_defaults = {"initial_attitude": "initial_state", "pc_exponent": "pc_exponent",
                          "measurement_covariance": "measurement_covariance",
                          "initial_covariance": "initial_covariance"}
     owned_fields = ("pc_exponent", "measurement_covariance", "initial_covariance")
 
     def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
-                 measurement_covariance=1.0, initial_state=IDENTITY,
+                 measurement_covariance=1.0, initial_attitude=IDENTITY,
                  initial_covariance: float = 1e-12, output: str = "prior",
-                 align_sign: bool = True, on_invalid: str = "raise"):
-        ExtendedKalmanFilter.__init__(self, dim_x=4, dim_z=4)
-        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_state,
+                 align_sign: bool = True, on_invalid: str = "raise", initial_state=None):
+        # initial_state, the former name of initial_attitude, wins when given
+        # (an [estimators.ekf] section's over the scenario's default).
+        if initial_state is not None:
+            initial_attitude = initial_state
+        AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self.filter = WorkshopModelEKF(self.dt)
         self.align_sign = boolean("align_sign", align_sign)
         self.pc_exponent = process_exponent("pc_exponent", pc_exponent)
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
         self.output = one_of("output", output, OUTPUTS)
-        self.R = covariance_matrix("measurement_covariance", measurement_covariance)
-        self.Q = math.exp(self.pc_exponent) * _IDENTITY_4
+        self.filter.R = covariance_matrix("measurement_covariance", measurement_covariance)
+        self.filter.Q = math.exp(self.pc_exponent) * _IDENTITY_4
         self.reset()
 
     def reset(self) -> None:
-        self.x = self.initial_attitude.copy()
-        self.P = self.initial_covariance * _IDENTITY_4
-        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
-        self.x_post, self.P_post = self.x.copy(), self.P.copy()
-        self._output_x, self._output_P = self.x, self.P
+        self._reset_filter(self.initial_attitude.copy(), self.initial_covariance * _IDENTITY_4)
+        self._record()
+
+    def _record(self) -> None:
+        # filterpy replaces x and P with new arrays, so keeping references is a snapshot.
+        self._output = (self.filter.x, self.filter.P)
 
     @property
     def attitude(self) -> np.ndarray:
         """The estimate :meth:`step` last returned, ``(4,)`` (not renormalised)."""
-        return self._output_x.copy()
+        return self._output[0].copy()
 
     @property
     def attitude_covariance(self) -> np.ndarray:
         """``4 Ξ(q̂)ᵀ P Ξ(q̂)`` (rad²) for the last estimate and its ``P``
         (see the module docstring)."""
-        xi = kinematics_matrix(self._output_x / np.sqrt(self._output_x @ self._output_x))
-        return 4.0 * xi.T @ self._output_P @ xi
-
-    def predict_x(self, u=np.zeros(3)) -> None:
-        """Nonlinear state prediction ``x ← f(x, u)`` with ``u`` the gyro rate (rad/s);
-        also sets ``F`` to the exact Jacobian at the pre-step ``x``."""
-        self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
+        x, P = self._output
+        xi = kinematics_matrix(x / np.sqrt(x @ x))
+        return 4.0 * xi.T @ P @ xi
 
     def state_is_finite(self) -> bool:
-        return finite_state(self.x, self.P)
+        return finite_state(self.filter.x, self.filter.P)
 
-    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        # filterpy replaces x and P with new arrays, so keeping references is a snapshot.
-        self._output_x, self._output_P = self.x, self.P
-        if star_tracker_quat is not None:
-            reading = np.asarray(star_tracker_quat, dtype=float)
-            if self.align_sign and reading @ self.x < 0:
-                reading = -reading
-            self.update(reading, _measurement_jacobian, _measurement_function)
-        elif self.output == "posterior":
-            self.x_post, self.P_post = self.x.copy(), self.P.copy()
+    def correct(self, star_tracker_quat: np.ndarray) -> None:
+        """filterpy's update with ``H = I₄``, the reading sign-aligned first if asked."""
+        reading = np.asarray(star_tracker_quat, dtype=float)
+        if self.align_sign and reading @ self.filter.x < 0:
+            reading = -reading
+        self.filter.update(reading, _measurement_jacobian, _measurement_function)
+
+    def _without_reading(self) -> None:
         if self.output == "posterior":
-            self._output_x, self._output_P = self.x, self.P
-        estimate = self._output_x.copy()
-        self.predict(u=omega_meas_radps)
-        return estimate
+            self.filter.x_post, self.filter.P_post = self.filter.x.copy(), self.filter.P.copy()
+
+    def propagate(self, omega_meas_radps: np.ndarray) -> None:
+        """``x ← f(x, ω̃)``, ``P ← F P Fᵀ + Q`` (filterpy's predict)."""
+        self.filter.predict(u=omega_meas_radps)

@@ -168,7 +168,7 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
-class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
+class MultiplicativeEKF(AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
     Parameters
@@ -195,6 +195,11 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
         aligned in sign with the prediction (the innovation is a rotation).
+
+    The filterpy ``KalmanFilter`` on the error state is :attr:`filter`
+    (``x`` is the error δθ, δβ, zero after each reset; ``P``, ``y``, ``S``,
+    ``K`` as filterpy keeps them); :attr:`q_hat` and :attr:`beta_hat` are
+    the global estimates.
     """
 
     name = "mekf"
@@ -205,29 +210,27 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, output: str = "posterior",
                  on_invalid: str = "raise"):
-        KalmanFilter.__init__(self, dim_x=6, dim_z=3)
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self.filter = KalmanFilter(dim_x=6, dim_z=3)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
                         initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
-        self.H = np.hstack([_I3, np.zeros((3, 3))])
+        self.filter.R = self.R
+        self.filter.H = np.hstack([_I3, np.zeros((3, 3))])
         self.reset()
 
     def reset(self) -> None:
         self.q_hat = self.initial_attitude.copy()
         self.beta_hat = self.initial_bias_radps.copy()
-        self.x = np.zeros(6)
-        self.P = self.initial_covariance.copy()
-        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
-        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        self._reset_filter(np.zeros(6), self.initial_covariance.copy())
         self._record()
 
     def _record(self) -> None:
         """Keep the estimate being output and its covariance (new arrays each step)."""
-        self._output = (self.q_hat, self.beta_hat, self.P)
+        self._output = (self.q_hat, self.beta_hat, self.filter.P)
 
     def innovation(self, star_tracker_quat: np.ndarray) -> np.ndarray:
         """The measured small angle ``y = log(q̂⁻¹ ⊗ z)`` (rad), ``z`` sign-aligned first."""
@@ -238,32 +241,21 @@ class MultiplicativeEKF(KalmanFilter, AttitudeAndBiasEstimator):
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """Kalman update with one reading, then the reset."""
-        self.update(self.innovation(star_tracker_quat))
-        delta_theta, delta_beta = self.x[:3], self.x[3:]
+        self.filter.update(self.innovation(star_tracker_quat))
+        delta_theta, delta_beta = self.filter.x[:3], self.filter.x[3:]
         q = quat_multiply(self.q_hat, quat_from_rotvec(delta_theta))
         self.q_hat = q / np.sqrt(q @ q)
         self.beta_hat = self.beta_hat + delta_beta
-        self.x = np.zeros(6)
+        self.filter.x = np.zeros(6)
 
     def propagate(self, omega_meas_radps: np.ndarray) -> None:
         """Global state and covariance from ``k`` to ``k + 1`` with the gyro's step average."""
         omega_hat = np.asarray(omega_meas_radps, dtype=float) - self.beta_hat
         phi, q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
                                       self.gyro_bias_random_walk)
-        self.predict(F=phi, Q=q)
+        self.filter.predict(F=phi, Q=q)
         propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)
 
     def state_is_finite(self) -> bool:
-        return finite_state(self.q_hat, self.P) and finite_state(self.beta_hat)
-
-    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        if self.output == "prior":
-            self._record()
-        if star_tracker_quat is not None:
-            self.correct(star_tracker_quat)
-        if self.output == "posterior":
-            self._record()
-        estimate = self._output[0].copy()
-        self.propagate(omega_meas_radps)
-        return estimate
+        return finite_state(self.q_hat, self.filter.P) and finite_state(self.beta_hat)

@@ -123,7 +123,7 @@ def _check_sigma_spread(name: str, value, spread: float) -> None:
                 "(n + lambda) P")
 
 
-class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
+class USQUE(AttitudeAndBiasEstimator):
     """Unscented quaternion estimator (Crassidis & Markley 2003) on filterpy's UKF.
 
     Parameters
@@ -140,6 +140,10 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         ``(n + λ) σ²`` of the initial covariance within ``1e-300`` and
         ``1e300`` (σ > 0 on every axis), so that the Cholesky factor of
         ``(n + λ) P`` exists in floating point.
+
+    The filterpy ``UnscentedKalmanFilter`` is :attr:`filter` (``x`` is
+    [δp, β] with δp about :attr:`q_hat`; ``P``, ``sigmas_f``, ``Wm``, ``Wc``,
+    ``y``, ``S``, ``K`` as filterpy keeps them).
     """
 
     name = "usque"
@@ -157,32 +161,32 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
         _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
         points = MerweScaledSigmaPoints(STATE_SIZE, alpha=alpha, beta=beta, kappa=kappa)
-        UnscentedKalmanFilter.__init__(self, dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
-                                       fx=self._fx, points=points)
+        self.filter = UnscentedKalmanFilter(dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
+                                            fx=self._fx, points=points)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
                         initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
+        self.filter.R = self.R
         self.reset()
 
     def reset(self) -> None:
         self.q_hat = self.initial_attitude.copy()
-        self.x = np.concatenate([np.zeros(3), self.initial_bias_radps])
-        self.P = self.initial_covariance.copy()
-        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
-        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        self._reset_filter(np.concatenate([np.zeros(3), self.initial_bias_radps]),
+                           self.initial_covariance.copy())
         # An update before the first predict needs sigma points about (x₀, P₀),
         # which filterpy only draws in predict.
-        self.sigmas_f = self.points_fn.sigma_points(self.x, self.P)
+        self.filter.sigmas_f = self.filter.points_fn.sigma_points(self.filter.x, self.filter.P)
         self._record()
 
     def _record(self) -> None:
         """Keep the estimate being output; ``P``'s GRP block is the body-frame
         small-angle covariance to first order (rad²)."""
-        q = self.q_hat if not np.any(self.x[:3]) else _unit(
-            quat_multiply(self.q_hat, quat_from_grp(self.x[:3])))
-        self._output = (q, self.x[3:].copy(), self.P)
+        x = self.filter.x
+        q = self.q_hat if not np.any(x[:3]) else _unit(
+            quat_multiply(self.q_hat, quat_from_grp(x[:3])))
+        self._output = (q, x[3:].copy(), self.filter.P)
 
     # The model, as filterpy calls it: fx on each sigma point, hx on each.
     def _fx(self, x, dt, omega_meas_radps, q_reference_next):
@@ -196,9 +200,13 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
         return x[:3]
 
     def _reset(self) -> None:
-        """Fold the mean's δp into the reference quaternion."""
-        self.q_hat = _unit(quat_multiply(self.q_hat, quat_from_grp(self.x[:3])))
-        self.x = np.concatenate([np.zeros(3), self.x[3:]])
+        """Fold the mean's δp into the reference quaternion (eq. 45)."""
+        x = self.filter.x
+        self.q_hat = _unit(quat_multiply(self.q_hat, quat_from_grp(x[:3])))
+        self.filter.x = np.concatenate([np.zeros(3), x[3:]])
+
+    #: Without a reading the prior mean's δp moves into q̂ all the same.
+    _without_reading = _reset
 
     def measured_grp(self, star_tracker_quat: np.ndarray) -> np.ndarray:
         """The reading as GRPs about the reference, sign-aligned first."""
@@ -209,33 +217,20 @@ class USQUE(UnscentedKalmanFilter, AttitudeAndBiasEstimator):
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """filterpy's unscented update with one reading, then the reset."""
-        self.update(self.measured_grp(star_tracker_quat))
+        self.filter.update(self.measured_grp(star_tracker_quat))
         self._reset()
 
     def propagate(self, omega_meas_radps: np.ndarray) -> None:
         """Sigma points through the exact kinematics; P⁻ = UT + Q."""
         omega = np.asarray(omega_meas_radps, dtype=float)
-        omega_hat = omega - self.x[3:]
+        omega_hat = omega - self.filter.x[3:]
         q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt)))
-        _, self.Q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
-                                         self.gyro_bias_random_walk)
-        self.predict(omega_meas_radps=omega, q_reference_next=q_next)
+        _, self.filter.Q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
+                                                self.gyro_bias_random_walk)
+        self.filter.predict(omega_meas_radps=omega, q_reference_next=q_next)
         # The prior mean's δp stays in x until the next update or reset: the
         # sigma points filterpy drew for the update are relative to q_next.
         self.q_hat = q_next
 
     def state_is_finite(self) -> bool:
-        return finite_state(self.q_hat, self.P) and finite_state(self.x)
-
-    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        if self.output == "prior":
-            self._record()
-        if star_tracker_quat is not None:
-            self.correct(star_tracker_quat)
-        else:
-            self._reset()
-        if self.output == "posterior":
-            self._record()
-        estimate = self._output[0].copy()
-        self.propagate(omega_meas_radps)
-        return estimate
+        return finite_state(self.q_hat, self.filter.P) and finite_state(self.filter.x)

@@ -55,13 +55,13 @@ def test_ekf_step_order_on_hand_computed_case():
     assert np.array_equal(q_hat0, [1.0, 0.0, 0.0, 0.0])        # the prior x̂[0|-1] is output
     # Update: K = P/(P+R) = ½ I, x⁺ = x0 + ½(z - x0) = [½, ½, 0, 0];
     # Joseph form P⁺ = (½)² I + (½)² I = ½ I.
-    assert np.allclose(ekf.x_post, [0.5, 0.5, 0, 0], atol=1e-15)
-    assert np.allclose(ekf.P_post, 0.5 * np.eye(4), atol=1e-15)
+    assert np.allclose(ekf.filter.x_post, [0.5, 0.5, 0, 0], atol=1e-15)
+    assert np.allclose(ekf.filter.P_post, 0.5 * np.eye(4), atol=1e-15)
     # Predict with ω = 0: f(x⁺) = x⁺/|x⁺| = [1/√2, 1/√2, 0, 0]; F = (I - n nᵀ)/|x⁺| with
     # |x⁺| = 1/√2, so F P⁺ Fᵀ + Q = 2 · ½ (I - n nᵀ) + I.
     n = np.array([1, 1, 0, 0]) / math.sqrt(2)
-    assert np.allclose(ekf.x_prior, n, atol=1e-15)
-    assert np.allclose(ekf.P_prior, (np.eye(4) - np.outer(n, n)) + np.eye(4), atol=1e-14)
+    assert np.allclose(ekf.filter.x_prior, n, atol=1e-15)
+    assert np.allclose(ekf.filter.P_prior, (np.eye(4) - np.outer(n, n)) + np.eye(4), atol=1e-14)
     # Step 1 outputs that prediction, before any correction.
     assert np.allclose(ekf.step(np.zeros(3)), n, atol=1e-15)
 
@@ -74,15 +74,38 @@ def test_ekf_posterior_output_option_returns_corrected_estimate():
 
 def test_ekf_is_filterpy_with_nonlinear_predict_and_1d_state(rng):
     ekf = QuaternionEKF(dt=0.01)
-    assert isinstance(ekf, ExtendedKalmanFilter)
+    assert isinstance(ekf.filter, ExtendedKalmanFilter)    # held, not inherited
     omega = np.array([0.3, -0.2, 0.1])
     x_before = np.array([0.9, 0.1, -0.2, 0.3])
-    ekf.x = x_before.copy()
-    ekf.predict(u=omega)
-    assert ekf.x.shape == (4,) and ekf.x_prior.shape == (4,)
-    assert np.allclose(ekf.x, propagate(x_before, omega, 0.01), atol=1e-15)
-    assert np.allclose(ekf.F, central_difference_jacobian(
+    ekf.filter.x = x_before.copy()
+    ekf.filter.predict(u=omega)
+    assert ekf.filter.x.shape == (4,) and ekf.filter.x_prior.shape == (4,)
+    assert np.allclose(ekf.filter.x, propagate(x_before, omega, 0.01), atol=1e-15)
+    assert np.allclose(ekf.filter.F, central_difference_jacobian(
         lambda x: propagate(x, omega, 0.01), x_before), atol=1e-8)
+
+
+def test_filters_hold_filterpy_and_expose_only_what_means_something():
+    from estimators import ESTIMATORS
+    for name in ("ekf", "mekf", "usque"):
+        estimator = ESTIMATORS[name]()
+        # filterpy's batch_filter and rts_smoother would run on the error state
+        # without its reset: they are the filter's, not the estimator's.
+        for method in ("batch_filter", "rts_smoother", "predict", "update"):
+            assert not hasattr(estimator, method), (name, method)
+        assert hasattr(estimator.filter, "predict") and hasattr(estimator.filter, "update")
+        estimator.step(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
+        # A reading equal to the prediction: no innovation, and the NIS says so.
+        assert estimator.innovation_nis == pytest.approx(0.0, abs=1e-12)
+        assert estimator.innovation_dof == (4 if name == "ekf" else 3)
+
+
+def test_the_ekf_takes_initial_attitude_and_its_former_name():
+    q = np.array([0.0, 0.6, 0.0, 0.8])
+    new, old = QuaternionEKF(initial_attitude=q), QuaternionEKF(initial_state=q)
+    assert np.array_equal(new.attitude, old.attitude)
+    assert np.allclose(new.attitude, q, rtol=0, atol=1e-15)
+    assert not np.allclose(QuaternionEKF().attitude, q)
 
 
 def test_resets_equal_the_reading_at_available_steps():

@@ -94,3 +94,21 @@ def test_no_module_imports_another_modules_private_name():
                                and not a.name.startswith("__")]
                     assert not private, f"{path.relative_to(ROOT)} imports {private} " \
                                         f"from {node.module}"
+
+
+#: No function grows past what one can read at a glance.
+MAX_FUNCTION_LINES = 100
+
+
+def test_no_function_of_the_project_is_longer_than_a_screenful():
+    long = []
+    for package in PACKAGES + ("tests",):
+        for path in (ROOT / package).rglob("*.py"):
+            tree = ast.parse(path.read_text(), filename=str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    lines = node.end_lineno - node.lineno + 1
+                    if lines > MAX_FUNCTION_LINES:
+                        long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} "
+                                    f"({lines} lines)")
+    assert not long, f"longer than {MAX_FUNCTION_LINES} lines: {', '.join(long)}"

@@ -118,7 +118,7 @@ def test_steady_state_equals_the_riccati_solution_of_its_own_model():
     result = simulate(scenario, [mekf], seed=3)
     assert result.error_deg["mekf"][-1] < 0.01
     m = 10
-    prior = mekf.P_prior[:3, :3]            # after the last step's predict: m·Q on a posterior
+    prior = mekf.filter.P_prior[:3, :3]            # after the last step's predict: m·Q on a posterior
     dare = solve_discrete_are(np.eye(3), np.eye(3), m * 1e-10 * 0.1 * np.eye(3), mekf.R)
     # The run ends at k = 4000, a reading step: its predict is the first of the m.
     posterior = dare - dare @ np.linalg.solve(dare + mekf.R, dare)

@@ -20,17 +20,17 @@ FLIGHT = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 
 def test_sigma_point_weights_sum_as_they_must_and_reproduce_mean_and_covariance(rng):
     ukf = USQUE(initial_attitude_sigma_rad=[0.1, 0.2, 0.3], initial_bias_sigma_radps=1e-3)
-    points = ukf.points_fn
+    points = ukf.filter.points_fn
     assert points.num_sigmas() == 13
-    assert np.sum(ukf.Wm) == pytest.approx(1.0, abs=1e-15)
+    assert np.sum(ukf.filter.Wm) == pytest.approx(1.0, abs=1e-15)
     # Van der Merwe's covariance weights: the mean's gets 1 - α² + β on top.
-    assert np.sum(ukf.Wc) == pytest.approx(1.0 + (1 - 1.0 ** 2 + 2.0), abs=1e-15)
+    assert np.sum(ukf.filter.Wc) == pytest.approx(1.0 + (1 - 1.0 ** 2 + 2.0), abs=1e-15)
     x = rng.normal(0, 1, 6)
     A = rng.normal(0, 1, (6, 6))
     P = A @ A.T + np.eye(6)
     sigmas = points.sigma_points(x, P)
-    mean = ukf.Wm @ sigmas
-    covariance = (ukf.Wc[:, None] * (sigmas - mean)).T @ (sigmas - mean)
+    mean = ukf.filter.Wm @ sigmas
+    covariance = (ukf.filter.Wc[:, None] * (sigmas - mean)).T @ (sigmas - mean)
     assert np.allclose(mean, x, atol=1e-12)
     assert np.allclose(covariance, P, atol=1e-10)
 

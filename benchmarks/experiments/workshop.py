@@ -7,6 +7,7 @@ with every figure embedded and the numbers in place.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,6 @@ ACTIVITY_2_INTERVALS = (0.2, 1.0, 5.0)
 ACTIVITY_3A_PC = (-8.7, -10.9)
 LANDSCAPE_GRID = (-18.0, 0.0, 0.25)
 SEED = 0
-STEPS = 9
 
 
 def _markdown_table(rows: dict, first: str, columns=STAT_COLUMNS) -> str:
@@ -134,60 +134,58 @@ def _count(divergence, stats: dict) -> None:
             divergence.add(name, row["diverged_step"])
 
 
-def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
-                 quiet: bool = False, divergence=None) -> Path:
-    """Run the exercise and write ``out/report.md``; returns its path.
-    ``divergence`` (a :class:`~benchmarks.divergence.DivergenceReport`), if
-    given, counts every estimator run of the comparisons that diverged."""
-    scenario = scenario or Scenario()
-    out = Path(out)
-    check_activities(scenario)
-    check_bound_inputs(scenario)      # step 9 draws the bound: refuse before step 1
-    started = time.perf_counter()
-    bar = progress(total=STEPS, desc="workshop", unit="step", quiet=quiet)
-    sections = []
+@dataclass
+class _Run:
+    """What the workshop's steps share: the scenario, and what a step leaves
+    for a later one (the tuned exponent, for the landscape)."""
 
-    def step(folder: str) -> Path:
-        bar.update()
-        return out / folder
+    scenario: Scenario
+    divergence: object = None
+    tuned_pc_exponent: float = float("nan")
 
-    # 1. The tumbling spacecraft.
-    folder = step("01-truth")
-    experiments.animate(scenario, None, SEED, folder, quiet=True)
-    sections.append(f"""## 1. The tumbling spacecraft
+    def count(self, stats: dict) -> None:
+        _count(self.divergence, stats)
+
+
+def _truth(run: _Run, folder: Path) -> str:
+    """1. The tumbling spacecraft."""
+    experiments.animate(run.scenario, None, SEED, folder, quiet=True)
+    return f"""## 1. The tumbling spacecraft
 
 A rigid body with principal moments {", ".join(f"{m:g}" for m in
-np.linalg.eigvalsh(scenario.inertia_tensor_kg_m2))} kg m² spins freely from
-ω₀ = {scenario.initial_rate_radps.tolist()} rad/s. With no torque
-{tumble_description(scenario)} (the truth is integrated to 1e-12 relative
+np.linalg.eigvalsh(run.scenario.inertia_tensor_kg_m2))} kg m² spins freely from
+ω₀ = {run.scenario.initial_rate_radps.tolist()} rad/s. With no torque
+{tumble_description(run.scenario)} (the truth is integrated to 1e-12 relative
 accuracy and checked against the Jacobi-elliptic closed form).
 
 ![The true attitude](01-truth/attitude_truth.gif)
-""")
+"""
 
-    # 2. Dead reckoning.
-    folder = step("02-dead-reckoning")
-    dr_stats = experiments.run_one(scenario, "dead-reckoning", SEED, folder)
-    _count(divergence, {"dead-reckoning": dr_stats})
-    experiments.animate(scenario, "dead-reckoning", SEED, folder, quiet=True)
-    sections.append(f"""## 2. Dead reckoning
+
+def _dead_reckoning(run: _Run, folder: Path) -> str:
+    """2. Dead reckoning: the gyro alone."""
+    dr_stats = experiments.run_one(run.scenario, "dead-reckoning", SEED, folder)
+    run.count({"dead-reckoning": dr_stats})
+    experiments.animate(run.scenario, "dead-reckoning", SEED, folder, quiet=True)
+    return f"""## 2. Dead reckoning
 
 Integrating the gyro alone, the estimate drifts: white rate noise of power
-p = {scenario.gyro_noise:g} rad²/s becomes an angle random walk whose variance
+p = {run.scenario.gyro_noise:g} rad²/s becomes an angle random walk whose variance
 grows as p·t per axis, so the error wanders upward with time (final error
 {dr_stats['final_deg']:.3f}°, maximum {dr_stats['max_deg']:.3f}°).
 
 ![Dead reckoning error](02-dead-reckoning/dead-reckoning.png)
 
 ![True and dead-reckoned attitude](02-dead-reckoning/attitude_dead-reckoning.gif)
-""")
+"""
 
-    # 3. Activity 1: gyro noise.
-    folder = step("03-activity-1")
-    rows = experiments.sweep(scenario, "dead-reckoning", "gyro-noise", ACTIVITY_1_GYRO_NOISE,
+
+def _activity_1(run: _Run, folder: Path) -> str:
+    """3. Activity 1: a noisier gyro."""
+    rows = experiments.sweep(run.scenario, "dead-reckoning", "gyro-noise", ACTIVITY_1_GYRO_NOISE,
                              SEED, folder, quiet=True)
     ratio = ACTIVITY_1_GYRO_NOISE[1] / ACTIVITY_1_GYRO_NOISE[0]
-    sections.append(f"""## 3. Activity 1 — a noisier gyro
+    return f"""## 3. Activity 1 — a noisier gyro
 
 {ratio:g} times the noise power means √{ratio:g} ≈ {ratio ** 0.5:.1f} times the
 drift on average (here, one noise realisation: {rows[1]['mean_deg'] / rows[0]['mean_deg']:.1f}
@@ -196,34 +194,36 @@ times the mean error).
 ![Dead reckoning for two gyro noise powers](03-activity-1/sweep.png)
 
 {_sweep_table(rows, "gyro noise")}
-""")
+"""
 
-    # 4. Resets.
-    folder = step("04-resets")
-    _, stats = experiments.compare(scenario, SEED, folder,
+
+def _resets(run: _Run, folder: Path) -> str:
+    """4. Dead reckoning with star-tracker resets."""
+    _, stats = experiments.compare(run.scenario, SEED, folder,
                                    estimators=("dead-reckoning", "dead-reckoning-resets"))
-    reading_rms = reading_error_rms_deg(scenario)
-    _count(divergence, stats)
+    reading_rms = reading_error_rms_deg(run.scenario)
+    run.count(stats)
     dead_rms, resets_rms = stats["dead-reckoning"]["rms_deg"], \
         stats["dead-reckoning-resets"]["rms_deg"]
-    sections.append(f"""## 4. Dead reckoning with star-tracker resets
+    return f"""## 4. Dead reckoning with star-tracker resets
 
 Replacing the estimate with each star tracker reading
-(every {scenario.time_between_measurements:g} s) stops the drift, but the error
-now sits at the star tracker's own noise level: {reading_error_text(scenario)}
+(every {run.scenario.time_between_measurements:g} s) stops the drift, but the error
+now sits at the star tracker's own noise level: {reading_error_text(run.scenario)}
 ≈ {reading_rms:.3g}° RMS at each reading. Over this run the resets' RMS error is
 {resets_rms:.3g}°, {_against(resets_rms, dead_rms)} dead reckoning's {dead_rms:.3g}°.
 
 ![Dead reckoning with and without resets](04-resets/compare.png)
 
 {_markdown_table(stats, "estimator")}
-""")
+"""
 
-    # 5. Activity 2: star tracker interval.
-    folder = step("05-activity-2")
-    rows = experiments.sweep(scenario, "dead-reckoning-resets", "time-between-measurements",
+
+def _activity_2(run: _Run, folder: Path) -> str:
+    """5. Activity 2: fewer star tracker readings."""
+    rows = experiments.sweep(run.scenario, "dead-reckoning-resets", "time-between-measurements",
                              ACTIVITY_2_INTERVALS, SEED, folder, quiet=True)
-    sections.append(f"""## 5. Activity 2 — fewer star tracker readings
+    return f"""## 5. Activity 2 — fewer star tracker readings
 
 With readings further apart the estimate dead-reckons for longer between
 resets, so the gyro's drift adds to each reading's error; right after a reset
@@ -232,44 +232,48 @@ the error is still the star tracker's own.
 ![Resets every {", ".join(f"{v:g}" for v in ACTIVITY_2_INTERVALS)} s](05-activity-2/sweep.png)
 
 {_sweep_table(rows, "interval (s)")}
-""")
+"""
 
-    # 6. EKF.
-    folder = step("06-ekf")
-    _, ekf_stats = experiments.compare(scenario, SEED, folder)
-    _count(divergence, ekf_stats)
-    sections.append(f"""## 6. The extended Kalman filter
+
+def _ekf(run: _Run, folder: Path) -> str:
+    """6. The extended Kalman filter."""
+    _, ekf_stats = experiments.compare(run.scenario, SEED, folder)
+    run.count(ekf_stats)
+    return f"""## 6. The extended Kalman filter
 
 The EKF blends both sensors, weighting the gyro's prediction by the process
-covariance Q = exp({scenario.pc_exponent:g}) I₄ and the star tracker by
-R = {matrix_text(scenario.measurement_covariance)}. {ranking_text(ekf_stats)}
+covariance Q = exp({run.scenario.pc_exponent:g}) I₄ and the star tracker by
+R = {matrix_text(run.scenario.measurement_covariance)}. {ranking_text(ekf_stats)}
 
 ![Dead reckoning, resets and the EKF](06-ekf/compare.png)
 
 {_markdown_table(ekf_stats, "estimator")}
-""")
+"""
 
-    # 7. Activity 3a: pc by hand.
-    folder = step("07-activity-3a")
-    rows = experiments.sweep(scenario, "ekf", "pc-exponent", ACTIVITY_3A_PC, SEED, folder,
+
+def _activity_3a(run: _Run, folder: Path) -> str:
+    """7. Activity 3a: tuning by hand."""
+    rows = experiments.sweep(run.scenario, "ekf", "pc-exponent", ACTIVITY_3A_PC, SEED, folder,
                              quiet=True)
-    sections.append(f"""## 7. Activity 3a — tuning by hand
+    return f"""## 7. Activity 3a — tuning by hand
 
 A smaller process covariance trusts the gyro more and the star tracker less.
 
 ![EKF at two process covariance exponents](07-activity-3a/sweep.png)
 
 {_sweep_table(rows, "pc exponent")}
-""")
+"""
 
-    # 8. Activity 3b: fminbnd.
-    folder = step("08-activity-3b")
-    tune = tune_pc_exponent(scenario, (SEED,), quiet=True)
+
+def _activity_3b(run: _Run, folder: Path) -> str:
+    """8. Activity 3b: the bounded minimiser."""
+    tune = tune_pc_exponent(run.scenario, (SEED,), quiet=True)
+    run.tuned_pc_exponent = tune.pc_exponent
     experiments.write_json(folder / "tune.json", tune.as_json())
-    _, tuned = experiments.compare(scenario.replace(pc_exponent=tune.pc_exponent), SEED, folder,
-                                   figure_name="tune.png", summary_name="summary.csv")
-    _count(divergence, tuned)
-    sections.append(f"""## 8. Activity 3b — tuning with a bounded minimiser
+    _, tuned = experiments.compare(run.scenario.replace(pc_exponent=tune.pc_exponent), SEED,
+                                   folder, figure_name="tune.png", summary_name="summary.csv")
+    run.count(tuned)
+    return f"""## 8. Activity 3b — tuning with a bounded minimiser
 
 Brent's bounded method (MATLAB's `fminbnd`, scipy's
 `minimize_scalar(method="bounded")`) searches [{DEFAULT_BOUNDS[0]:g}, {DEFAULT_BOUNDS[1]:g}]
@@ -291,15 +295,16 @@ It settles at **pc_exponent = {tune.pc_exponent:.4f}** with a loss of
 
 This optimum fits one noise realisation (seed {SEED}); `attitude-bench tune
 --seeds 0-19` tunes on the mean loss of many runs instead.
-""")
+"""
 
-    # 9. The landscape.
-    folder = step("09-landscape")
+
+def _landscape(run: _Run, folder: Path) -> str:
+    """9. The loss landscape."""
     grid = pc_grid(*LANDSCAPE_GRID)
-    landscape = compute_landscape(scenario, grid, (SEED,), quiet=True)
+    landscape = compute_landscape(run.scenario, grid, (SEED,), quiet=True)
     write_landscape(landscape, folder)
     best = landscape.table.iloc[landscape.best_index]
-    sections.append(f"""## 9. The loss landscape
+    return f"""## 9. The loss landscape
 
 Sweeping the exponent from {grid[0]:g} to {grid[-1]:g} in steps of
 {LANDSCAPE_GRID[2]:g} shows the whole trade-off: too small a Q ignores the star
@@ -307,15 +312,40 @@ tracker and drifts like dead reckoning, too large a Q follows every noisy
 reading. The lowest error standard deviation on this grid is
 {best['std_deg']:.6f}° at pc_exponent = {landscape.best_pc_exponent:g}
 (mean error {best['mean_deg']:.4f}°), next to the bounded minimiser's
-{tune.pc_exponent:.4f}.
+{run.tuned_pc_exponent:.4f}.
 
 ![The landscape](09-landscape/landscape.png)
 
 ![The landscape, animated over the sweep](09-landscape/landscape.gif)
 
 The numbers are in [landscape.csv](09-landscape/landscape.csv).
-""")
-    bar.close()
+"""
+
+
+#: The exercise, in order: each step's folder and the function that fills it
+#: and returns its section of the report.
+WORKSHOP_STEPS = (("01-truth", _truth), ("02-dead-reckoning", _dead_reckoning),
+                  ("03-activity-1", _activity_1), ("04-resets", _resets),
+                  ("05-activity-2", _activity_2), ("06-ekf", _ekf),
+                  ("07-activity-3a", _activity_3a), ("08-activity-3b", _activity_3b),
+                  ("09-landscape", _landscape))
+
+
+def run_workshop(scenario: Scenario | None = None, out: Path = Path("results"),
+                 quiet: bool = False, divergence=None) -> Path:
+    """Run the exercise and write ``out/report.md``; returns its path.
+    ``divergence`` (a :class:`~benchmarks.divergence.DivergenceReport`), if
+    given, counts every estimator run of the comparisons that diverged."""
+    scenario = scenario or Scenario()
+    out = Path(out)
+    check_activities(scenario)
+    check_bound_inputs(scenario)      # step 9 draws the bound: refuse before step 1
+    started = time.perf_counter()
+    run, sections = _Run(scenario, divergence), []
+    with progress(total=len(WORKSHOP_STEPS), desc="workshop", unit="step", quiet=quiet) as bar:
+        for folder, step in WORKSHOP_STEPS:
+            bar.update()
+            sections.append(step(run, out / folder))
     elapsed = time.perf_counter() - started
     report = out / "report.md"
     write_text(report, f"""# The attitude estimation workshop

@@ -36,13 +36,13 @@ def initial_state(estimators) -> State:
     first = estimators[0]
     return State(x=np.array([e.initial_attitude for e in estimators]),
                  P=np.array([e.initial_covariance * np.eye(4) for e in estimators]),
-                 q_variance=np.array([e.Q[0, 0] for e in estimators]),
-                 R=np.ascontiguousarray(first.R), posterior=first.output == "posterior",
+                 q_variance=np.array([e.filter.Q[0, 0] for e in estimators]),
+                 R=np.ascontiguousarray(first.filter.R), posterior=first.output == "posterior",
                  align_sign=first.align_sign)
 
 
 def nis_dof(estimators) -> int:
-    return estimators[0].dim_z
+    return estimators[0].filter.dim_z
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -43,13 +43,13 @@ def initial_state(estimators) -> State:
                  beta=beta, P=P,
                  noise=np.array([e.gyro_noise for e in estimators], dtype=float),
                  bias_rw=np.array([e.gyro_bias_random_walk for e in estimators], dtype=float),
-                 R=np.array([e.R for e in estimators]).reshape(-1, 3, 3),
+                 R=np.array([e.filter.R for e in estimators]).reshape(-1, 3, 3),
                  beta_last=beta.copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior")
 
 
 def nis_dof(estimators) -> int:
-    return estimators[0].dim_z
+    return estimators[0].filter.dim_z
 
 
 def final(state, estimators) -> dict:

@@ -71,15 +71,19 @@ def _spread(points) -> float:
 def initial_state(estimators) -> State:
     """From the per-run objects (``from_scenario``), one per run: filterpy's
     ``x``, ``P``, the sigma points and weights it holds."""
-    stack = lambda attribute, shape: np.array(  # noqa: E731
-        [getattr(e, attribute) for e in estimators], dtype=float).reshape((-1,) + shape)
-    P = stack("P", (6, 6))
-    x = stack("x", (6,))
-    return State(q=stack("q_hat", (4,)), x=x, P=P, sigmas=stack("sigmas_f", (N_SIGMAS, 6)),
-                 noise=stack("gyro_noise", ()), bias_rw=stack("gyro_bias_random_walk", ()),
-                 R=stack("R", (3, 3)),
-                 spread=np.array([_spread(e.points_fn) for e in estimators]),
-                 Wm=stack("Wm", (N_SIGMAS,)), Wc=stack("Wc", (N_SIGMAS,)),
+    def stack(values, shape):
+        return np.array(list(values), dtype=float).reshape((-1,) + shape)
+    filters = [e.filter for e in estimators]
+    P = stack((f.P for f in filters), (6, 6))
+    x = stack((f.x for f in filters), (6,))
+    return State(q=stack((e.q_hat for e in estimators), (4,)), x=x, P=P,
+                 sigmas=stack((f.sigmas_f for f in filters), (N_SIGMAS, 6)),
+                 noise=stack((e.gyro_noise for e in estimators), ()),
+                 bias_rw=stack((e.gyro_bias_random_walk for e in estimators), ()),
+                 R=stack((f.R for f in filters), (3, 3)),
+                 spread=np.array([_spread(f.points_fn) for f in filters]),
+                 Wm=stack((f.Wm for f in filters), (N_SIGMAS,)),
+                 Wc=stack((f.Wc for f in filters), (N_SIGMAS,)),
                  beta_last=x[:, 3:].copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior")
 
