@@ -38,3 +38,11 @@ def error_statistics(error_deg: np.ndarray) -> dict[str, float]:
 def loss(error_deg: np.ndarray) -> float:
     """The workshop's loss: sample standard deviation of the error, degrees."""
     return error_statistics(error_deg)["std_deg"]
+
+
+def nees(errors: np.ndarray, covariances: np.ndarray) -> np.ndarray:
+    """``eᵀ P⁻¹ e`` for stacks of errors ``(..., n)`` and covariances ``(..., n, n)``:
+    the normalised estimation error squared (:mod:`benchmarks.experiments.consistency`)."""
+    errors = np.asarray(errors, dtype=float)
+    solved = np.linalg.solve(np.asarray(covariances, dtype=float), errors[..., None])[..., 0]
+    return np.sum(errors * solved, axis=-1)

@@ -163,11 +163,11 @@ def test_resume_refuses_a_damaged_manifest(tmp_path, capsys):
 
 
 def test_bad_or_unreachable_scheduler_leaves_nothing(tmp_path, capsys, monkeypatch):
-    from benchmarks.engine import campaign
+    from benchmarks.engine import runner
     out = tmp_path / "c"
     assert main(["montecarlo", "--scheduler", "not-an-address", "--out", str(out)]) == 2
     assert "scheduler = 'not-an-address'" in capsys.readouterr().err
-    monkeypatch.setattr(campaign, "SCHEDULER_TIMEOUT_S", 2)
+    monkeypatch.setattr(runner, "SCHEDULER_TIMEOUT_S", 2)
     assert main(["montecarlo", "--scheduler", "tcp://127.0.0.1:9", "--tstop", "1",
                  "--out", str(out), "--quiet"]) == 2
     assert "cannot be reached" in capsys.readouterr().err

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from benchmarks import Scenario, simulate
 from benchmarks.cli import main
 from benchmarks.divergence import EXIT_DIVERGED
-from benchmarks.engine import RunTable, make_runs, run_batch, run_chunked
+from benchmarks.engine import RunTable, make_runs, run_batch, run_many
 from benchmarks.engine.campaign import CHUNKS, MANIFEST, Campaign, chunk_path, run_campaign
 from benchmarks.experiments.tuning import EkfLoss, tune_pc_exponent
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
@@ -230,7 +230,7 @@ except ValueError as err:
     (lambda: run_batch(SHORT, make_runs(SHORT, [0]), "ekf"), "estimators"),
     (lambda: run_batch(SHORT, make_runs(SHORT, [0]), []), "estimators"),
     (lambda: run_batch(SHORT, make_runs(SHORT, [0]), ["ekf"], block_steps=0), "block_steps"),
-    (lambda: run_chunked(SHORT, make_runs(SHORT, [0]), ["ekf"], chunk_runs=0), "chunk_runs"),
+    (lambda: run_many(SHORT, make_runs(SHORT, [0]), ["ekf"], chunk_runs=0), "chunk_runs"),
     (lambda: run_batch(SHORT, [0, 1], ["ekf"]), "runs"),
     (lambda: run_batch(SHORT, RunTable(np.arange(2), np.array([1e-5, np.nan]),
                                        np.full(2, 1e-6), np.full(2, 0.2), np.full(2, -8.7)),

@@ -531,26 +531,3 @@ def _consistency(record, row: int, n_steps: int, dt: float, nis_dof: int) -> dic
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,
 #: small enough that a batch's buffers stay near 100 MB.
 CHUNK_RUNS = 1024
-
-
-def run_chunked(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
-                chunk_runs: int = CHUNK_RUNS, progress_bar=None) -> BatchResult:
-    """:func:`run_batch` over ``runs`` in chunks (statistics only), joined.
-
-    Chunking never changes a run's numbers; it bounds memory.
-    """
-    chunk_runs = whole_number("chunk_runs", chunk_runs, 1)
-    runs = checked_runs(scenario, runs)
-    parts = []
-    for start in range(0, len(runs), chunk_runs):
-        part = run_batch(scenario, runs.slice(start, start + chunk_runs), estimators)
-        parts.append(part)
-        if progress_bar is not None:
-            progress_bar.update(len(part.runs))
-    statistics = {name: {column: np.concatenate([p.statistics[name][column] for p in parts])
-                         for column in STAT_COLUMNS}
-                  for name in parts[0].estimators}
-    diverged = {name: np.concatenate([p.diverged_step[name] for p in parts])
-                for name in parts[0].estimators}
-    return BatchResult(runs=runs, estimators=parts[0].estimators, statistics=statistics,
-                       diverged_step=diverged)

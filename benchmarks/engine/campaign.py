@@ -17,8 +17,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import logging
-import re
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,12 +24,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch,
-                                     seed_range)
-from benchmarks.metrics import STAT_COLUMNS, error_statistics
+from benchmarks.engine.batch import CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, seed_range
+from benchmarks.engine.runner import dask_client, run_many
+from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_bytes, write_text
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import simulate
 from dynamics.validation import InvalidParameterError
 
 MANIFEST = "campaign.json"
@@ -41,9 +38,6 @@ CHUNKS = "chunks"
 CHUNK_COLUMNS = STAT_COLUMNS + ("diverged_step",)
 CAMPAIGN_COLUMNS = ("run", "seed", "estimator") + CHUNK_COLUMNS
 _FORMAT = 2
-#: How long to try a scheduler before saying it cannot be reached, seconds.
-SCHEDULER_TIMEOUT_S = 10
-_ADDRESS = re.compile(r"^([a-z]+://)?[\w.\-\[\]:]+:\d+$")
 
 
 @dataclass(frozen=True)
@@ -84,30 +78,19 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
     """Statistics of runs ``start … stop-1``: ``{"seed": …, "NAME/COLUMN": …}``.
 
     Runs on Dask workers too; ``threads`` caps the kernel's threads there so
-    that worker processes do not oversubscribe the cores.
+    that worker processes do not oversubscribe the cores. The estimators
+    run as :func:`~benchmarks.engine.runner.run_many` runs them.
     """
     if threads is not None:
         import numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     runs = make_runs(scenario, seed_range(base_seed + start, stop - start))
+    batch = run_many(scenario, runs, estimators, threads=threads)
     arrays = {"seed": runs.seeds}
-    engine = [name for name in estimators if name in ENGINE_ESTIMATORS]
-    if engine:
-        batch = run_batch(scenario, runs, engine, threads=threads)
-        for name in batch.estimators:
-            for column in STAT_COLUMNS:
-                arrays[f"{name}/{column}"] = batch.statistics[name][column]
-            arrays[f"{name}/diverged_step"] = batch.diverged_step[name]
-    # Estimators without a kernel (users' own) run per run.
     for name in estimators:
-        if name in engine:
-            continue
-        results = [simulate(scenario, [name], seed=int(seed)) for seed in runs.seeds]
-        rows = [error_statistics(result.error_deg[name]) for result in results]
         for column in STAT_COLUMNS:
-            arrays[f"{name}/{column}"] = np.array([row[column] for row in rows])
-        arrays[f"{name}/diverged_step"] = np.array([r.diverged_step[name] for r in results],
-                                                   dtype=np.int64)
+            arrays[f"{name}/{column}"] = batch.statistics[name][column]
+        arrays[f"{name}/diverged_step"] = batch.diverged_step[name]
     return arrays
 
 
@@ -149,28 +132,6 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
     for stale in (out / CHUNKS).glob(".*.tmp*"):
         stale.unlink(missing_ok=True)
     return not manifest_existed
-
-
-def dask_client(workers: int, scheduler: str | None):
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise InvalidParameterError(
-            "workers" if workers else "scheduler", workers or scheduler,
-            "needs Dask; install it with pip install '.[distributed]'") from None
-    logging.getLogger("distributed").setLevel(logging.ERROR)
-    if scheduler is not None:
-        if not _ADDRESS.match(scheduler):
-            raise InvalidParameterError("scheduler", scheduler,
-                                        "must be an address such as tcp://host:8786")
-        try:
-            return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), None
-        except (OSError, TimeoutError) as err:
-            raise InvalidParameterError("scheduler", scheduler, f"cannot be reached "
-                                        f"({type(err).__name__}: {err})") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.ERROR)
-    return Client(cluster), cluster
 
 
 def check_campaign(campaign: Campaign) -> None:

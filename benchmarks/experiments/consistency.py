@@ -31,18 +31,12 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
+from benchmarks.metrics import nees  # noqa: F401 (the NEES of this module's docstring)
 from dynamics.quaternion import attitude_error_vector_rad
 
 #: The two-sided probability of the ANEES band.
 BAND_LEVEL = 0.95
 VERDICTS = ("consistent", "optimistic", "pessimistic")
-
-
-def nees(errors: np.ndarray, covariances: np.ndarray) -> np.ndarray:
-    """``eᵀ P⁻¹ e`` for stacks of errors ``(..., n)`` and covariances ``(..., n, n)``."""
-    errors = np.asarray(errors, dtype=float)
-    solved = np.linalg.solve(np.asarray(covariances, dtype=float), errors[..., None])[..., 0]
-    return np.sum(errors * solved, axis=-1)
 
 
 def anees_band(n_runs: int, dof: int, level: float = BAND_LEVEL) -> tuple[float, float]:
@@ -59,19 +53,6 @@ def verdict(anees_value: float, band: tuple[float, float]) -> str:
     if anees_value < band[0]:
         return "pessimistic"
     return "consistent"
-
-
-def run_errors(result, name: str) -> dict:
-    """One run's attitude and bias errors of estimator ``name`` with the
-    filter's covariances (from a :func:`~benchmarks.simulation.simulate` run
-    with ``traces=True``); None entries where the estimator keeps none."""
-    trace = result.traces[name]
-    attitude = attitude_error_vector_rad(result.truth.q_true, trace.quat)
-    bias = (None if trace.bias_radps is None
-            else trace.bias_radps - result.sensors.gyro_bias_radps)
-    return {"attitude": attitude, "attitude_covariance": trace.attitude_covariance,
-            "bias": bias, "bias_covariance": trace.bias_covariance,
-            "nis": trace.nis, "nis_dof": trace.nis_dof}
 
 
 # --- Campaigns: the engine where an estimator has a kernel, the per-run path otherwise ---
@@ -140,23 +121,6 @@ def traced_runs(scenario, estimators, seed: int) -> dict:
     return {name: traced[name] for name in estimators}
 
 
-def per_run_consistency(scenario, name: str, seed: int, every: int, settle_steps: int) -> dict:
-    """One per-run simulation of ``name``: its RMS error and NEES figures."""
-    from benchmarks.simulation import simulate
-    result = simulate(scenario, [name], seed=seed, traces=True)
-    out = {"rms_deg": float(np.sqrt(np.mean(result.error_deg[name] ** 2))),
-           "diverged_step": result.diverged_step[name]}
-    errors = run_errors(result, name)
-    if errors["attitude_covariance"] is not None:
-        values = nees(errors["attitude"], errors["attitude_covariance"])
-        out["nees_samples"] = values[::every]
-        out["nees_time_average"] = float(values[settle_steps:].mean())
-    if errors["nis"] is not None:
-        out["nis_mean"] = float(np.nanmean(errors["nis"]))
-        out["nis_dof"] = errors["nis_dof"]
-    return out
-
-
 def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
                     settle_s: float | None = None, per_run_limit: int = PER_RUN_LIMIT,
                     workers: int = 0, progress_bar=None,
@@ -165,12 +129,12 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
 
     Estimators with an engine kernel run on the engine, streaming NEES;
     the others run per run (at most ``per_run_limit`` seeds), on a local Dask
-    cluster of ``workers`` processes if asked. ``settle_s`` (default a tenth of
+    cluster of ``workers`` processes if asked (:func:`benchmarks.engine.runner.run_many`). ``settle_s`` (default a tenth of
     the run) is left out of the time averages.
     """
     from benchmarks.bounds import posterior_crb
-    from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, make_runs, run_batch,
-                                         seed_range)
+    from benchmarks.engine.batch import make_runs, seed_range
+    from benchmarks.engine.runner import run_many
     from benchmarks.simulation import build_estimator
 
     n_steps = scenario.n_steps
@@ -178,39 +142,12 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     settle_steps = round((scenario.tstop / 10 if settle_s is None else settle_s) / scenario.dt)
     settle_steps = min(max(settle_steps, 0), n_steps - 1)
     bound = posterior_crb(scenario)
-    engine_names = [name for name in estimators if name in ENGINE_ESTIMATORS]
-    other_names = [name for name in estimators if name not in ENGINE_ESTIMATORS]
-    per_run = {}
-    if engine_names:
-        parts = []
-        for start in range(0, runs, CHUNK_RUNS):
-            seeds = seed_range(base_seed + start, min(runs, start + CHUNK_RUNS) - start)
-            parts.append(run_batch(scenario, make_runs(scenario, seeds), engine_names,
-                                   consistency=True, nees_every=every,
-                                   settle_steps=settle_steps))
-            if progress_bar is not None:
-                progress_bar.update(len(seeds) * len(engine_names))
-        for name in engine_names:
-            record = {"rms_deg": np.concatenate([p.statistics[name]["rms_deg"] for p in parts]),
-                      "diverged_step": np.concatenate([p.diverged_step[name] for p in parts])}
-            if parts[0].consistency and name in parts[0].consistency:
-                for key in ("nees_samples", "nees_time_average", "nis_mean"):
-                    record[key] = np.concatenate([p.consistency[name][key] for p in parts])
-                record["nis_dof"] = parts[0].consistency[name]["nis_dof"]
-            per_run[name] = record
-    for name in other_names:
-        seeds = range(base_seed, base_seed + min(runs, per_run_limit))
-        arguments = [(scenario, name, seed, every, settle_steps) for seed in seeds]
-        outcomes = _map(per_run_consistency, arguments, workers, progress_bar)
-        record = {"rms_deg": np.array([o["rms_deg"] for o in outcomes]),
-                  "diverged_step": np.array([o["diverged_step"] for o in outcomes])}
-        if "nees_samples" in outcomes[0]:
-            record["nees_samples"] = np.array([o["nees_samples"] for o in outcomes])
-            record["nees_time_average"] = np.array([o["nees_time_average"] for o in outcomes])
-        if "nis_mean" in outcomes[0]:
-            record["nis_mean"] = np.array([o["nis_mean"] for o in outcomes])
-            record["nis_dof"] = outcomes[0]["nis_dof"]
-        per_run[name] = record
+    batch = run_many(scenario, make_runs(scenario, seed_range(base_seed, runs)), estimators,
+                     per_run_limit=per_run_limit, consistency=True, nees_every=every,
+                     settle_steps=settle_steps, workers=workers, progress_bar=progress_bar)
+    per_run = {name: {"rms_deg": batch.statistics[name]["rms_deg"],
+                      "diverged_step": batch.diverged_step[name],
+                      **batch.consistency.get(name, {})} for name in estimators}
 
     summary, anees = {}, {}
     for name in estimators:
@@ -252,31 +189,6 @@ def _summary_row(record: dict, bound_rms_deg: float, level: float) -> tuple[dict
         row["anis"] = float(np.mean(record["nis_mean"][kept]))
         row["nis_dof"] = record["nis_dof"]
     return row, anees
-
-
-def _map(function, arguments, workers: int, progress_bar):
-    """``function(*a)`` for each ``a``, in order; on a local Dask cluster with ``workers``."""
-    if not workers:
-        out = []
-        for args in arguments:
-            out.append(function(*args))
-            if progress_bar is not None:
-                progress_bar.update(1)
-        return out
-    from benchmarks.engine.campaign import dask_client
-    client, cluster = dask_client(workers, None)
-    try:
-        futures = [client.submit(function, *args, pure=False) for args in arguments]
-        out = []
-        for future in futures:
-            out.append(future.result())
-            if progress_bar is not None:
-                progress_bar.update(1)
-        return out
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def format_summary(summary: dict) -> str:

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import seaborn as sns
 
-from benchmarks.engine import make_runs, run_batch, run_chunked
+from benchmarks.engine import make_runs, run_batch, run_many
 from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import atomic_path, write_csv, write_figure
 from benchmarks.figures.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
@@ -108,7 +108,7 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
                                                                     indexing="ij"))
     runs = make_runs(scenario, grid_seed, pc_exponent=grid_pc)
     with progress(total=len(runs), desc="landscape", unit="run", quiet=quiet) as bar:
-        batch = run_chunked(scenario, runs, ["ekf"], progress_bar=bar)
+        batch = run_many(scenario, runs, ["ekf"], progress_bar=bar)
     records = pd.DataFrame({"pc_exponent": grid_pc, "seed": grid_seed,
                             **batch.statistics["ekf"],
                             "diverged_step": batch.diverged_step["ekf"]})

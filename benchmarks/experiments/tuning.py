@@ -27,7 +27,7 @@ from scipy.optimize import minimize_scalar
 
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
-from benchmarks.engine import make_runs, run_chunked
+from benchmarks.engine import make_runs, run_many
 from dynamics.validation import InvalidParameterError, finite_number, process_exponent
 
 DEFAULT_BOUNDS = (-16.0, 0.0)
@@ -109,7 +109,7 @@ class EkfLoss:
     def run_losses(self, pc_exponent: float) -> np.ndarray:
         """Each seed's loss at ``pc_exponent``."""
         runs = make_runs(self.scenario, self.seeds, pc_exponent=pc_exponent)
-        return run_chunked(self.scenario, runs, ["ekf"]).statistics["ekf"]["std_deg"]
+        return run_many(self.scenario, runs, ["ekf"]).statistics["ekf"]["std_deg"]
 
     def __call__(self, pc_exponent: float) -> float:
         """The mean loss, or infinity if the EKF diverged in any run (its
