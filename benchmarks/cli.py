@@ -9,6 +9,7 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import Callable, NamedTuple
 
 from benchmarks import experiments
 from benchmarks.experiments import SWEEP_PARAMETERS
@@ -352,20 +353,14 @@ def _parse_workshop(commands) -> None:
     _add_common(workshop, seed=False)
 
 
-#: Each command's arguments, in the order ``--help`` lists them.
-COMMAND_PARSERS = (_parse_run, _parse_compare, _parse_sweep, _parse_tune, _parse_landscape,
-                   _parse_animate, _parse_montecarlo, _parse_consistency, _parse_replay,
-                   _parse_workshop)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Compare spacecraft attitude estimators on the "
                      "Kalman-filter workshop's tumbling-spacecraft scenario.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                      parser_class=_Parser)
-    for add in COMMAND_PARSERS:
-        add(commands)
+    for command in COMMAND_TABLE:
+        command.arguments(commands)
     return parser
 
 
@@ -632,50 +627,72 @@ def command_replay(args, _scenario):
     return report_of(result.run.scenario.dt, result.run.diverged_step)
 
 
-COMMANDS = {"run": command_run, "compare": command_compare, "sweep": command_sweep,
-            "tune": command_tune, "landscape": command_landscape, "animate": command_animate,
-            "montecarlo": command_montecarlo, "consistency": command_consistency,
-            "workshop": command_workshop, "replay": command_replay}
+def _engine_memory(args, scenario) -> None:
+    """A command on the streaming engine alone: its memory is flat."""
+    from benchmarks.resources import check_memory, engine_bytes
+    check_memory(scenario, engine_bytes(scenario.n_steps))
 
 
-#: Commands that run on the streaming engine alone (their memory is flat);
-#: montecarlo's grows with its chunks (checked on its own).
-ENGINE_COMMANDS = ("tune",)
+def _montecarlo_memory(args, scenario) -> None:
+    """The engine's buffers grow with montecarlo's chunks."""
+    from benchmarks.resources import check_memory, engine_bytes
+    check_memory(scenario, engine_bytes(scenario.n_steps, args.chunk_size),
+                 chunk_runs=args.chunk_size)
 
 
-def check_resources(args, scenario) -> None:
-    """Refuse, before any work, a run whose memory cannot fit (see benchmarks.resources)."""
-    from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
-    if scenario is None:       # replay: checked once its recording is read
-        return
-    n_steps = scenario.n_steps
-    streaming = engine_bytes(n_steps)
-    if args.command == "montecarlo":
-        check_memory(scenario, engine_bytes(n_steps, args.chunk_size), chunk_runs=args.chunk_size)
-        return
-    if args.command in ENGINE_COMMANDS:
-        check_memory(scenario, streaming)
-        return
-    if args.command == "landscape":
-        # It keeps the first seed's error curve at every grid value, and two more.
-        from benchmarks.experiments.landscape import pc_grid
-        curves = len(pc_grid(args.pc_min, args.pc_max, args.pc_step)) + 2
-        check_memory(scenario, per_run_bytes(n_steps, curves, traced=False))
-        return
-    estimators = len(getattr(args, "estimators", ()) or ()) or 3
-    traced = args.command in ("consistency", "compare", "workshop")
-    check_memory(scenario, per_run_bytes(n_steps, estimators, traced), streaming_bytes=streaming)
+def _landscape_memory(args, scenario) -> None:
+    """It keeps the first seed's error curve at every grid value, and two more."""
+    from benchmarks.experiments.landscape import pc_grid
+    from benchmarks.resources import check_memory, per_run_bytes
+    curves = len(pc_grid(args.pc_min, args.pc_max, args.pc_step)) + 2
+    check_memory(scenario, per_run_bytes(scenario.n_steps, curves, traced=False))
 
 
-#: The files each command writes into --out (checked before any work).
-OUTPUT_FILES = {
-    "run": (), "compare": ("compare.png", "summary.csv"), "sweep": ("sweep.png", "sweep.csv"),
-    "tune": ("tune.json", "tune.png"), "landscape": ("landscape.csv", "landscape.png",
-                                                    "landscape.gif"),
-    "animate": (), "montecarlo": ("montecarlo.csv", "montecarlo.png", "campaign.json"),
-    "consistency": ("consistency.csv", "consistency.png"), "workshop": ("report.md",),
-    "replay": ("replay.png", "summary.csv", "ATTRIBUTION.txt"),
-}
+def _per_run_memory(traced: bool):
+    """The per-run path's records of each estimator (three if none are named)."""
+    def check(args, scenario) -> None:
+        from benchmarks.resources import check_memory, engine_bytes, per_run_bytes
+        estimators = len(getattr(args, "estimators", ()) or ()) or 3
+        check_memory(scenario, per_run_bytes(scenario.n_steps, estimators, traced),
+                     streaming_bytes=engine_bytes(scenario.n_steps))
+    return check
+
+
+class Command(NamedTuple):
+    """One command: its arguments (added to the sub-parsers), its run
+    (``run(args, scenario)``, returning a divergence report or None), the
+    files it writes into ``--out`` (checked before any work) and its memory
+    check (``memory(args, scenario)``, before any work; None: checked by the
+    run itself, as replay does once its recording is read)."""
+
+    name: str
+    arguments: Callable
+    run: Callable
+    outputs: tuple
+    memory: Callable | None
+
+
+#: Every command, in the order ``--help`` lists them; main() only dispatches.
+COMMAND_TABLE = (
+    Command("run", _parse_run, command_run, (), _per_run_memory(False)),
+    Command("compare", _parse_compare, command_compare, ("compare.png", "summary.csv"),
+            _per_run_memory(True)),
+    Command("sweep", _parse_sweep, command_sweep, ("sweep.png", "sweep.csv"),
+            _per_run_memory(False)),
+    Command("tune", _parse_tune, command_tune, ("tune.json", "tune.png"), _engine_memory),
+    Command("landscape", _parse_landscape, command_landscape,
+            ("landscape.csv", "landscape.png", "landscape.gif"), _landscape_memory),
+    Command("animate", _parse_animate, command_animate, (), _per_run_memory(False)),
+    Command("montecarlo", _parse_montecarlo, command_montecarlo,
+            ("montecarlo.csv", "montecarlo.png", "campaign.json"), _montecarlo_memory),
+    Command("consistency", _parse_consistency, command_consistency,
+            ("consistency.csv", "consistency.png"), _per_run_memory(True)),
+    Command("replay", _parse_replay, command_replay,
+            ("replay.png", "summary.csv", "ATTRIBUTION.txt"), None),
+    Command("workshop", _parse_workshop, command_workshop, ("report.md",),
+            _per_run_memory(True)),
+)
+COMMANDS = {command.name: command for command in COMMAND_TABLE}
 EXIT_IO = 1
 
 
@@ -685,9 +702,11 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         scenario = scenario_from_args(args)
         check_effects(args, scenario)
-        check_output_folder(args.out, OUTPUT_FILES[args.command])
-        check_resources(args, scenario)
-        report = COMMANDS[args.command](args, scenario)
+        command = COMMANDS[args.command]
+        check_output_folder(args.out, command.outputs)
+        if command.memory is not None and scenario is not None:
+            command.memory(args, scenario)     # refuse what cannot fit, before any work
+        report = command.run(args, scenario)
     except (UsageError, InvalidParameterError) as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
