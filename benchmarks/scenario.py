@@ -231,7 +231,7 @@ class Scenario:
              else gyro.scale_misalignment)
         # The rotation tracker's settings are checked whichever model is chosen:
         # a file that switches models later should not hide a bad value.
-        rotation = star_tracker if isinstance(star_tracker, RotationStarTracker) else \
+        rotation = star_tracker if star_tracker.model == "rotation" else \
             self._rotation_star_tracker()
         set_("star_tracker_sigma_arcsec", rotation.sigma_arcsec)
         set_("star_tracker_dropout_probability", rotation.dropout_probability)
@@ -407,11 +407,14 @@ def _plain(value):
 
 @dataclass(frozen=True)
 class SectionKey:
-    """A key of a TOML section: the field it sets and, for datasheet units,
-    the conversion to the field's SI unit."""
+    """A key of a TOML section: the field it sets, for datasheet units the
+    conversion to the field's SI unit, and whether ``sweep`` can vary it
+    (``--param SECTION.KEY``, one number per run; for a per-axis σ, a
+    number is the same σ on every axis)."""
 
     field: str
     convert: object = None
+    sweepable: bool = False
 
 
 #: section → key → what it sets.
@@ -422,14 +425,14 @@ SECTIONS = {
         "initial_rate_radps": SectionKey("initial_rate_radps"),
     },
     "gyro": {
-        "noise_power": SectionKey("gyro_noise"),
+        "noise_power": SectionKey("gyro_noise", sweepable=True),
         "arw_deg_per_rthr": SectionKey(
             "gyro_noise", lambda v: arw_deg_per_rthr_to_rad_per_rts(
-                standard_deviation("gyro.arw_deg_per_rthr", v)) ** 2),
-        "bias_random_walk": SectionKey("gyro_bias_random_walk"),
+                standard_deviation("gyro.arw_deg_per_rthr", v)) ** 2, sweepable=True),
+        "bias_random_walk": SectionKey("gyro_bias_random_walk", sweepable=True),
         "bias_rw_deg_per_hr_rthr": SectionKey(
             "gyro_bias_random_walk", lambda v: rrw_deg_per_hr_rthr_to_rad_per_s1p5(
-                standard_deviation("gyro.bias_rw_deg_per_hr_rthr", v))),
+                standard_deviation("gyro.bias_rw_deg_per_hr_rthr", v)), sweepable=True),
         "initial_bias_radps": SectionKey("gyro_initial_bias_radps"),
         "initial_bias_deg_per_hr": SectionKey(
             "gyro_initial_bias_radps", lambda v: deg_per_hr_to_radps(
@@ -438,10 +441,12 @@ SECTIONS = {
     },
     "star_tracker": {
         "model": SectionKey("star_tracker_model"),
-        "interval_s": SectionKey("time_between_measurements"),
-        "noise_power": SectionKey("star_tracker_noise"),
-        "sigma_arcsec": SectionKey("star_tracker_sigma_arcsec"),
-        "dropout_probability": SectionKey("star_tracker_dropout_probability"),
+        "interval_s": SectionKey("time_between_measurements", sweepable=True),
+        "noise_power": SectionKey("star_tracker_noise", sweepable=True),
+        # A number is the same σ on every sensor axis.
+        "sigma_arcsec": SectionKey("star_tracker_sigma_arcsec",
+                                   lambda v: [v] * 3 if np.ndim(v) == 0 else v, sweepable=True),
+        "dropout_probability": SectionKey("star_tracker_dropout_probability", sweepable=True),
         "outages_s": SectionKey("star_tracker_outages_s"),
         "sign": SectionKey("star_tracker_sign"),
         "to_body_quat": SectionKey("star_tracker_to_body_quat"),

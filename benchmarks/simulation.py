@@ -23,7 +23,6 @@ from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS, AttitudeEstimator, resolve_estimator
-from sensors.star_tracker import RotationStarTracker
 
 #: The workshop's estimators in the order it introduces them.
 WORKSHOP_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf")
@@ -125,10 +124,7 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
     """Gyro and star tracker readings of ``truth`` for ``seed``."""
     gyro_rng, star_rng, dropout_rng = sensor_generators(seed)
     star_tracker = scenario.build_star_tracker()
-    if isinstance(star_tracker, RotationStarTracker):
-        readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng)
-    else:
-        readings = star_tracker.measure(truth.q_true, star_rng)
+    readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng)
     omega, bias = scenario.build_gyro().measure_with_bias(truth.omega_true_radps, gyro_rng)
     return SensorData(omega_meas_radps=omega, star_tracker_quat=readings.quat,
                       available=readings.available, gyro_bias_radps=bias)

@@ -71,6 +71,11 @@ def steps_between_readings(time_between_measurements: float, dt: float) -> int:
 class StarTracker:
     """A star tracker reading every ``time_between_measurements`` seconds.
 
+    Both trackers (this, the workshop's, and :class:`RotationStarTracker`)
+    answer one interface: ``model``, ``measure(q_true, rng, dropout_rng)``,
+    ``attitude_covariance_rad2``, ``dropout_probability`` and
+    ``in_outage(time_s)``; this one never drops a reading.
+
     Parameters
     ----------
     noise_power : float
@@ -81,6 +86,10 @@ class StarTracker:
     dt : float
         Simulation step in seconds.
     """
+
+    model = "workshop"
+    #: It reads at every scheduled step: no dropouts, no outages.
+    dropout_probability = 0.0
 
     def __init__(self, noise_power: float, time_between_measurements: float, dt: float):
         self.noise_power = finite_number("star_tracker_noise", noise_power, minimum=0.0)
@@ -97,11 +106,16 @@ class StarTracker:
         order: the normalised ``q + v`` is off by ``2 v⊥``, so ``(2σ)² I₃``."""
         return (2.0 * self.std) ** 2 * np.eye(3)
 
-    def measure(self, q_true: np.ndarray, rng: np.random.Generator) -> StarTrackerReadings:
+    def in_outage(self, time_s: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool: all False (no outage windows)."""
+        return np.zeros(np.shape(time_s), dtype=bool)
+
+    def measure(self, q_true: np.ndarray, rng: np.random.Generator,
+                dropout_rng: np.random.Generator | None = None) -> StarTrackerReadings:
         """Held readings for true attitudes ``(N, 4)``.
 
         Draws one row of 4 standard normals from ``rng`` per reading, in time
-        order.
+        order (``dropout_rng`` is not drawn from: no reading is lost).
         """
         q_true = np.asarray(q_true, dtype=float)
         n_steps = len(q_true)
@@ -159,6 +173,8 @@ class RotationStarTracker:
     sensor_to_body_quat : (4,) array-like
         Rotation from the sensor frame to the body frame (scalar-first).
     """
+
+    model = "rotation"
 
     def __init__(self, sigma_arcsec, time_between_measurements: float, dt: float, *,
                  dropout_probability: float = 0.0, outages_s=(), sign: str = "raw",

@@ -186,3 +186,34 @@ def test_flight_study_verdicts_follow_the_efficiencies():
     assert "stays 30 % above" in _verdict(1.3, Scenario())
     assert _mekf_text(0.97).startswith("The MEKF sits at the bound (efficiency 0.97")
     assert _mekf_text(1.5) == "The MEKF is 1.50 times the bound"
+
+
+# --- Any sweepable key of a scenario section ---
+
+FLIGHT_SCENARIO_FILE = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
+
+
+def test_a_section_key_sweeps_in_its_own_units(tmp_path):
+    from benchmarks.experiments import SWEEP_PARAMETERS, sweep, sweep_scenarios
+    from sensors.noise import arw_deg_per_rthr_to_rad_per_rts
+    flight = Scenario.from_toml(FLIGHT_SCENARIO_FILE).replace(tstop=20.0)
+    assert {"gyro.arw_deg_per_rthr", "star_tracker.sigma_arcsec",
+            "star_tracker.interval_s"} <= set(SWEEP_PARAMETERS)
+    arw = sweep_scenarios(flight, "gyro.arw_deg_per_rthr", [0.01, 0.02])
+    assert [case.gyro_noise for case in arw] == [arw_deg_per_rthr_to_rad_per_rts(v) ** 2
+                                                 for v in (0.01, 0.02)]
+    sigma = sweep_scenarios(flight, "star_tracker.sigma_arcsec", [3.0])[0]
+    assert sigma.star_tracker_sigma_arcsec.tolist() == [3.0, 3.0, 3.0]   # a number: every axis
+    rows = sweep(flight, "mekf", "star_tracker.sigma_arcsec", [2.0, 20.0], 0, tmp_path,
+                 quiet=True)
+    # Ten times the tracker's noise: the matched MEKF's error grows with it.
+    assert rows[1]["rms_deg"] > 3 * rows[0]["rms_deg"]
+
+
+def test_a_swept_key_the_model_does_not_read_is_refused(tmp_path, capsys):
+    out = tmp_path / "s"
+    assert main(["sweep", "--estimator", "mekf", "--param", "star_tracker.sigma_arcsec",
+                 "--values", "1,2", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no effect with the workshop star tracker" in err and err.count("\n") == 1
+    assert not out.exists()

@@ -105,3 +105,16 @@ def test_arw_predicts_integrated_gyro_noise():
     statistic = np.sum(angle**2) / (power * steps * dt)
     low, high = chi2_bounds(angle.size)
     assert low < statistic < high
+
+
+def test_both_star_trackers_answer_one_interface():
+    from sensors.star_tracker import RotationStarTracker, StarTracker
+    q_true = np.tile([1.0, 0.0, 0.0, 0.0], (11, 1))
+    time_s = np.arange(11) * 0.1
+    for tracker in (StarTracker(1e-6, 0.2, 0.1), RotationStarTracker([6, 6, 40], 0.2, 0.1)):
+        readings = tracker.measure(q_true, np.random.default_rng(1), np.random.default_rng(2))
+        assert readings.available.tolist() == [k % 2 == 0 for k in range(11)]
+        assert tracker.model in ("workshop", "rotation")
+        assert tracker.dropout_probability == 0.0
+        assert not tracker.in_outage(time_s).any()
+        assert tracker.attitude_covariance_rad2.shape == (3, 3)

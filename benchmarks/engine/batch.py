@@ -31,7 +31,7 @@ from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, senso
                                    simulate_truth, truth_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS
-from sensors.star_tracker import RotationStarTracker, steps_between_readings
+from sensors.star_tracker import steps_between_readings
 
 #: Steps advanced per kernel call. It bounds the noise buffer (B × 2500 × 3
 #: floats, 61 MB at B = 1024) whatever the run length; larger blocks mean
@@ -293,13 +293,13 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
     n_runs, dt = len(runs), scenario.dt
     gyro = scenario.build_gyro()
     tracker = scenario.build_star_tracker()
-    rotation = isinstance(tracker, RotationStarTracker)
+    rotation = tracker.model == "rotation"
     steps_between = np.array([steps_between_readings(t, dt)
                               for t in runs.time_between_measurements], dtype=np.int64)
     # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
     block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
-    dropout = float(tracker.dropout_probability) if rotation else 0.0
+    dropout = float(tracker.dropout_probability)
     settings = dict(
         gyro_std=np.array([gyro.reading_std(p, dt, gyro.bias_random_walk)
                            for p in runs.gyro_noise]),
@@ -340,8 +340,7 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth):
     counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
     _fill_normals(sensors.generators, normals, settings["star_normals"], counts,
                   settings["dropout_uniforms"], sensors.threads)
-    outage = (sensors.tracker.in_outage(truth.time_s) if settings["rotation_model"]
-              else np.zeros(stop - k0, dtype=bool))
+    outage = sensors.tracker.in_outage(truth.time_s)
     return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
                  q_true=np.ascontiguousarray(truth.q_true),
                  omega_true=np.ascontiguousarray(truth.omega_true_radps), outage=outage,

@@ -16,7 +16,7 @@ from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.figures.plots import comparison_figure, flight_figure
 from benchmarks.progress import progress
-from benchmarks.scenario import Scenario
+from benchmarks.scenario import SECTIONS, Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
@@ -29,19 +29,31 @@ TRACE_COLUMNS = ("time_s", "q_true_w", "q_true_x", "q_true_y", "q_true_z",
 
 @dataclass(frozen=True)
 class SweepParameter:
-    """A scenario setting that ``sweep`` can vary, and how its legend reads."""
+    """A scenario setting that ``sweep`` can vary, how its legend reads, and
+    the conversion of a swept value to the field's unit (None: as given)."""
 
     field: str
     legend: str     # format string; {value} and {label} (the estimator's label)
+    convert: object = None
 
 
-#: Sweepable settings by their command-line name.
+def _section_parameters() -> dict:
+    """Every key a scenario section declares sweepable, as ``SECTION.KEY``."""
+    return {f"{section}.{key}": SweepParameter(spec.field, f"{section}.{key} = {{value:g}}",
+                                               spec.convert)
+            for section, keys in SECTIONS.items() for key, spec in keys.items()
+            if spec.sweepable}
+
+
+#: Sweepable settings by their command-line name: the workshop's four, then
+#: every sweepable key of the scenario's sections (benchmarks.scenario.SECTIONS).
 SWEEP_PARAMETERS = {
     "gyro-noise": SweepParameter("gyro_noise", "Noise = {value:g}"),
     "star-tracker-noise": SweepParameter("star_tracker_noise", "ST noise = {value:g}"),
     "time-between-measurements": SweepParameter("time_between_measurements",
                                                 "ST every {value:g} s"),
     "pc-exponent": SweepParameter("pc_exponent", "{label}, pc exponent = {value:g}"),
+    **_section_parameters(),
 }
 
 SWEEP_COLUMNS = ("param", "value") + STAT_COLUMNS
@@ -113,13 +125,14 @@ def write_summary(path: Path, stats: dict) -> None:
 
 def sweep_scenarios(scenario: Scenario, param: str, values) -> list[Scenario]:
     """One validated scenario per value of ``param`` (a :data:`SWEEP_PARAMETERS` key)."""
-    field = SWEEP_PARAMETERS[param].field
+    spec = SWEEP_PARAMETERS[param]
     values = [float(value) for value in values]
     repeated = [value for value in values if values.count(value) > 1]
     if repeated:
         raise InvalidParameterError("values", values, f"names {repeated[0]:g} more than once; "
                                     "give each value once")
-    return [scenario.replace(**{field: value}) for value in values]
+    convert = spec.convert or (lambda value: value)
+    return [scenario.replace(**{spec.field: convert(value)}) for value in values]
 
 
 def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out: Path,
