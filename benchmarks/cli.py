@@ -15,7 +15,7 @@ from benchmarks import experiments
 from benchmarks.experiments import SWEEP_PARAMETERS
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import check_output_folder
-from benchmarks.scenario import Scenario
+from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
 from benchmarks.divergence import EXIT_DIVERGED, DivergenceReport, report_of
 from benchmarks.experiments.replay import DEFAULT_ESTIMATORS as REPLAY_ESTIMATORS
@@ -26,15 +26,9 @@ from estimators import ESTIMATORS
 PROG = "attitude-bench"
 EXIT_USAGE = 2
 
-#: Scenario field → command-line flag, for the overridable settings.
-SCENARIO_FLAGS = {
-    "gyro_noise": "--gyro-noise",
-    "star_tracker_noise": "--star-tracker-noise",
-    "time_between_measurements": "--time-between-measurements",
-    "pc_exponent": "--pc-exponent",
-    "tstop": "--tstop",
-    "dt": "--dt",
-}
+#: Scenario field → command-line flag, for the settings declared with one
+#: (benchmarks.scenario.SETTINGS), in the order --help lists them.
+SCENARIO_FLAGS = {setting.field: setting.flag for setting in SETTINGS if setting.flag}
 
 class UsageError(Exception):
     """Bad command-line input; the message is the whole one-line explanation."""
@@ -135,18 +129,13 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--scenario", metavar="FILE", type=Path,
                        help="TOML file of scenario settings (see scenarios/default.toml)")
     _add_import_option(group)
-    group.add_argument("--gyro-noise", type=_number, metavar="POWER",
-                       help="gyro noise power, rad^2/s (default 1e-5)")
-    group.add_argument("--star-tracker-noise", type=_number, metavar="POWER",
-                       help="star tracker noise power (default 1e-6)")
-    group.add_argument("--time-between-measurements", type=_number, metavar="SECONDS",
-                       help="star tracker interval, a whole multiple of dt (default 0.2)")
-    group.add_argument("--pc-exponent", type=_number, metavar="X",
-                       help="EKF process covariance Q = exp(X) I4 (default -8.7)")
-    group.add_argument("--tstop", type=_number, metavar="SECONDS",
-                       help="simulated time (default 50)")
-    group.add_argument("--dt", type=_number, metavar="SECONDS",
-                       help="gyro and estimator step (default 0.01)")
+    defaults = Scenario()
+    for setting in SETTINGS:
+        if setting.flag:
+            unit = f", {setting.unit}" if setting.unit else ""
+            group.add_argument(setting.flag, type=_number, metavar="X", dest=setting.field,
+                               help=f"{setting.doc}{unit} (default "
+                               f"{getattr(defaults, setting.field):g})")
 
 
 def _add_import_option(parser) -> None:

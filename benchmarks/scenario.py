@@ -417,41 +417,111 @@ class SectionKey:
     sweepable: bool = False
 
 
-#: section → key → what it sets.
-SECTIONS = {
-    "truth": {
-        "inertia_tensor_kg_m2": SectionKey("inertia_tensor_kg_m2"),
-        "initial_attitude_quat": SectionKey("initial_attitude_quat"),
-        "initial_rate_radps": SectionKey("initial_rate_radps"),
-    },
+@dataclass(frozen=True)
+class Setting:
+    """One scenario setting, declared once: its :class:`Scenario` field, where
+    a TOML file sets it (``section``, ``key``; the flat field name always
+    works too), its unit and meaning, its command-line flag, whether a run of
+    a batch may vary it (a :class:`~benchmarks.engine.RunTable` column) and
+    whether ``sweep`` can vary it (under ``sweep`` with ``legend``, and as
+    ``SECTION.KEY``). The TOML sections (:data:`SECTIONS`), the flags, the
+    per-run columns and the sweepable parameters are made from these."""
+
+    field: str
+    section: str | None            # None: a top-level key only
+    key: str
+    unit: str
+    doc: str
+    flag: str | None = None
+    per_run: bool = False
+    sweep: str | None = None
+    legend: str = ""
+    sweepable: bool = False
+
+
+#: Every setting of a scenario but the estimators' own options, in TOML order.
+#: The EKF's settings live in ``[estimators.ekf]`` (its ``owned_fields``);
+#: the workshop's flat keys keep working.
+SETTINGS = (
+    Setting("tstop", None, "tstop", "s", "simulated time", flag="--tstop"),
+    Setting("dt", None, "dt", "s", "gyro and estimator step", flag="--dt"),
+    Setting("initial_state", None, "initial_state", "", "initial estimate of every estimator"),
+    Setting("inertia_tensor_kg_m2", "truth", "inertia_tensor_kg_m2", "kg m^2", "body inertia"),
+    Setting("initial_attitude_quat", "truth", "initial_attitude_quat", "",
+            "true attitude at t = 0, scalar-first"),
+    Setting("initial_rate_radps", "truth", "initial_rate_radps", "rad/s",
+            "true body rate at t = 0"),
+    Setting("gyro_noise", "gyro", "noise_power", "rad^2/s", "gyro noise power",
+            flag="--gyro-noise", per_run=True, sweep="gyro-noise", legend="Noise = {value:g}",
+            sweepable=True),
+    Setting("gyro_bias_random_walk", "gyro", "bias_random_walk", "rad/s^1.5",
+            "gyro bias rate random walk", sweepable=True),
+    Setting("gyro_initial_bias_radps", "gyro", "initial_bias_radps", "rad/s",
+            "gyro bias at t = 0"),
+    Setting("gyro_scale_misalignment", "gyro", "scale_misalignment", "",
+            "scale factor errors and misalignments"),
+    Setting("star_tracker_model", "star_tracker", "model", "", "workshop or rotation"),
+    Setting("star_tracker_noise", "star_tracker", "noise_power", "",
+            "star tracker noise power (workshop model)", flag="--star-tracker-noise",
+            per_run=True, sweep="star-tracker-noise", legend="ST noise = {value:g}",
+            sweepable=True),
+    Setting("time_between_measurements", "star_tracker", "interval_s", "s",
+            "star tracker interval, a whole multiple of dt", flag="--time-between-measurements",
+            per_run=True, sweep="time-between-measurements", legend="ST every {value:g} s",
+            sweepable=True),
+    Setting("star_tracker_sigma_arcsec", "star_tracker", "sigma_arcsec", "arcsec",
+            "rotation model: error sigma about sensor x, y, z", sweepable=True),
+    Setting("star_tracker_dropout_probability", "star_tracker", "dropout_probability", "",
+            "rotation model: chance a reading is lost", sweepable=True),
+    Setting("star_tracker_outages_s", "star_tracker", "outages_s", "s",
+            "rotation model: windows without readings"),
+    Setting("star_tracker_sign", "star_tracker", "sign", "", "rotation model: raw or canonical"),
+    Setting("star_tracker_to_body_quat", "star_tracker", "to_body_quat", "",
+            "rotation model: sensor-to-body rotation"),
+    Setting("pc_exponent", "estimators.ekf", "pc_exponent", "",
+            "EKF process covariance Q = exp(X) I4", flag="--pc-exponent", per_run=True,
+            sweep="pc-exponent", legend="{label}, pc exponent = {value:g}"),
+    Setting("measurement_covariance", "estimators.ekf", "measurement_covariance", "",
+            "EKF measurement covariance R"),
+    Setting("initial_covariance", "estimators.ekf", "initial_covariance", "",
+            "EKF P0 = initial_covariance I4"),
+)
+
+#: Keys in datasheet units: section → key → the setting's field and the conversion.
+DATASHEET_KEYS = {
     "gyro": {
-        "noise_power": SectionKey("gyro_noise", sweepable=True),
         "arw_deg_per_rthr": SectionKey(
             "gyro_noise", lambda v: arw_deg_per_rthr_to_rad_per_rts(
                 standard_deviation("gyro.arw_deg_per_rthr", v)) ** 2, sweepable=True),
-        "bias_random_walk": SectionKey("gyro_bias_random_walk", sweepable=True),
         "bias_rw_deg_per_hr_rthr": SectionKey(
             "gyro_bias_random_walk", lambda v: rrw_deg_per_hr_rthr_to_rad_per_s1p5(
                 standard_deviation("gyro.bias_rw_deg_per_hr_rthr", v)), sweepable=True),
-        "initial_bias_radps": SectionKey("gyro_initial_bias_radps"),
         "initial_bias_deg_per_hr": SectionKey(
             "gyro_initial_bias_radps", lambda v: deg_per_hr_to_radps(
                 finite_vector("gyro.initial_bias_deg_per_hr", v, 3))),
-        "scale_misalignment": SectionKey("gyro_scale_misalignment"),
-    },
-    "star_tracker": {
-        "model": SectionKey("star_tracker_model"),
-        "interval_s": SectionKey("time_between_measurements", sweepable=True),
-        "noise_power": SectionKey("star_tracker_noise", sweepable=True),
-        # A number is the same σ on every sensor axis.
-        "sigma_arcsec": SectionKey("star_tracker_sigma_arcsec",
-                                   lambda v: [v] * 3 if np.ndim(v) == 0 else v, sweepable=True),
-        "dropout_probability": SectionKey("star_tracker_dropout_probability", sweepable=True),
-        "outages_s": SectionKey("star_tracker_outages_s"),
-        "sign": SectionKey("star_tracker_sign"),
-        "to_body_quat": SectionKey("star_tracker_to_body_quat"),
     },
 }
+#: How a key converts its value, where a number stands for more.
+_CONVERSIONS = {
+    # A number is the same σ on every sensor axis.
+    "star_tracker_sigma_arcsec": lambda v: [v] * 3 if np.ndim(v) == 0 else v,
+}
+
+
+def _sections() -> dict:
+    """section → key → what it sets: the declared settings, then the datasheet keys."""
+    sections = {}
+    for setting in SETTINGS:
+        if setting.section is not None and not setting.section.startswith("estimators."):
+            sections.setdefault(setting.section, {})[setting.key] = SectionKey(
+                setting.field, _CONVERSIONS.get(setting.field), setting.sweepable)
+    for section, keys in DATASHEET_KEYS.items():
+        sections[section].update(keys)
+    return sections
+
+
+#: section → key → what it sets.
+SECTIONS = _sections()
 
 
 def flatten_sections(data: dict) -> dict:

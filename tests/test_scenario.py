@@ -125,3 +125,29 @@ def test_estimators_build_from_the_scenario_with_their_options():
     import json
     again = json.loads(json.dumps(s.as_dict()))
     assert Scenario(**again).as_dict() == s.as_dict()
+
+
+def test_every_setting_is_declared_once_and_the_tables_come_from_it():
+    import dataclasses
+    from benchmarks.cli import SCENARIO_FLAGS, build_parser
+    from benchmarks.engine.batch import PER_RUN_SETTINGS, RunTable
+    from benchmarks.experiments import SWEEP_PARAMETERS
+    from benchmarks.scenario import SECTIONS, SETTINGS
+    from estimators import QuaternionEKF
+    fields = [f.name for f in dataclasses.fields(Scenario) if f.name != "estimator_options"]
+    declared = [setting.field for setting in SETTINGS]
+    assert sorted(declared) == sorted(fields) and len(set(declared)) == len(declared)
+    assert tuple(RunTable.__dataclass_fields__)[1:] == PER_RUN_SETTINGS
+    assert set(PER_RUN_SETTINGS) == {s.field for s in SETTINGS if s.per_run}
+    for setting in SETTINGS:
+        if setting.section in SECTIONS:
+            assert SECTIONS[setting.section][setting.key].field == setting.field
+        if setting.sweep:
+            assert SWEEP_PARAMETERS[setting.sweep].field == setting.field
+        if setting.sweepable and setting.section in SECTIONS:
+            assert f"{setting.section}.{setting.key}" in SWEEP_PARAMETERS
+    ekf_fields = {QuaternionEKF.scenario_defaults[k] for k in QuaternionEKF.owned_fields}
+    assert ekf_fields == {s.field for s in SETTINGS if s.section == "estimators.ekf"}
+    args = build_parser().parse_args(["run", "--estimator", "ekf"] + [
+        part for field, flag in SCENARIO_FLAGS.items() for part in (flag, "0.5")])
+    assert all(getattr(args, field) == 0.5 for field in SCENARIO_FLAGS)

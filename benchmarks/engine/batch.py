@@ -26,7 +26,7 @@ import pandas as pd
 
 from benchmarks.engine.kernels import KERNELS, kernel
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
-from benchmarks.scenario import Scenario
+from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
                                    simulate_truth, truth_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
@@ -47,9 +47,9 @@ HISTOGRAM_BINS = 1 + 128 * 28
 #: median's relative error (for medians above HISTOGRAM_MIN_DEG): 0.78 %.
 MEDIAN_RELATIVE_ERROR = 2.0 ** -7
 
-#: Settings a run may override, besides its seed.
-PER_RUN_SETTINGS = ("gyro_noise", "star_tracker_noise", "time_between_measurements",
-                    "pc_exponent")
+#: Settings a run may override, besides its seed (declared ``per_run`` in
+#: benchmarks.scenario.SETTINGS; :class:`RunTable` has a column for each).
+PER_RUN_SETTINGS = tuple(setting.field for setting in SETTINGS if setting.per_run)
 
 
 @dataclass(frozen=True)

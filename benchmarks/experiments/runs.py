@@ -16,7 +16,7 @@ from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.figures.plots import comparison_figure, flight_figure
 from benchmarks.progress import progress
-from benchmarks.scenario import SECTIONS, Scenario
+from benchmarks.scenario import SECTIONS, SETTINGS, Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
@@ -45,14 +45,12 @@ def _section_parameters() -> dict:
             if spec.sweepable}
 
 
-#: Sweepable settings by their command-line name: the workshop's four, then
-#: every sweepable key of the scenario's sections (benchmarks.scenario.SECTIONS).
+#: Sweepable settings by their command-line name: the workshop's four (the
+#: settings declared with a ``sweep`` name), then every sweepable key of the
+#: scenario's sections as ``SECTION.KEY`` (benchmarks.scenario.SETTINGS).
 SWEEP_PARAMETERS = {
-    "gyro-noise": SweepParameter("gyro_noise", "Noise = {value:g}"),
-    "star-tracker-noise": SweepParameter("star_tracker_noise", "ST noise = {value:g}"),
-    "time-between-measurements": SweepParameter("time_between_measurements",
-                                                "ST every {value:g} s"),
-    "pc-exponent": SweepParameter("pc_exponent", "{label}, pc exponent = {value:g}"),
+    **{setting.sweep: SweepParameter(setting.field, setting.legend)
+       for setting in SETTINGS if setting.sweep},
     **_section_parameters(),
 }
 
