@@ -566,11 +566,12 @@ def command_montecarlo(args, scenario):
 
 
 def command_workshop(args, scenario):
-    divergence = DivergenceReport(scenario.dt)
     if args.part == "flight":
-        from benchmarks.experiments.flight_study import run_flight_study
-        report = run_flight_study(scenario, args.out, quiet=args.quiet)
+        from benchmarks.experiments.flight_study import run_flight_study, study_scenario
+        divergence = DivergenceReport(study_scenario().dt)
+        report = run_flight_study(scenario, args.out, quiet=args.quiet, divergence=divergence)
     else:
+        divergence = DivergenceReport(scenario.dt)
         from benchmarks.experiments.workshop import run_workshop
         report = run_workshop(scenario, args.out, quiet=args.quiet, divergence=divergence)
     print(f"wrote {report}")

@@ -397,6 +397,23 @@ def test_animate_and_workshop_report_divergence(tmp_path, capsys):
     assert "(ekf diverged: no error to rank)" in report
 
 
+def test_the_flight_study_reports_divergence(tmp_path, capsys, monkeypatch):
+    from benchmarks.experiments import flight_study
+    # The study's own sizes take about a minute; the same code on small ones,
+    # with a USQUE whose σ_v² = 1e307 overflows its covariance (see above).
+    monkeypatch.setattr(flight_study, "STUDY_TSTOP_S", 5.0)
+    monkeypatch.setattr(flight_study, "WORKSHOP_SEEDS", 4)
+    monkeypatch.setattr(flight_study, "FLIGHT_ENGINE_RUNS", 3)
+    monkeypatch.setattr(flight_study, "PC_GRID", np.array([-9.0, -8.5]))
+    shipped = flight_study.study_scenario
+    monkeypatch.setattr(flight_study, "study_scenario", lambda: shipped().replace(
+        estimator_options={**shipped().estimator_options, "usque": {"gyro_noise": 1e307}}))
+    assert main(["workshop", "--part", "flight", "--tstop", "2", "--quiet",
+                 "--out", str(tmp_path / "f")]) == EXIT_DIVERGED
+    err = capsys.readouterr().err
+    assert "usque diverged in 3 of 3 runs" in err and "mekf diverged" not in err
+
+
 def test_resume_refuses_a_chunk_of_a_campaign_with_other_estimators(tmp_path):
     mine, theirs = tmp_path / "mine", tmp_path / "theirs"
     run_campaign(_campaign(estimators=("dead-reckoning", "ekf")), mine)

@@ -224,7 +224,10 @@ def histogram_median(hist: np.ndarray, count: int) -> np.ndarray:
     index = np.argmax(cumulative > rank, axis=1)
     rows = np.arange(len(hist))
     before = np.where(index > 0, cumulative[rows, index - 1], 0)
-    fraction = (rank - before + 0.5) / hist[rows, index]
+    # A diverged run's histogram stops short of the rank (its bin count may
+    # be 0): its median is NaN'd with its other statistics.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fraction = (rank - before + 0.5) / hist[rows, index]
     safe = np.maximum(index, 1)
     low, high = _bin_edge(safe), _bin_edge(safe + 1)
     return np.where(index == 0, 0.0, low + fraction * (high - low))

@@ -96,7 +96,8 @@ def _mekf_text(efficiency: float) -> str:
 
 
 def flight_side_by_side(flight: Scenario, out: Path, quiet: bool) -> tuple[Section, dict]:
-    """Error, efficiency and consistency of the three filters on the flight scenario."""
+    """Error, efficiency and consistency of the three filters on the flight
+    scenario: the section, and each estimator's diverged steps per run."""
     names = ("dead-reckoning",) + FILTERS
     with progress(total=FLIGHT_ENGINE_RUNS * len(names), desc="flight study",
                   unit="run", quiet=quiet) as bar:
@@ -138,7 +139,8 @@ bias, and that lets every reading's noise through.
 
 ![ANEES over time and one run's errors against their envelopes](consistency.png)
 """
-    return Section("2. The flight scenario: additive against multiplicative", body), summary
+    return (Section("2. The flight scenario: additive against multiplicative", body),
+            result.diverged_step)
 
 
 def convergence_and_cost(flight: Scenario) -> tuple[Section, dict]:
@@ -174,15 +176,25 @@ sparse or rough readings). The price is in the last column: USQUE propagates
                                                       "seconds_per_step": costs}
 
 
+def study_scenario() -> Scenario:
+    """The flight scenario as the study runs it (its first :data:`STUDY_TSTOP_S`)."""
+    return Scenario.from_toml(shipped_file(FLIGHT_SCENARIO)).replace(tstop=STUDY_TSTOP_S)
+
+
 def run_flight_study(workshop: Scenario | None = None, out: Path = Path("results"),
-                     quiet: bool = False) -> Path:
-    """Write ``out/report.md`` with the study; returns its path."""
+                     quiet: bool = False, divergence=None) -> Path:
+    """Write ``out/report.md`` with the study; returns its path. ``divergence``
+    (a :class:`~benchmarks.divergence.DivergenceReport` in the study
+    scenario's steps), if given, counts the side-by-side runs that diverged."""
     out = Path(out)
     workshop = workshop or Scenario()
-    flight = Scenario.from_toml(shipped_file(FLIGHT_SCENARIO)).replace(tstop=STUDY_TSTOP_S)
+    flight = study_scenario()
     started = time.perf_counter()
-    sections = [workshop_efficiency(workshop)[0], flight_side_by_side(flight, out, quiet)[0],
-                convergence_and_cost(flight)[0]]
+    side_by_side, diverged = flight_side_by_side(flight, out, quiet)
+    if divergence is not None:
+        for name, steps in diverged.items():
+            divergence.add(name, steps)
+    sections = [workshop_efficiency(workshop)[0], side_by_side, convergence_and_cost(flight)[0]]
     elapsed = time.perf_counter() - started
     report = out / "report.md"
     write_text(report, "# After the workshop: additive against multiplicative, and the best "
