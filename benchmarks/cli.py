@@ -390,19 +390,23 @@ READ_ONLY_BY = {"star_tracker_noise": ("dead-reckoning-resets", "ekf", "mekf", "
                 "pc_exponent": ("ekf",)}
 
 
-#: The settings only the rotation star tracker reads.
-ROTATION_ONLY = ("star_tracker_sigma_arcsec", "star_tracker_dropout_probability")
+#: The settings only one star tracker model reads: setting → that model.
+READ_BY_MODEL = {setting.field: setting.model for setting in SETTINGS if setting.model}
+#: Why a setting of the other model changes nothing, by the chosen model.
+MODEL_IGNORES = {
+    "rotation": "has no effect with the rotation star tracker, whose noise is "
+                "[star_tracker] sigma_arcsec",
+    "workshop": "has no effect with the workshop star tracker, whose noise is "
+                "[star_tracker] noise_power; set [star_tracker] model = \"rotation\"",
+}
 
 
 def ineffective_reason(field_name: str, scenario: Scenario, names) -> str | None:
     """Why setting ``field_name`` cannot change the results of estimators
     ``names`` on ``scenario`` (None if it can)."""
-    if field_name == "star_tracker_noise" and scenario.star_tracker_model == "rotation":
-        return ("has no effect with the rotation star tracker, whose noise is "
-                "[star_tracker] sigma_arcsec")
-    if field_name in ROTATION_ONLY and scenario.star_tracker_model == "workshop":
-        return ("has no effect with the workshop star tracker, whose noise is "
-                "[star_tracker] noise_power; set [star_tracker] model = \"rotation\"")
+    reader = READ_BY_MODEL.get(field_name)
+    if reader is not None and reader != scenario.star_tracker_model:
+        return MODEL_IGNORES[scenario.star_tracker_model]
     if not names and field_name not in ("tstop", "dt"):
         return "has no effect on the truth alone (no estimator is run)"
     readers = READ_ONLY_BY.get(field_name)

@@ -424,8 +424,10 @@ class Setting:
     works too), its unit and meaning, its command-line flag, whether a run of
     a batch may vary it (a :class:`~benchmarks.engine.RunTable` column) and
     whether ``sweep`` can vary it (under ``sweep`` with ``legend``, and as
-    ``SECTION.KEY``). The TOML sections (:data:`SECTIONS`), the flags, the
-    per-run columns and the sweepable parameters are made from these."""
+    ``SECTION.KEY``), and which star tracker ``model`` alone reads it (None:
+    every one). The TOML sections (:data:`SECTIONS`), the flags, the per-run
+    columns, the sweepable parameters and the refusal of a setting the
+    chosen model ignores are made from these."""
 
     field: str
     section: str | None            # None: a top-level key only
@@ -437,6 +439,7 @@ class Setting:
     sweep: str | None = None
     legend: str = ""
     sweepable: bool = False
+    model: str | None = None
 
 
 #: Every setting of a scenario but the estimators' own options, in TOML order.
@@ -464,20 +467,22 @@ SETTINGS = (
     Setting("star_tracker_noise", "star_tracker", "noise_power", "",
             "star tracker noise power (workshop model)", flag="--star-tracker-noise",
             per_run=True, sweep="star-tracker-noise", legend="ST noise = {value:g}",
-            sweepable=True),
+            sweepable=True, model="workshop"),
     Setting("time_between_measurements", "star_tracker", "interval_s", "s",
             "star tracker interval, a whole multiple of dt", flag="--time-between-measurements",
             per_run=True, sweep="time-between-measurements", legend="ST every {value:g} s",
             sweepable=True),
     Setting("star_tracker_sigma_arcsec", "star_tracker", "sigma_arcsec", "arcsec",
-            "rotation model: error sigma about sensor x, y, z", sweepable=True),
+            "rotation model: error sigma about sensor x, y, z", sweepable=True,
+            model="rotation"),
     Setting("star_tracker_dropout_probability", "star_tracker", "dropout_probability", "",
-            "rotation model: chance a reading is lost", sweepable=True),
+            "rotation model: chance a reading is lost", sweepable=True, model="rotation"),
     Setting("star_tracker_outages_s", "star_tracker", "outages_s", "s",
-            "rotation model: windows without readings"),
-    Setting("star_tracker_sign", "star_tracker", "sign", "", "rotation model: raw or canonical"),
+            "rotation model: windows without readings", model="rotation"),
+    Setting("star_tracker_sign", "star_tracker", "sign", "", "rotation model: raw or canonical",
+            model="rotation"),
     Setting("star_tracker_to_body_quat", "star_tracker", "to_body_quat", "",
-            "rotation model: sensor-to-body rotation"),
+            "rotation model: sensor-to-body rotation", model="rotation"),
     Setting("pc_exponent", "estimators.ekf", "pc_exponent", "",
             "EKF process covariance Q = exp(X) I4", flag="--pc-exponent", per_run=True,
             sweep="pc-exponent", legend="{label}, pc exponent = {value:g}"),

@@ -37,101 +37,125 @@ _ADDRESS = re.compile(r"^([a-z]+://)?[\w.\-\[\]:]+:\d+$")
 
 def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: int | None = None,
              consistency: bool = False, nees_every: int = 1, settle_steps: int = 0,
-             workers: int = 0, threads: int | None = None, chunk_runs: int = CHUNK_RUNS,
-             progress_bar=None) -> BatchResult:
+             keep_traces: bool = False, workers: int = 0, threads: int | None = None,
+             chunk_runs: int = CHUNK_RUNS, progress_bar=None) -> BatchResult:
     """Every estimator of ``estimators`` over ``runs``: their statistics,
     diverged steps and, with ``consistency``, their NEES and NIS figures
     (:attr:`BatchResult.consistency`, for estimators that report a
-    covariance). An estimator that runs per run covers the first
-    ``per_run_limit`` runs only (all if None); its arrays are that long."""
+    covariance); with ``keep_traces``, their estimates and attitude
+    variances at every step (:attr:`BatchResult.estimates`,
+    :attr:`BatchResult.attitude_variances`). An estimator that runs per run
+    covers the first ``per_run_limit`` runs only (all if None); its arrays
+    are that long."""
     chunk_runs = whole_number("chunk_runs", chunk_runs, 1)
+    if per_run_limit is not None:
+        per_run_limit = whole_number("per_run_limit", per_run_limit, 1)
     runs = checked_runs(scenario, runs)
+    kept = {"consistency": consistency, "nees_every": nees_every,
+            "settle_steps": settle_steps, "keep_traces": keep_traces}
     engine = [name for name in estimators if name in ENGINE_ESTIMATORS]
     results = {}
     if engine:
-        results.update(_on_the_engine(scenario, runs, engine, consistency, nees_every,
-                                      settle_steps, threads, chunk_runs, progress_bar))
+        results.update(_on_the_engine(scenario, runs, engine, kept, threads, chunk_runs,
+                                      progress_bar))
     for name in estimators:
         if name not in results:
             count = len(runs) if per_run_limit is None else min(len(runs), per_run_limit)
-            arguments = [(scenario, runs, i, name, consistency, nees_every, settle_steps)
-                         for i in range(count)]
-            results[name] = _joined(_map(_one_run, arguments, workers, progress_bar))
-    statistics = {name: results[name]["statistics"] for name in estimators}
-    checked = {name: results[name]["consistency"] for name in estimators
-               if results[name].get("consistency")}
-    return BatchResult(runs=runs, estimators=tuple(estimators), statistics=statistics,
-                       diverged_step={name: results[name]["diverged_step"]
-                                      for name in estimators},
-                       consistency=checked if consistency else None)
+            arguments = [(scenario, runs, i, name, kept) for i in range(count)]
+            results[name] = _concatenated(_map(_one_run, arguments, workers, progress_bar))
+
+    def each(key):
+        return {name: results[name][key] for name in estimators if key in results[name]}
+    return BatchResult(runs=runs, estimators=tuple(estimators), statistics=each("statistics"),
+                       diverged_step=each("diverged_step"),
+                       estimates=each("estimates") if keep_traces else None,
+                       attitude_variances=each("variances") if keep_traces else None,
+                       consistency=each("consistency") if consistency else None)
 
 
-def _on_the_engine(scenario, runs, names, consistency, nees_every, settle_steps, threads,
-                   chunk_runs, progress_bar) -> dict:
+#: What a run's record joins over chunks or runs, besides its statistics.
+_PER_RUN_ARRAYS = ("diverged_step", "estimates", "variances")
+_CONSISTENCY_ARRAYS = ("nees_samples", "nees_time_average", "nis_mean")
+
+
+def _on_the_engine(scenario, runs, names, kept: dict, threads, chunk_runs,
+                   progress_bar) -> dict:
     """The engine's estimators over ``runs``, ``chunk_runs`` at a time, joined."""
     parts = []
     for start in range(0, len(runs), chunk_runs):
         part = run_batch(scenario, runs.slice(start, start + chunk_runs), names,
-                         consistency=consistency, nees_every=nees_every,
-                         settle_steps=settle_steps, threads=threads)
+                         threads=threads, **kept)
         parts.append(part)
         if progress_bar is not None:
             progress_bar.update(len(part.runs) * len(names))
-    joined = {}
-    for name in names:
-        record = {"statistics": {column: np.concatenate([p.statistics[name][column]
-                                                         for p in parts])
-                                 for column in STAT_COLUMNS},
-                  "diverged_step": np.concatenate([p.diverged_step[name] for p in parts])}
-        if consistency and name in (parts[0].consistency or {}):
-            first = parts[0].consistency[name]
-            record["consistency"] = {
-                key: np.concatenate([p.consistency[name][key] for p in parts])
-                for key in ("nees_samples", "nees_time_average", "nis_mean")}
-            record["consistency"].update(time_s=first["time_s"], nis_dof=first["nis_dof"])
-        joined[name] = record
-    return joined
+    records = [{name: _engine_record(part, name) for name in names} for part in parts]
+    return {name: _concatenated([record[name] for record in records]) for name in names}
 
 
-def _one_run(scenario: Scenario, runs: RunTable, i: int, name: str, consistency: bool,
-             nees_every: int, settle_steps: int) -> dict:
+def _engine_record(part: BatchResult, name: str) -> dict:
+    """One estimator's arrays in one engine batch, as :func:`_one_run` gives them."""
+    record = {"statistics": part.statistics[name], "diverged_step": part.diverged_step[name]}
+    if part.estimates is not None:
+        record["estimates"] = part.estimates[name]
+        if name in part.attitude_variances:
+            record["variances"] = part.attitude_variances[name]
+    if part.consistency and name in part.consistency:
+        record["consistency"] = part.consistency[name]
+    return record
+
+
+def _one_run(scenario: Scenario, runs: RunTable, i: int, name: str, kept: dict) -> dict:
     """Run ``i`` of ``runs`` of estimator ``name`` on the per-run path, with
-    that run's settings: its statistics and, if asked, its NEES and NIS."""
+    that run's settings: its statistics and, if asked, its NEES and NIS and
+    its traces, each with a leading axis of one run."""
     case = scenario.replace(**{setting: float(getattr(runs, setting)[i])
                                for setting in PER_RUN_SETTINGS})
-    result = simulate(case, [name], seed=int(runs.seeds[i]), traces=consistency)
-    out = {"statistics": error_statistics(result.error_deg[name]),
-           "diverged_step": result.diverged_step[name]}
-    if not consistency:
-        return out
+    traced = kept["consistency"] or kept["keep_traces"]
+    result = simulate(case, [name], seed=int(runs.seeds[i]), traces=traced)
+    record = {"statistics": {column: np.array([value]) for column, value in
+                             error_statistics(result.error_deg[name]).items()},
+              "diverged_step": np.array([result.diverged_step[name]], dtype=np.int64)}
+    if not traced:
+        return record
     trace = result.traces[name]
-    checked = {}
+    covariance = trace.attitude_covariance
+    if kept["keep_traces"]:
+        record["estimates"] = trace.quat[None]
+        if covariance is not None:
+            record["variances"] = np.diagonal(covariance, axis1=1, axis2=2)[None]
+    if kept["consistency"]:
+        record["consistency"] = _run_consistency(result, trace, kept)
+    return record
+
+
+def _run_consistency(result, trace, kept: dict) -> dict:
+    """One per-run simulation's NEES samples and time average, and its mean NIS."""
+    every, checked = kept["nees_every"], {}
     if trace.attitude_covariance is not None:
         values = nees(attitude_error_vector_rad(result.truth.q_true, trace.quat),
                       trace.attitude_covariance)
-        checked.update(nees_samples=values[::nees_every],
-                       nees_time_average=float(values[settle_steps:].mean()),
-                       time_s=result.time_s[::nees_every])
+        checked.update(nees_samples=values[::every][None],
+                       nees_time_average=np.array([values[kept["settle_steps"]:].mean()]),
+                       time_s=result.time_s[::every])
     if trace.nis is not None:
-        checked.update(nis_mean=float(np.nanmean(trace.nis)), nis_dof=trace.nis_dof)
-    out["consistency"] = checked
-    return out
+        checked.update(nis_mean=np.array([np.nanmean(trace.nis)]), nis_dof=trace.nis_dof)
+    return checked
 
 
-def _joined(outcomes: list) -> dict:
-    """The per-run outcomes of one estimator as arrays, one entry per run."""
-    record = {"statistics": {column: np.array([o["statistics"][column] for o in outcomes])
-                             for column in STAT_COLUMNS},
-              "diverged_step": np.array([o["diverged_step"] for o in outcomes],
-                                        dtype=np.int64)}
-    checked = outcomes[0].get("consistency") if outcomes else None
-    if checked:
-        record["consistency"] = {key: np.array([o["consistency"][key] for o in outcomes])
-                                 for key in ("nees_samples", "nees_time_average", "nis_mean")
-                                 if key in checked}
-        record["consistency"].update({key: checked[key] for key in ("time_s", "nis_dof")
+def _concatenated(records: list) -> dict:
+    """Records of the same estimator (chunks, or single runs) joined along the runs."""
+    first = records[0]
+    joined = {"statistics": {column: np.concatenate([r["statistics"][column] for r in records])
+                             for column in STAT_COLUMNS}}
+    joined.update({key: np.concatenate([r[key] for r in records])
+                   for key in _PER_RUN_ARRAYS if key in first})
+    if first.get("consistency"):
+        checked = first["consistency"]
+        joined["consistency"] = {key: np.concatenate([r["consistency"][key] for r in records])
+                                 for key in _CONSISTENCY_ARRAYS if key in checked}
+        joined["consistency"].update({key: checked[key] for key in ("time_s", "nis_dof")
                                       if key in checked})
-    return record
+    return joined
 
 
 def _map(function, arguments, workers: int, progress_bar) -> list:

@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
-from benchmarks.metrics import nees  # noqa: F401 (the NEES of this module's docstring)
+from benchmarks.metrics import nees  # noqa: F401 (re-exported: the NEES defined above)
 from dynamics.quaternion import attitude_error_vector_rad
 
 #: The two-sided probability of the ANEES band.
@@ -90,35 +90,22 @@ class TracedRun:
 
 
 def traced_runs(scenario, estimators, seed: int) -> dict:
-    """Each estimator's run of ``seed`` with its error and 1σ at every step:
-    from the engine where it has a kernel (its covariance kept with the
-    traces), else from the per-run path."""
-    from benchmarks.engine.batch import ENGINE_ESTIMATORS, make_runs, run_batch
-    from benchmarks.simulation import build_estimator, simulate, simulate_truth
+    """Each estimator's run of ``seed`` with its error and 1σ at every step
+    (:func:`benchmarks.engine.runner.run_many` with its traces kept)."""
+    from benchmarks.engine.batch import make_runs
+    from benchmarks.engine.runner import run_many
+    from benchmarks.simulation import build_estimator, simulate_truth
     truth = simulate_truth(scenario)
-    engine_names = [name for name in estimators if name in ENGINE_ESTIMATORS]
+    batch = run_many(scenario, make_runs(scenario, [seed]), estimators, keep_traces=True)
     traced = {}
-    if engine_names:
-        batch = run_batch(scenario, make_runs(scenario, [seed]), engine_names, keep_traces=True)
-        for name in engine_names:
-            variances = batch.attitude_variances.get(name)
-            traced[name] = TracedRun(
-                label=build_estimator(name, scenario).label, time_s=truth.time_s,
-                error_deg=np.degrees(attitude_error_vector_rad(truth.q_true,
-                                                               batch.estimates[name][0])),
-                sigma_deg=None if variances is None else np.degrees(np.sqrt(variances[0])))
     for name in estimators:
-        if name in traced:
-            continue
-        result = simulate(scenario, [name], seed=seed, traces=True)
-        trace = result.traces[name]
-        covariance = trace.attitude_covariance
+        variances = batch.attitude_variances.get(name)
         traced[name] = TracedRun(
-            label=result.labels[name], time_s=result.time_s,
-            error_deg=np.degrees(attitude_error_vector_rad(result.truth.q_true, trace.quat)),
-            sigma_deg=None if covariance is None else np.degrees(
-                np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))))
-    return {name: traced[name] for name in estimators}
+            label=build_estimator(name, scenario).label, time_s=truth.time_s,
+            error_deg=np.degrees(attitude_error_vector_rad(truth.q_true,
+                                                           batch.estimates[name][0])),
+            sigma_deg=None if variances is None else np.degrees(np.sqrt(variances[0])))
+    return traced
 
 
 def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
@@ -129,8 +116,8 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
 
     Estimators with an engine kernel run on the engine, streaming NEES;
     the others run per run (at most ``per_run_limit`` seeds), on a local Dask
-    cluster of ``workers`` processes if asked (:func:`benchmarks.engine.runner.run_many`). ``settle_s`` (default a tenth of
-    the run) is left out of the time averages.
+    cluster of ``workers`` processes if asked (:func:`benchmarks.engine.runner.run_many`).
+    ``settle_s`` (default a tenth of the run) is left out of the time averages.
     """
     from benchmarks.bounds import posterior_crb
     from benchmarks.engine.batch import make_runs, seed_range

@@ -339,7 +339,7 @@ def log_error(q, p, norm):
 @njit(cache=True, error_model="numpy")
 def nees(q_true_k, q, C, scratch):
     """eᵀ C⁻¹ e with e = log(q̂⁻¹ ⊗ q) the body-frame error of estimate ``q``
-    and ``C`` its 3x3 covariance (benchmarks.experiments.consistency.nees)."""
+    and ``C`` its 3x3 covariance (benchmarks.metrics.nees)."""
     # The EKF's estimate is not unit: normalise it inside the log.
     e = log_error(q, q_true_k, math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]))
     S = scratch[0]
