@@ -5,7 +5,10 @@ with the *truth's* noise: the body-frame attitude error :math:`\delta\theta`
 (and, when the gyro has a bias model, the bias error :math:`\Delta\beta`)
 evolves as :math:`x_{k+1} = \Phi_k x_k + w_k`, :math:`w_k \sim \mathcal N(0,
 Q_k)` with :math:`\Phi_k, Q_k` the exact discrete model of §6.2.4 at the
-*true* rate :math:`\omega_k` and the gyro's own :math:`\sigma_v, \sigma_u`,
+*true* rate :math:`\omega_k` (the rate the gyro reads: sampled at the step's
+start, or its average over the step, :mod:`sensors.gyro`) and the gyro's own
+:math:`\sigma_v, \sigma_u` (a Gauss–Markov bias as its equivalent random
+walk, exact over times short against its correlation time),
 and each star tracker reading measures :math:`y = \delta\theta + v`,
 :math:`v \sim \mathcal N(0, R)` with :math:`R` the tracker's body-frame
 covariance (for the workshop tracker, :math:`(2\sigma)^2 I_3`).
@@ -112,7 +115,7 @@ def linear_model(scenario):
         prior = ESTIMATORS["mekf"].from_scenario(scenario).initial_covariance
     else:
         prior = 4.0 * scenario.initial_covariance * np.eye(3)
-    return scenario.gyro_noise, scenario.gyro_bias_random_walk, R, prior, with_bias
+    return scenario.gyro_noise, scenario.gyro_filter_bias_random_walk, R, prior, with_bias
 
 
 def check_bound_inputs(scenario) -> None:
@@ -145,6 +148,9 @@ def posterior_crb(scenario) -> AttitudeBound:
     lost = tracker.in_outage(truth.time_s) if hasattr(tracker, "in_outage") else \
         np.zeros(len(truth.time_s), dtype=bool)
     states = 6 if with_bias else 3
+    # The rate the gyro reads (sampled, or averaged over each step) is the one
+    # the filters' transition uses.
+    rates = scenario.build_gyro().true_rates(truth.q_true, truth.omega_true_radps)
     R_inverse = np.linalg.inv(R)
     P = prior.copy()
     n = scenario.n_steps
@@ -157,7 +163,7 @@ def posterior_crb(scenario) -> AttitudeBound:
             P = np.linalg.inv(information)
             P = 0.5 * (P + P.T)
         posteriors[k] = P[:3, :3]
-        phi, q = discrete_error_model(truth.omega_true_radps[k], scenario.dt, noise, bias_rw)
+        phi, q = discrete_error_model(rates[k], scenario.dt, noise, bias_rw)
         P = phi[:states, :states] @ P @ phi[:states, :states].T + q[:states, :states]
     return AttitudeBound(time_s=truth.time_s, prior=priors, posterior=posteriors)
 

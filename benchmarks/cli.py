@@ -124,18 +124,35 @@ def _seed_list(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
+def _add_scenario_options(parser: argparse.ArgumentParser, defaults: Scenario) -> None:
     group = parser.add_argument_group("scenario (defaults: the workshop's, or --scenario FILE)")
-    group.add_argument("--scenario", metavar="FILE", type=Path,
-                       help="TOML file of scenario settings (see scenarios/default.toml)")
+    group.add_argument("--scenario", metavar="FILE", type=Path, action="append",
+                       help="TOML file of scenario settings (see scenarios/default.toml); "
+                       "repeat to lay files over each other, later keys overriding earlier")
     _add_import_option(group)
-    defaults = Scenario()
     for setting in SETTINGS:
         if setting.flag:
             unit = f", {setting.unit}" if setting.unit else ""
+            reader = f"; {setting.model} star tracker only" if setting.model else ""
             group.add_argument(setting.flag, type=_number, metavar="X", dest=setting.field,
                                help=f"{setting.doc}{unit} (default "
-                               f"{getattr(defaults, setting.field):g})")
+                               f"{getattr(defaults, setting.field):g}{reader})")
+
+
+def help_defaults(argv) -> Scenario:
+    """The scenario whose values ``--help`` shows as defaults: that of the
+    ``--scenario`` files in ``argv`` where they load, else the workshop's."""
+    if not argv or not any(item in ("-h", "--help") for item in argv):
+        return Scenario()
+    peek = argparse.ArgumentParser(add_help=False)
+    peek.add_argument("--scenario", type=Path, action="append")
+    files = peek.parse_known_args(argv)[0].scenario
+    if not files:
+        return Scenario()
+    try:
+        return Scenario.from_toml(files, allow_imports=[a for a in argv if ":" in a])
+    except InvalidParameterError:
+        return Scenario()         # the run itself will say what is wrong
 
 
 def _add_import_option(parser) -> None:
@@ -153,7 +170,7 @@ def _add_common(parser: argparse.ArgumentParser, seed: bool = True) -> None:
                         help="output folder (default results/)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_divergence_option(parser)
-    _add_scenario_options(parser)
+    _add_scenario_options(parser, _HELP_DEFAULTS[0])
 
 
 def _add_divergence_option(parser: argparse.ArgumentParser) -> None:
@@ -203,6 +220,25 @@ def _parse_compare(commands) -> None:
                          help=f"any of {', '.join(ESTIMATORS)} or package.module:ClassName "
                          "(default: the workshop's three)")
     _add_common(compare)
+
+
+def _parse_show_config(commands) -> None:
+    """The ``show-config`` command's arguments."""
+    show = commands.add_parser("show-config", help="every estimator's effective settings on "
+                               "the scenario, and where each came from (writes nothing)")
+    show.add_argument("--estimators", type=_estimator_list, default=tuple(ESTIMATORS),
+                      metavar="A,B,...", help="any of the registry's or "
+                      "package.module:ClassName (default: every registry estimator)")
+    _add_scenario_options(show, _HELP_DEFAULTS[0])
+
+
+def command_show_config(args, scenario):
+    from benchmarks.experiments.configuration import effective_settings, format_settings
+    rows = [row for name in args.estimators for row in effective_settings(scenario, name)]
+    print(format_settings(rows))
+    print("\n(file: the scenario's [estimators.NAME] section; scenario: a scenario setting "
+          "given; derived: from the scenario's sensors; default: left at its default)")
+    return None
 
 
 def _parse_sweep(commands) -> None:
@@ -342,7 +378,14 @@ def _parse_workshop(commands) -> None:
     _add_common(workshop, seed=False)
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: The scenario whose values the flags' help shows (see :func:`help_defaults`).
+_HELP_DEFAULTS = [Scenario()]
+
+
+def build_parser(defaults: Scenario | None = None) -> argparse.ArgumentParser:
+    """The command line; ``defaults`` is the scenario whose values the help
+    lists as each flag's default (the workshop's if None)."""
+    _HELP_DEFAULTS[0] = defaults or Scenario()
     parser = _Parser(prog=PROG, description="Compare spacecraft attitude estimators on the "
                      "Kalman-filter workshop's tumbling-spacecraft scenario.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
@@ -598,7 +641,7 @@ def command_consistency(args, scenario):
         result = consistency.run_consistency(
             scenario, args.estimators, args.runs, base_seed=args.seed, settle_s=args.settle,
             per_run_limit=args.per_run_limit, workers=args.workers or 0, progress_bar=bar)
-    print(consistency.format_summary(result.summary))
+    print(consistency.format_summary(result.summary, result.settle_s))
     frame = consistency.consistency_frame(result)
     write_text(args.out / "consistency.csv", frame.to_csv(index=False))
     write_figure(args.out / "consistency.png", consistency.figure(result))
@@ -692,6 +735,7 @@ COMMAND_TABLE = (
             ("replay.png", "summary.csv", "ATTRIBUTION.txt"), None),
     Command("workshop", _parse_workshop, command_workshop, ("report.md",),
             _per_run_memory(True)),
+    Command("show-config", _parse_show_config, command_show_config, (), None),
 )
 COMMANDS = {command.name: command for command in COMMAND_TABLE}
 EXIT_IO = 1
@@ -700,11 +744,13 @@ EXIT_IO = 1
 def main(argv=None) -> int:
     importable_from_here()
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser(help_defaults(sys.argv[1:] if argv is None else argv)
+                            ).parse_args(argv)
         scenario = scenario_from_args(args)
         check_effects(args, scenario)
         command = COMMANDS[args.command]
-        check_output_folder(args.out, command.outputs)
+        if hasattr(args, "out"):
+            check_output_folder(args.out, command.outputs)
         if command.memory is not None and scenario is not None:
             command.memory(args, scenario)     # refuse what cannot fit, before any work
         report = command.run(args, scenario)
@@ -721,7 +767,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    return _divergence_status(report, args.allow_divergence)
+    return _divergence_status(report, getattr(args, "allow_divergence", False))
 
 
 def _divergence_status(report: DivergenceReport | None, allowed: bool) -> int:

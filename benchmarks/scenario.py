@@ -13,9 +13,11 @@ both::
     initial_state = [1.0, 0.0, 0.0, 0.0]
 
     [truth]          # inertia_tensor_kg_m2, initial_attitude_quat, initial_rate_radps
-    [gyro]           # noise_power or arw_deg_per_rthr, bias_random_walk or
-                     # bias_rw_deg_per_hr_rthr, initial_bias_radps or
-                     # initial_bias_deg_per_hr, scale_misalignment
+    [gyro]           # noise_power, arw_deg_per_rthr or noise_density_deg_per_s_rthz;
+                     # bias_random_walk or bias_rw_deg_per_hr_rthr; initial_bias_radps
+                     # or initial_bias_deg_per_hr; bias_instability_radps or
+                     # bias_instability_deg_per_hr, bias_correlation_time_s;
+                     # scale_misalignment; sampling ("sample" or "average")
     [star_tracker]   # model ("workshop" or "rotation"), interval_s, noise_power,
                      # sigma_arcsec, dropout_probability, outages_s, sign, to_body_quat
     [estimators.mekf]   # any constructor keyword of that estimator
@@ -60,6 +62,8 @@ from estimators import ESTIMATORS, resolve_estimator
 from sensors.gyro import Gyro
 from sensors.noise import (
     arw_deg_per_rthr_to_rad_per_rts,
+    bias_instability_deg_per_hr_to_radps,
+    noise_density_deg_per_s_rthz_to_rad_per_rts,
     deg_per_hr_to_radps,
     rrw_deg_per_hr_rthr_to_rad_per_s1p5,
 )
@@ -118,13 +122,18 @@ class Scenario:
     time_between_measurements : float
         Seconds between star tracker readings; a whole multiple of dt (0.2).
     pc_exponent : float
-        EKF process covariance Q = exp(pc_exponent) I₄ (-8.7).
+        EKF process covariance Q = exp(pc_exponent) I₄ (on the workshop's
+        sensors -8.7; otherwise derived from the gyro, see
+        :meth:`estimators.QuaternionEKF.derived_fields`). None (the default)
+        derives it; :attr:`derived_fields` names the fields that were.
     measurement_covariance : (4, 4) array
-        EKF measurement covariance R (I₄); a number means that times I₄.
+        EKF measurement covariance R (workshop: I₄; otherwise the star
+        tracker's error in quaternion units); a number means that times I₄.
     initial_state : (4,) array
         Initial estimate of every estimator ([1, 0, 0, 0]).
     initial_covariance : float
-        EKF P₀ = initial_covariance · I₄ (1e-12).
+        EKF P₀ = initial_covariance · I₄ (workshop: 1e-12; otherwise the
+        MEKF's default prior of 0.1 rad per axis, (0.1/2)² = 0.0025).
     gyro_bias_random_walk : float
         σ_u, the gyro bias's rate random walk, rad/s^{3/2} (0). ``gyro_noise``
         is σ_v², the square of the angle random walk density.
@@ -132,6 +141,14 @@ class Scenario:
         The gyro's bias at t = 0, rad/s (0).
     gyro_scale_misalignment : (3, 3) array
         Scale factor errors (diagonal) and misalignments (0).
+    gyro_sampling : {"sample", "average"}
+        A reading is the true rate at the step's start (the workshop's) or
+        the average rate over the step, as integrating gyros report
+        (:mod:`sensors.gyro`).
+    gyro_bias_instability_radps : float
+        σ_b of the bias's first-order Gauss–Markov part, rad/s (0: none).
+    gyro_bias_correlation_time_s : float
+        τ of that part, seconds (3600).
     star_tracker_model : {"workshop", "rotation"}
         Additive quaternion noise of power ``star_tracker_noise`` (the
         workshop's), or a small error rotation of ``star_tracker_sigma_arcsec``.
@@ -160,13 +177,18 @@ class Scenario:
     gyro_noise: float = 1e-5
     star_tracker_noise: float = 1e-6
     time_between_measurements: float = 0.2
-    pc_exponent: float = -8.7
-    measurement_covariance: np.ndarray = field(default_factory=lambda: np.eye(4))
+    # The EKF's settings: None derives them (the workshop's values on the
+    # workshop's sensors; from the sensors otherwise, see QuaternionEKF).
+    pc_exponent: float | None = None
+    measurement_covariance: np.ndarray | None = None
     initial_state: np.ndarray = _vector(1.0, 0.0, 0.0, 0.0)
-    initial_covariance: float = 1e-12
+    initial_covariance: float | None = None
     gyro_bias_random_walk: float = 0.0
     gyro_initial_bias_radps: np.ndarray = _vector(0.0, 0.0, 0.0)
     gyro_scale_misalignment: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    gyro_sampling: str = "sample"
+    gyro_bias_instability_radps: float = 0.0
+    gyro_bias_correlation_time_s: float = 3600.0
     star_tracker_model: str = "workshop"
     star_tracker_sigma_arcsec: np.ndarray = _vector(6.0, 6.0, 40.0)
     star_tracker_dropout_probability: float = 0.0
@@ -213,12 +235,7 @@ class Scenario:
         set_("time_between_measurements", finite_number(
             "time_between_measurements", self.time_between_measurements, strictly_positive=True))
         steps_between_readings(self.time_between_measurements, self.dt)
-        set_("pc_exponent", process_exponent("pc_exponent", self.pc_exponent))
-        set_("measurement_covariance", covariance_matrix("measurement_covariance",
-                                                         self.measurement_covariance))
         set_("initial_state", nonzero_quaternion("initial_state", self.initial_state))
-        set_("initial_covariance", finite_number("initial_covariance", self.initial_covariance,
-                                                 strictly_positive=True))
         one_of("star_tracker_model", self.star_tracker_model, STAR_TRACKER_MODELS)
         set_("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
                                                       self.star_tracker_outages_s))
@@ -236,7 +253,30 @@ class Scenario:
         set_("star_tracker_sigma_arcsec", rotation.sigma_arcsec)
         set_("star_tracker_dropout_probability", rotation.dropout_probability)
         set_("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
+        self._derive_estimator_fields()
+        set_("pc_exponent", process_exponent("pc_exponent", self.pc_exponent))
+        set_("measurement_covariance", covariance_matrix("measurement_covariance",
+                                                         self.measurement_covariance))
+        set_("initial_covariance", finite_number("initial_covariance", self.initial_covariance,
+                                                 strictly_positive=True))
         set_("estimator_options", _checked_options(self, self.estimator_options))
+
+    def _derive_estimator_fields(self) -> None:
+        """Fill the estimators' own fields left None with what each estimator
+        derives from this scenario's sensors (``derived_fields``), and note
+        which they were (:attr:`derived_fields`, kept by :meth:`replace` so a
+        changed sensor derives them anew)."""
+        derived = set()
+        for cls in dict.fromkeys(ESTIMATORS.values()):
+            missing = [cls.scenario_defaults[keyword] for keyword in cls.owned_fields
+                       if getattr(self, cls.scenario_defaults[keyword]) is None]
+            if not missing:
+                continue
+            values = cls.derived_fields(self)
+            for name in missing:
+                object.__setattr__(self, name, values[name])
+                derived.add(name)
+        object.__setattr__(self, "derived_fields", frozenset(derived))
 
     def _check_standard_deviations(self) -> None:
         """The σ the sensors square into variances: refused here while the
@@ -249,7 +289,10 @@ class Scenario:
         """The gyro this scenario describes."""
         return Gyro(self.gyro_noise, self.dt, bias_random_walk=self.gyro_bias_random_walk,
                     initial_bias_radps=self.gyro_initial_bias_radps,
-                    scale_misalignment=self.gyro_scale_misalignment)
+                    scale_misalignment=self.gyro_scale_misalignment,
+                    sampling=self.gyro_sampling,
+                    bias_instability_radps=self.gyro_bias_instability_radps,
+                    bias_correlation_time_s=self.gyro_bias_correlation_time_s)
 
     def build_star_tracker(self) -> StarTracker | RotationStarTracker:
         """The star tracker this scenario describes."""
@@ -265,6 +308,13 @@ class Scenario:
             sensor_to_body_quat=self.star_tracker_to_body_quat)
 
     @property
+    def gyro_filter_bias_random_walk(self) -> float:
+        """σ_u (rad/s^{3/2}) a filter with a random-walk bias takes for this
+        gyro: its random walk, and its Gauss–Markov part as the equivalent
+        driving noise (:func:`sensors.gyro.equivalent_bias_random_walk`)."""
+        return self.build_gyro().filter_bias_random_walk
+
+    @property
     def star_tracker_attitude_covariance_rad2(self) -> np.ndarray:
         """Covariance (rad²) of a star tracker reading's body-frame error: what
         a filter matched to this scenario takes as its ``R``."""
@@ -272,8 +322,11 @@ class Scenario:
 
     @property
     def is_workshop_sensors(self) -> bool:
-        """True when the gyro has no bias model and the star tracker is the workshop's."""
-        return (self.star_tracker_model == "workshop"
+        """True when the sensors are the workshop's: its star tracker model, and
+        a gyro that samples the rate and has no bias model. Estimators then
+        take the exercise's settings; on any other scenario they derive
+        theirs from the sensors (each estimator's ``settings_from_scenario``)."""
+        return (self.star_tracker_model == "workshop" and self.gyro_sampling == "sample"
                 and not self.build_gyro().has_bias_model)
 
     @property
@@ -292,6 +345,8 @@ class Scenario:
             name = sorted(unknown)[0]
             raise InvalidParameterError(name, changes[name], "is not a scenario setting; "
                                         f"known: {', '.join(field_names())}")
+        for name in self.derived_fields:
+            changes.setdefault(name, None)       # derived again from the new sensors
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict:
@@ -303,15 +358,29 @@ class Scenario:
         """Load a scenario file: flat field names and/or sections (see the
         module docstring); missing keys take the defaults.
 
+        ``path`` may be a list of files, laid over each other in order: a
+        later file's setting overrides an earlier one's key by key (in any of
+        its units), and its ``[estimators.NAME]`` keys override those of the
+        same section. So a change to try is a small file over the full one.
+
         A section ``[estimators."package.module:ClassName"]`` imports that
         module, which runs its code: it is refused, before anything is
         imported, unless ``allow_imports`` (module names, or
         ``package.module:ClassName`` specs, which allow their module) names
         the module. Registry names (``[estimators.mekf]``) need no consent.
         """
-        data = read_toml(path)
-        check_import_consent(data, allow_imports)
-        return cls().replace(**flatten_sections(data))
+        paths = [path] if isinstance(path, (str, Path)) else list(path)
+        if not paths:
+            raise InvalidParameterError("scenario", paths, "must name at least one file")
+        flat, options = {}, {}
+        for each in paths:
+            data = read_toml(each)
+            check_import_consent(data, allow_imports)
+            layer = flatten_sections(data)
+            for name, settings in layer.pop("estimator_options", {}).items():
+                options.setdefault(name, {}).update(settings)
+            flat.update(layer)
+        return cls().replace(**flat, **({"estimator_options": options} if options else {}))
 
     def with_estimator_settings(self, path, *, allow_imports=()) -> "Scenario":
         """This scenario with the ``[estimators.NAME]`` sections of the file
@@ -463,6 +532,12 @@ SETTINGS = (
             "gyro bias at t = 0"),
     Setting("gyro_scale_misalignment", "gyro", "scale_misalignment", "",
             "scale factor errors and misalignments"),
+    Setting("gyro_sampling", "gyro", "sampling", "",
+            "sample (the rate at the step's start) or average (over the step)"),
+    Setting("gyro_bias_instability_radps", "gyro", "bias_instability_radps", "rad/s",
+            "sigma of the bias's Gauss-Markov part", sweepable=True),
+    Setting("gyro_bias_correlation_time_s", "gyro", "bias_correlation_time_s", "s",
+            "correlation time of the bias's Gauss-Markov part", sweepable=True),
     Setting("star_tracker_model", "star_tracker", "model", "", "workshop or rotation"),
     Setting("star_tracker_noise", "star_tracker", "noise_power", "",
             "star tracker noise power (workshop model)", flag="--star-tracker-noise",
@@ -501,6 +576,13 @@ DATASHEET_KEYS = {
         "bias_rw_deg_per_hr_rthr": SectionKey(
             "gyro_bias_random_walk", lambda v: rrw_deg_per_hr_rthr_to_rad_per_s1p5(
                 standard_deviation("gyro.bias_rw_deg_per_hr_rthr", v)), sweepable=True),
+        "noise_density_deg_per_s_rthz": SectionKey(
+            "gyro_noise", lambda v: noise_density_deg_per_s_rthz_to_rad_per_rts(
+                standard_deviation("gyro.noise_density_deg_per_s_rthz", v)) ** 2,
+            sweepable=True),
+        "bias_instability_deg_per_hr": SectionKey(
+            "gyro_bias_instability_radps", lambda v: bias_instability_deg_per_hr_to_radps(
+                standard_deviation("gyro.bias_instability_deg_per_hr", v)), sweepable=True),
         "initial_bias_deg_per_hr": SectionKey(
             "gyro_initial_bias_radps", lambda v: deg_per_hr_to_radps(
                 finite_vector("gyro.initial_bias_deg_per_hr", v, 3))),
@@ -617,10 +699,8 @@ def _checked_options(scenario: Scenario, options) -> dict:
                     f"is not a setting of {name}; known: {', '.join(known)}")
         checked[name] = dict(settings)
     for name in checked:
-        # A registry class finds its section by its name; a user's is handed it.
-        own = {} if name in ESTIMATORS else checked[name]
         try:
-            _estimator_class(name).from_scenario(_OptionsView(scenario, checked), **own)
+            _estimator_class(name).from_scenario(_OptionsView(scenario, checked))
         except InvalidParameterError as err:
             if err.name in checked[name]:
                 raise InvalidParameterError(f"estimators.{_key(name)}.{err.name}", err.value,

@@ -22,7 +22,7 @@ from benchmarks.resources import TRUTH_CACHE_STEPS, check_memory, engine_bytes, 
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
 from dynamics.validation import InvalidParameterError, seed_values
-from estimators import ESTIMATORS, AttitudeEstimator, resolve_estimator
+from estimators import AttitudeEstimator, resolve_estimator
 
 #: The workshop's estimators in the order it introduces them.
 WORKSHOP_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf")
@@ -101,6 +101,27 @@ def truth_blocks(scenario: Scenario, block_steps: int, cache_steps: int = TRUTH_
                                       scenario.n_steps, block_steps)
 
 
+def truth_and_rate_blocks(scenario: Scenario, block_steps: int,
+                          cache_steps: int = TRUTH_CACHE_STEPS):
+    """:func:`truth_blocks` with the rates the gyro reads over each block
+    (:meth:`sensors.Gyro.true_rates`): for an averaging gyro, each block's
+    last rate takes the next block's first attitude, so the rates are those
+    of the whole run, bit for bit."""
+    blocks = truth_blocks(scenario, block_steps, cache_steps)
+    gyro = scenario.build_gyro()
+    if gyro.sampling == "sample":
+        for block in blocks:
+            yield block, block.omega_true_radps
+        return
+    previous = None
+    for block in blocks:
+        if previous is not None:
+            yield previous, gyro.true_rates(previous.q_true, previous.omega_true_radps,
+                                            q_after=block.q_true[0])
+        previous = block
+    yield previous, gyro.true_rates(previous.q_true, previous.omega_true_radps)
+
+
 @lru_cache(maxsize=8)
 def _truth_cached(dt, n_steps, inertia, q0, omega0) -> RigidBodyTruth:
     return simulate_torque_free(np.frombuffer(inertia).reshape(3, 3), np.frombuffer(q0),
@@ -125,19 +146,18 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
     gyro_rng, star_rng, dropout_rng = sensor_generators(seed)
     star_tracker = scenario.build_star_tracker()
     readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng)
-    omega, bias = scenario.build_gyro().measure_with_bias(truth.omega_true_radps, gyro_rng)
+    gyro = scenario.build_gyro()
+    omega, bias = gyro.measure_with_bias(gyro.true_rates(truth.q_true, truth.omega_true_radps),
+                                         gyro_rng)
     return SensorData(omega_meas_radps=omega, star_tracker_quat=readings.quat,
                       available=readings.available, gyro_bias_radps=bias)
 
 
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
     """The estimator ``name`` names (see :func:`estimators.resolve_estimator`),
-    built from ``scenario`` (its ``from_scenario``). A user's class named as
-    ``package.module:ClassName`` also takes the scenario's
-    ``[estimators."package.module:ClassName"]`` section."""
-    cls = resolve_estimator(name)
-    own = {} if name in ESTIMATORS else getattr(scenario, "estimator_options", {}).get(name, {})
-    return cls.from_scenario(scenario, **own)
+    built from ``scenario`` (its ``from_scenario``, which also applies a
+    user's class's ``[estimators."package.module:ClassName"]`` section)."""
+    return resolve_estimator(name).from_scenario(scenario)
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,

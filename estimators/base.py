@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,6 +94,13 @@ class AttitudeEstimator:
         self.diverged_step = None
 
     @classmethod
+    def derived_fields(cls, scenario) -> dict:
+        """Values of this estimator's :attr:`owned_fields` (by scenario field
+        name) that a scenario leaves unset, derived from its sensors (the
+        scenario is complete but for these)."""
+        return {}
+
+    @classmethod
     def settings_from_scenario(cls, scenario) -> dict:
         """Constructor keywords taken from ``scenario`` before its
         ``[estimators.NAME]`` options (override to derive more, e.g. noise
@@ -106,9 +114,24 @@ class AttitudeEstimator:
     def from_scenario(cls, scenario, **overrides) -> "AttitudeEstimator":
         """This estimator as ``scenario`` configures it (``overrides`` last)."""
         settings = cls.settings_from_scenario(scenario)
-        settings.update(getattr(scenario, "estimator_options", {}).get(cls.name, {}))
+        settings.update(cls.scenario_section(scenario))
         settings.update(overrides)
         return cls(**settings)
+
+    @classmethod
+    def scenario_section(cls, scenario) -> dict:
+        """This estimator's ``[estimators.NAME]`` section of ``scenario``: a
+        registry class's under its :attr:`name`, a user's under its
+        ``"package.module:ClassName"`` spec (so the Python API applies the
+        same section the command line does)."""
+        options = getattr(scenario, "estimator_options", {}) or {}
+        section = dict(options.get(cls.name, {})) if cls.name != AttitudeEstimator.name else {}
+        for key, values in options.items():
+            module_name, colon, class_name = key.partition(":")
+            module = sys.modules.get(module_name) if colon else None
+            if module is not None and getattr(module, class_name, None) is cls:
+                section.update(values)
+        return section
 
     @classmethod
     def option_names(cls) -> tuple[str, ...]:
@@ -423,9 +446,10 @@ class AttitudeAndBiasEstimator(KalmanEstimator):
 
     _output: tuple
     #: Both take the gyro's noise model and the star tracker's body-frame
-    #: covariance from the scenario: filters matched to their sensors.
+    #: covariance from the scenario: filters matched to their sensors (a
+    #: Gauss–Markov bias as its equivalent random walk).
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
-                         "gyro_bias_random_walk": "gyro_bias_random_walk",
+                         "gyro_bias_random_walk": "gyro_filter_bias_random_walk",
                          "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
 
     def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,

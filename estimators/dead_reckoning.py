@@ -56,6 +56,16 @@ class DeadReckoning(AttitudeEstimator):
         self.rate_timing = one_of("rate_timing", rate_timing, RATE_TIMINGS)
         self.reset()
 
+    @classmethod
+    def settings_from_scenario(cls, scenario) -> dict:
+        """The scenario's settings, and the rate timing: the workshop's on its
+        sensors (the exercise's numbers), ``"step-average"`` on any other, so
+        that the estimate at ``t = 0`` is the initial attitude itself."""
+        settings = super().settings_from_scenario(scenario)
+        settings["rate_timing"] = ("workshop" if getattr(scenario, "is_workshop_sensors", True)
+                                   else "step-average")
+        return settings
+
     def reset(self) -> None:
         self.attitude = self.initial_attitude.copy()
         self._pending_rate = None

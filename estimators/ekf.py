@@ -139,6 +139,52 @@ class QuaternionEKF(KalmanEstimator):
                          "initial_covariance": "initial_covariance"}
     owned_fields = ("pc_exponent", "measurement_covariance", "initial_covariance")
 
+    #: The MEKF's default attitude prior, 0.1 rad per axis, in quaternion
+    #: units ((σ/2)² per component): the derived P₀.
+    DERIVED_INITIAL_COVARIANCE = (0.1 / 2.0) ** 2
+    #: The smallest derived Q per component (a noise-free gyro).
+    MIN_DERIVED_Q = 1e-30
+
+    @classmethod
+    def derived_fields(cls, scenario) -> dict:
+        r"""The EKF's settings for ``scenario`` where it leaves them unset.
+
+        On the workshop's sensors (``scenario.is_workshop_sensors``), the
+        exercise's: :math:`Q = e^{-8.7} I_4`, :math:`R = I_4`,
+        :math:`P_0 = 10^{-12} I_4`. Otherwise, from the sensors, in quaternion
+        units (:math:`\delta q pprox 	frac12 \Xi(q)\,\delta	heta`, so an
+        angle variance :math:`s` per axis is :math:`s/4` per component):
+
+        * ``measurement_covariance`` :math:`R = 	frac{1}{12}\operatorname{tr}(R_	heta)\, I_4`,
+          the tracker's body-frame covariance :math:`R_	heta` averaged over
+          the three axes. A constant 4x4 ``R`` cannot follow an anisotropic
+          error fixed in the body (its quaternion image turns with the
+          attitude); the MEKF, whose ``R`` is :math:`R_	heta` itself, can.
+        * ``pc_exponent`` :math:`= \lnigl(	frac14(\sigma_v^2\Delta t +
+          \sigma_u^2\Delta t^3/3)igr)`: the angle the gyro's noise and bias
+          walk add in one step (M&C 2014, eq. 6.93's attitude block). This
+          filter has no bias state: a constant bias is not in its model.
+        * ``initial_covariance`` :math:`= (0.1/2)^2`, the MEKF's default prior.
+        """
+        if scenario.is_workshop_sensors:
+            return {"pc_exponent": -8.7, "measurement_covariance": np.eye(4),
+                    "initial_covariance": 1e-12}
+        R_theta = scenario.star_tracker_attitude_covariance_rad2
+        dt, su = scenario.dt, scenario.gyro_filter_bias_random_walk
+        per_step = (scenario.gyro_noise * dt + su * su * dt ** 3 / 3.0) / 4.0
+        return {"pc_exponent": math.log(max(per_step, cls.MIN_DERIVED_Q)),
+                "measurement_covariance": np.trace(R_theta) / 12.0 * np.eye(4),
+                "initial_covariance": cls.DERIVED_INITIAL_COVARIANCE}
+
+    @classmethod
+    def settings_from_scenario(cls, scenario) -> dict:
+        """The scenario's settings, and the output: the workshop's prior on
+        its sensors, the posterior (the estimate after the step's reading, as
+        the MEKF and USQUE give) on any other."""
+        settings = super().settings_from_scenario(scenario)
+        settings["output"] = "prior" if scenario.is_workshop_sensors else "posterior"
+        return settings
+
     def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
                  measurement_covariance=1.0, initial_attitude=IDENTITY,
                  initial_covariance: float = 1e-12, output: str = "prior",

@@ -116,6 +116,21 @@ def rrw_rad_per_s1p5_to_deg_per_hr_rthr(sigma_u: float) -> float:
     return sigma_u * _DEG_PER_RAD * _SECONDS_PER_HOUR * _RT_SECONDS_PER_RT_HOUR
 
 
+def noise_density_deg_per_s_rthz_to_rad_per_rts(density_deg_per_s_rthz: float) -> float:
+    """Angle random walk ``σ_v`` in rad/√s from a datasheet rate noise density
+    in °/s/√Hz (1/√Hz = √s, so only the degrees convert).
+
+    Example: a MEMS gyro of 0.004 °/s/√Hz has σ_v ≈ 7e-5 rad/√s, an ARW of
+    0.24 °/√h (×60).
+
+    >>> f"{noise_density_deg_per_s_rthz_to_rad_per_rts(0.004):.4g}"
+    '6.981e-05'
+    >>> round(arw_rad_per_rts_to_deg_per_rthr(noise_density_deg_per_s_rthz_to_rad_per_rts(0.004)), 3)
+    0.24
+    """
+    return density_deg_per_s_rthz / _DEG_PER_RAD
+
+
 def deg_per_hr_to_radps(rate_deg_per_hr: float) -> float:
     """A rate (e.g. a gyro bias) in deg/h as rad/s.
 
@@ -123,6 +138,20 @@ def deg_per_hr_to_radps(rate_deg_per_hr: float) -> float:
     '4.848e-07'
     """
     return rate_deg_per_hr / (_DEG_PER_RAD * _SECONDS_PER_HOUR)
+
+
+def bias_instability_deg_per_hr_to_radps(instability_deg_per_hr: float) -> float:
+    """The Gauss–Markov bias's ``σ_b`` in rad/s from a datasheet bias
+    instability in °/h, taken as the process's standard deviation (the usual
+    reading of a datasheet; the Allan deviation of such a process peaks near
+    0.62 σ_b, so a figure read off an Allan plot's floor is the smaller one).
+
+    Example: a 3 °/h MEMS gyro has σ_b ≈ 1.45e-5 rad/s.
+
+    >>> f"{bias_instability_deg_per_hr_to_radps(3.0):.4g}"
+    '1.454e-05'
+    """
+    return deg_per_hr_to_radps(instability_deg_per_hr)
 
 
 def radps_to_deg_per_hr(rate_radps: float) -> float:

@@ -57,9 +57,19 @@ def test_nees_catches_a_filter_whose_q_is_ten_times_too_small():
 def test_band_is_the_chi_square_quantile_over_n():
     low, high = anees_band(10, 3, level=0.99)
     assert (low, high) == pytest.approx((chi2.ppf(0.005, 30) / 10, chi2.ppf(0.995, 30) / 10))
-    assert verdict(2.9, (low, high)) == "consistent"
-    assert verdict(high * 1.01, (low, high)) == "optimistic"
-    assert verdict(low * 0.99, (low, high)) == "pessimistic"
+    assert verdict(3.0, (low, high)) == "consistent"
+    assert verdict(high * 1.5, (low, high)) == "optimistic"
+    assert verdict(low * 0.5, (low, high)) == "pessimistic"
+
+
+def test_a_verdict_near_its_band_edge_says_borderline():
+    # Within BORDERLINE (10 %) of the band's half-width from an edge, either side.
+    low, high = 2.5, 3.5                      # half-width 0.5: a margin of 0.05
+    assert verdict(3.46, (low, high)) == "consistent (borderline)"
+    assert verdict(3.54, (low, high)) == "optimistic (borderline)"
+    assert verdict(2.47, (low, high)) == "pessimistic (borderline)"
+    assert verdict(3.44, (low, high)) == "consistent"
+    assert verdict(3.56, (low, high)) == "optimistic"
 
 
 def test_consistency_command_prints_the_table_and_writes_csv_and_figure(tmp_path, capsys):

@@ -28,7 +28,7 @@ from benchmarks.engine.kernels import KERNELS, kernel
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
-                                   simulate_truth, truth_blocks)
+                                   simulate_truth, truth_and_rate_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS
 from sensors.star_tracker import steps_between_readings
@@ -100,6 +100,15 @@ def checked_estimators(estimators) -> tuple:
         raise InvalidParameterError("estimators", names, "must name at least one estimator, "
                                     "each once")
     return tuple(name for name in KERNELS if name in names)
+
+
+def engine_limitation(scenario: Scenario) -> str | None:
+    """Why the engine cannot run ``scenario`` (a sensor model its kernels do
+    not draw), or None. Those scenarios run on the per-run path
+    (:func:`benchmarks.engine.runner.run_many` falls back, saying so)."""
+    if scenario.gyro_bias_instability_radps > 0:
+        return "a gyro bias with a Gauss-Markov part ([gyro] bias_instability)"
+    return None
 
 
 def checked_runs(scenario: Scenario, runs) -> RunTable:
@@ -325,9 +334,10 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
                     block_steps=block_steps, threads=threads)
 
 
-def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth):
-    """The block of steps from ``k0`` with ``truth``: its normals drawn, in the
-    per-run path's order, and the tracker's outages over it."""
+def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
+    """The block of steps from ``k0`` with ``truth`` and the rates the gyro
+    reads over it: its normals drawn, in the per-run path's order, and the
+    tracker's outages over it."""
     from benchmarks.engine.kernels.common import Block
     settings = dict(sensors.settings)
     stop = k0 + len(truth.time_s)
@@ -346,7 +356,7 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth):
     outage = sensors.tracker.in_outage(truth.time_s)
     return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
                  q_true=np.ascontiguousarray(truth.q_true),
-                 omega_true=np.ascontiguousarray(truth.omega_true_radps), outage=outage,
+                 omega_true=np.ascontiguousarray(rates), outage=outage,
                  **settings)
 
 
@@ -382,9 +392,10 @@ def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict,
     sensors' readings from the noise itself: measured, that costs no more
     than sharing them). Returns each kernel's sensor state."""
     readings = {name: sensors.state() for name in kernels}
-    for k0, truth in zip(range(0, scenario.n_steps, sensors.block_steps),
-                         truth_blocks(scenario, sensors.block_steps, cache_steps)):
-        block = _block(sensors, scenario, k0, truth)
+    for k0, (truth, rates) in zip(range(0, scenario.n_steps, sensors.block_steps),
+                                  truth_and_rate_blocks(scenario, sensors.block_steps,
+                                                        cache_steps)):
+        block = _block(sensors, scenario, k0, truth, rates)
         for row, name in enumerate(kernels):
             kernels[name].advance(block, readings[name], states[name], record, row)
         if progress_bar is not None:
@@ -439,6 +450,11 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     # trust shapes and lengths, so a bad table would read or write out of bounds.
     runs = checked_runs(scenario, runs)
     names = checked_estimators(estimators)
+    limitation = engine_limitation(scenario)
+    if limitation is not None:
+        raise InvalidParameterError("scenario", limitation, "is not modelled by the engine's "
+                                    "kernels; run it through benchmarks.engine.runner.run_many, "
+                                    "which takes the per-run path")
     block_steps, nees_every, cache_steps, error_every, settle_steps = (
         whole_number("block_steps", block_steps, 1), whole_number("nees_every", nees_every, 1),
         whole_number("cache_steps", cache_steps, 0), whole_number("error_every", error_every, 0),

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import logging
 import re
+import sys
 
 import numpy as np
 
 from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, PER_RUN_SETTINGS,
-                                     BatchResult, RunTable, checked_runs, run_batch,
-                                     whole_number)
+                                     BatchResult, RunTable, checked_runs, engine_limitation,
+                                     run_batch, whole_number)
 from benchmarks.metrics import STAT_COLUMNS, error_statistics, nees
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import simulate
@@ -37,14 +38,17 @@ _ADDRESS = re.compile(r"^([a-z]+://)?[\w.\-\[\]:]+:\d+$")
 
 def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: int | None = None,
              consistency: bool = False, nees_every: int = 1, settle_steps: int = 0,
-             keep_traces: bool = False, workers: int = 0, threads: int | None = None,
+             keep_traces: bool = False, error_every: int = 0, workers: int = 0,
+             threads: int | None = None,
              chunk_runs: int = CHUNK_RUNS, progress_bar=None) -> BatchResult:
     """Every estimator of ``estimators`` over ``runs``: their statistics,
     diverged steps and, with ``consistency``, their NEES and NIS figures
     (:attr:`BatchResult.consistency`, for estimators that report a
     covariance); with ``keep_traces``, their estimates and attitude
     variances at every step (:attr:`BatchResult.estimates`,
-    :attr:`BatchResult.attitude_variances`). An estimator that runs per run
+    :attr:`BatchResult.attitude_variances`); with ``error_every`` m > 0,
+    their errors at steps 0, m, 2m, … (:attr:`BatchResult.error_samples`).
+    An estimator that runs per run
     covers the first ``per_run_limit`` runs only (all if None); its arrays
     are that long."""
     chunk_runs = whole_number("chunk_runs", chunk_runs, 1)
@@ -52,15 +56,21 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
         per_run_limit = whole_number("per_run_limit", per_run_limit, 1)
     runs = checked_runs(scenario, runs)
     kept = {"consistency": consistency, "nees_every": nees_every,
-            "settle_steps": settle_steps, "keep_traces": keep_traces}
-    engine = [name for name in estimators if name in ENGINE_ESTIMATORS]
+            "settle_steps": settle_steps, "keep_traces": keep_traces,
+            "error_every": whole_number("error_every", error_every, 0)}
+    limitation = engine_limitation(scenario)
+    engine = [name for name in estimators if name in ENGINE_ESTIMATORS and limitation is None]
+    if limitation is not None:
+        _say_once(f"note: the engine does not model {limitation}; its estimators take the "
+                  "per-run path on every run (slower, the same numbers)")
     results = {}
     if engine:
         results.update(_on_the_engine(scenario, runs, engine, kept, threads, chunk_runs,
                                       progress_bar))
     for name in estimators:
         if name not in results:
-            count = len(runs) if per_run_limit is None else min(len(runs), per_run_limit)
+            limited = per_run_limit is not None and name not in ENGINE_ESTIMATORS
+            count = min(len(runs), per_run_limit) if limited else len(runs)
             arguments = [(scenario, runs, i, name, kept) for i in range(count)]
             results[name] = _concatenated(_map(_one_run, arguments, workers, progress_bar))
 
@@ -70,11 +80,24 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
                        diverged_step=each("diverged_step"),
                        estimates=each("estimates") if keep_traces else None,
                        attitude_variances=each("variances") if keep_traces else None,
+                       error_samples=each("error_samples") if error_every else None,
+                       sample_time_s=(np.arange(0, scenario.n_steps, error_every) * scenario.dt
+                                      if error_every else None),
                        consistency=each("consistency") if consistency else None)
 
 
+_SAID: set = set()
+
+
+def _say_once(message: str) -> None:
+    """A note on stderr, once per process."""
+    if message not in _SAID:
+        _SAID.add(message)
+        print(message, file=sys.stderr)
+
+
 #: What a run's record joins over chunks or runs, besides its statistics.
-_PER_RUN_ARRAYS = ("diverged_step", "estimates", "variances")
+_PER_RUN_ARRAYS = ("diverged_step", "estimates", "variances", "error_samples")
 _CONSISTENCY_ARRAYS = ("nees_samples", "nees_time_average", "nis_mean")
 
 
@@ -95,6 +118,8 @@ def _on_the_engine(scenario, runs, names, kept: dict, threads, chunk_runs,
 def _engine_record(part: BatchResult, name: str) -> dict:
     """One estimator's arrays in one engine batch, as :func:`_one_run` gives them."""
     record = {"statistics": part.statistics[name], "diverged_step": part.diverged_step[name]}
+    if part.error_samples is not None:
+        record["error_samples"] = part.error_samples[name]
     if part.estimates is not None:
         record["estimates"] = part.estimates[name]
         if name in part.attitude_variances:
@@ -115,6 +140,8 @@ def _one_run(scenario: Scenario, runs: RunTable, i: int, name: str, kept: dict) 
     record = {"statistics": {column: np.array([value]) for column, value in
                              error_statistics(result.error_deg[name]).items()},
               "diverged_step": np.array([result.diverged_step[name]], dtype=np.int64)}
+    if kept["error_every"]:
+        record["error_samples"] = result.error_deg[name][::kept["error_every"]][None]
     if not traced:
         return record
     trace = result.traces[name]

@@ -89,9 +89,8 @@ being further off on average.)
 
 def _mekf_text(efficiency: float) -> str:
     if abs(efficiency - 1) <= 0.1:
-        return (f"The MEKF sits at the bound (efficiency {efficiency:.2f}; a little under it "
-                "when the scenario's initial bias error, a fixed half of the prior's σ rather "
-                "than a random draw, is kinder than the bound assumes)")
+        return (f"The MEKF sits at the bound (efficiency {efficiency:.2f}, both taken after "
+                "the settle time)")
     return f"The MEKF is {efficiency:.2f} times the bound"
 
 

@@ -1,0 +1,103 @@
+"""``show-config``: every estimator's effective settings, and where each came from.
+
+An estimator built from a scenario (:meth:`estimators.AttitudeEstimator.from_scenario`)
+takes each constructor keyword from one of four places, in this order of
+precedence:
+
+``file``     the scenario's ``[estimators.NAME]`` section;
+``scenario`` a scenario setting the file (or a flag) gives;
+``derived``  derived from the scenario's sensors (the EKF's ``Q``, ``R`` and
+             ``P₀``, the six-state filters' noise densities and ``R``, dead
+             reckoning's rate timing, the EKF's output), or a scenario
+             setting left at its default;
+``default``  the estimator's own default.
+"""
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+
+from benchmarks.scenario import Scenario, field_names
+from estimators import resolve_estimator
+
+SOURCES = ("file", "scenario", "derived", "default")
+
+
+def effective_settings(scenario: Scenario, name: str) -> list[dict]:
+    """Rows ``{estimator, setting, value, source, from}`` for each constructor
+    keyword of estimator ``name`` as ``scenario`` builds it."""
+    cls = resolve_estimator(name)
+    section = cls.scenario_section(scenario)
+    scenario_values = cls.settings_from_scenario(scenario)
+    defaults = Scenario()
+    rows = []
+    for keyword, parameter in inspect.signature(cls.__init__).parameters.items():
+        if parameter.kind is not inspect.Parameter.KEYWORD_ONLY:
+            continue
+        field = "dt" if keyword == "dt" else cls.scenario_defaults.get(keyword)
+        if keyword in section:
+            value, source, origin = section[keyword], "file", f"[estimators.{name}]"
+        elif keyword in scenario_values:
+            value = scenario_values[keyword]
+            source, origin = _scenario_source(scenario, defaults, field)
+        else:
+            value, source, origin = parameter.default, "default", cls.__name__
+        if keyword in ("initial_state",) and value is None:
+            continue                        # a former name, not a setting of its own
+        rows.append({"estimator": name, "setting": keyword, "value": _shown(value),
+                     "source": source, "from": origin})
+    return rows
+
+
+def _scenario_source(scenario: Scenario, defaults: Scenario, field: str | None):
+    """Where a keyword taken from the scenario came from."""
+    if field is None:
+        return "derived", "the scenario's sensors"
+    if field not in field_names():
+        return "derived", f"the sensors ({field})"
+    if field in scenario.derived_fields:
+        return "derived", f"the sensors ({field})"
+    if field != "dt" and _same(getattr(scenario, field), getattr(defaults, field)):
+        return "default", f"scenario {field}"
+    return "scenario", f"scenario {field}"
+
+
+def _same(a, b) -> bool:
+    try:
+        return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+    except (TypeError, ValueError):
+        return a == b
+
+
+def _shown(value) -> str:
+    """A value as one short line."""
+    if isinstance(value, np.ndarray):
+        if value.ndim == 2 and np.allclose(value, np.diag(np.diag(value))):
+            diagonal = np.diag(value)
+            if np.all(diagonal == diagonal[0]):
+                return f"{diagonal[0]:.6g} I{len(diagonal)}"
+            return "diag(" + ", ".join(f"{v:.6g}" for v in diagonal) + ")"
+        return np.array2string(value, precision=6, separator=", ").replace("\n", "")
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_shown(v) for v in value) + "]"
+    return str(value)
+
+
+def format_settings(rows: list[dict]) -> str:
+    """The printed table, one estimator after another."""
+    width = max(len(row["setting"]) for row in rows)
+    value_width = min(44, max(len(row["value"]) for row in rows))
+    lines, current = [], None
+    for row in rows:
+        if row["estimator"] != current:
+            current = row["estimator"]
+            lines.append(("" if not lines else "\n") + f"[{current}]")
+        lines.append(f"  {row['setting']:<{width}}  {row['value']:<{value_width}}  "
+                     f"{row['source']:<8} {row['from']}")
+    return "\n".join(lines)
+
+
+__all__ = ["SOURCES", "effective_settings", "format_settings"]
