@@ -54,7 +54,6 @@ from scipy.linalg import solve_discrete_are
 from benchmarks.simulation import simulate_truth
 from estimators.mekf import discrete_error_model
 from dynamics.validation import InvalidParameterError
-from sensors.star_tracker import steps_between_readings
 
 #: Standard normal draws for E|δθ| (fixed: the bound is a deterministic number).
 _MEAN_DRAWS = np.random.default_rng(19980501).standard_normal((200_000, 3))
@@ -142,11 +141,13 @@ def posterior_crb(scenario) -> AttitudeBound:
     check_bound_inputs(scenario)
     noise, bias_rw, R, prior, with_bias = linear_model(scenario)
     truth = simulate_truth(scenario)
-    m = steps_between_readings(scenario.time_between_measurements, scenario.dt)
-    # Readings the tracker can never deliver (scheduled outages) give no information.
+    # Each reading at its own time (on the grid, at its step: τ = 0); readings
+    # the tracker can never deliver (scheduled outages) give no information.
     tracker = scenario.build_star_tracker()
-    lost = tracker.in_outage(truth.time_s) if hasattr(tracker, "in_outage") else \
-        np.zeros(len(truth.time_s), dtype=bool)
+    steps, offsets = tracker.schedule(scenario.n_steps)
+    kept = ~tracker.in_outage(steps * scenario.dt + offsets)
+    reading_offset = np.full(scenario.n_steps, np.nan)
+    reading_offset[steps[kept]] = offsets[kept]
     states = 6 if with_bias else 3
     # The rate the gyro reads (sampled, or averaged over each step) is the one
     # the filters' transition uses.
@@ -154,17 +155,28 @@ def posterior_crb(scenario) -> AttitudeBound:
     R_inverse = np.linalg.inv(R)
     P = prior.copy()
     n = scenario.n_steps
+
+    def propagated(P, k, dt):
+        phi, q = discrete_error_model(rates[k], dt, noise, bias_rw)
+        return phi[:states, :states] @ P @ phi[:states, :states].T + q[:states, :states]
+
+    def updated(P):
+        information = np.linalg.inv(P)
+        information[:3, :3] += R_inverse
+        P = np.linalg.inv(information)
+        return 0.5 * (P + P.T)
+
     priors, posteriors = np.empty((n, 3, 3)), np.empty((n, 3, 3))
     for k in range(n):
         priors[k] = P[:3, :3]
-        if k % m == 0 and not lost[k]:
-            information = np.linalg.inv(P)
-            information[:3, :3] += R_inverse
-            P = np.linalg.inv(information)
-            P = 0.5 * (P + P.T)
+        tau = reading_offset[k]
+        if tau == 0.0:
+            P = updated(P)
         posteriors[k] = P[:3, :3]
-        phi, q = discrete_error_model(rates[k], scenario.dt, noise, bias_rw)
-        P = phi[:states, :states] @ P @ phi[:states, :states].T + q[:states, :states]
+        if tau > 0.0:        # a reading within the step, at t_k + τ
+            P = propagated(updated(propagated(P, k, tau)), k, scenario.dt - tau)
+        else:
+            P = propagated(P, k, scenario.dt)
     return AttitudeBound(time_s=truth.time_s, prior=priors, posterior=posteriors)
 
 

@@ -70,8 +70,9 @@ from sensors.noise import (
 from sensors.star_tracker import (
     RotationStarTracker,
     StarTracker,
+    on_gyro_grid,
     outage_windows,
-    steps_between_readings,
+    reading_interval,
 )
 
 STAR_TRACKER_MODELS = ("workshop", "rotation")
@@ -120,7 +121,9 @@ class Scenario:
     star_tracker_noise : float
         Star tracker noise power per quaternion component (1e-6).
     time_between_measurements : float
-        Seconds between star tracker readings; a whole multiple of dt (0.2).
+        Seconds between star tracker readings, at least dt (0.2); off the
+        gyro's grid (not a whole multiple of dt) the readings carry their own
+        times and the estimators apply each at its time.
     pc_exponent : float
         EKF process covariance Q = exp(pc_exponent) I₄ (on the workshop's
         sensors -8.7; otherwise derived from the gyro, see
@@ -232,9 +235,8 @@ class Scenario:
                 f"component; at most {MAX_STAR_NOISE:g}, beyond which a reading is noise alone "
                 f"(star_tracker_noise <= {MAX_STAR_NOISE ** 2 * self.dt:g} with dt = "
                 f"{self.dt:g})")
-        set_("time_between_measurements", finite_number(
-            "time_between_measurements", self.time_between_measurements, strictly_positive=True))
-        steps_between_readings(self.time_between_measurements, self.dt)
+        set_("time_between_measurements", reading_interval(self.time_between_measurements,
+                                                           self.dt))
         set_("initial_state", nonzero_quaternion("initial_state", self.initial_state))
         one_of("star_tracker_model", self.star_tracker_model, STAR_TRACKER_MODELS)
         set_("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
@@ -328,6 +330,12 @@ class Scenario:
         theirs from the sensors (each estimator's ``settings_from_scenario``)."""
         return (self.star_tracker_model == "workshop" and self.gyro_sampling == "sample"
                 and not self.build_gyro().has_bias_model)
+
+    @property
+    def readings_on_gyro_grid(self) -> bool:
+        """Whether the tracker's interval is a whole multiple of ``dt`` (its
+        readings fall on gyro steps); otherwise they carry their own times."""
+        return on_gyro_grid(self.time_between_measurements, self.dt)
 
     @property
     def n_steps(self) -> int:
@@ -544,7 +552,7 @@ SETTINGS = (
             per_run=True, sweep="star-tracker-noise", legend="ST noise = {value:g}",
             sweepable=True, model="workshop"),
     Setting("time_between_measurements", "star_tracker", "interval_s", "s",
-            "star tracker interval, a whole multiple of dt", flag="--time-between-measurements",
+            "star tracker interval (>= dt; its own clock)", flag="--time-between-measurements",
             per_run=True, sweep="time-between-measurements", legend="ST every {value:g} s",
             sweepable=True),
     Setting("star_tracker_sigma_arcsec", "star_tracker", "sigma_arcsec", "arcsec",

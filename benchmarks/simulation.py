@@ -12,6 +12,7 @@ noise (the star tracker noise is drawn only at its readings).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -39,12 +40,25 @@ class SensorData:
     available : (N,) bool, True where a new star tracker reading was taken
     gyro_bias_radps : (N, 3) the gyro's true bias β_k, rad/s (zeros for the
         workshop gyro)
+    star_tracker_offset_s : (N,) seconds after ``t_k`` that step ``k``'s
+        reading was taken (0 on the gyro grid and where there is none; see
+        :func:`sensors.star_tracker.reading_schedule`)
     """
 
     omega_meas_radps: np.ndarray
     star_tracker_quat: np.ndarray
     available: np.ndarray
     gyro_bias_radps: np.ndarray | None = None
+    star_tracker_offset_s: np.ndarray | None = None
+
+    @property
+    def record(self) -> tuple:
+        """What an estimator's ``run`` and ``track`` take: rates, readings,
+        availability and (off the gyro grid) the readings' offsets."""
+        offsets = self.star_tracker_offset_s
+        if offsets is None or not np.any(offsets):
+            return self.omega_meas_radps, self.star_tracker_quat, self.available
+        return self.omega_meas_radps, self.star_tracker_quat, self.available, offsets
 
 
 @dataclass(frozen=True)
@@ -145,12 +159,25 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
     """Gyro and star tracker readings of ``truth`` for ``seed``."""
     gyro_rng, star_rng, dropout_rng = sensor_generators(seed)
     star_tracker = scenario.build_star_tracker()
-    readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng)
+    readings = star_tracker.measure(truth.q_true, star_rng, dropout_rng,
+                                    reading_quat=_truth_at_readings(scenario, star_tracker))
     gyro = scenario.build_gyro()
     omega, bias = gyro.measure_with_bias(gyro.true_rates(truth.q_true, truth.omega_true_radps),
                                          gyro_rng)
     return SensorData(omega_meas_radps=omega, star_tracker_quat=readings.quat,
-                      available=readings.available, gyro_bias_radps=bias)
+                      available=readings.available, gyro_bias_radps=bias,
+                      star_tracker_offset_s=readings.offset_s)
+
+
+def _truth_at_readings(scenario: Scenario, star_tracker) -> np.ndarray | None:
+    """Off the gyro grid, the true attitude at each scheduled reading's time
+    (integrated at those times, as accurately as the grid's truth); on it, None."""
+    if scenario.readings_on_gyro_grid:
+        return None
+    steps, offsets = star_tracker.schedule(scenario.n_steps)
+    times = steps * scenario.dt + offsets
+    return simulate_torque_free(scenario.inertia_tensor_kg_m2, scenario.initial_attitude_quat,
+                                scenario.initial_rate_radps, times).q_true
 
 
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
@@ -192,7 +219,10 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
     for item in estimators:
         estimator = build_estimator(item, scenario) if isinstance(item, str) else item
         key = item if isinstance(item, str) else estimator.name
-        record = (sensors.omega_meas_radps, sensors.star_tracker_quat, sensors.available)
+        record = sensors.record
+        if len(record) == 4 and not estimator.applies_reading_times:
+            warnings.warn(f"{key} applies each star tracker reading at its gyro step, not at "
+                          "its own time (it does not override _step_at)", stacklevel=2)
         if traces:
             kept[key] = estimator.track(*record)
             q_est = kept[key].quat

@@ -178,8 +178,12 @@ class AttitudeEstimator:
         """Degrees of freedom of :attr:`innovation_nis` (the reading's dimension)."""
         return int(np.size(getattr(getattr(self, "filter", self), "y", ())))
 
-    def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None
-             ) -> np.ndarray:
+    #: Whether :meth:`_step_at` applies a reading at its own time (a reading
+    #: off the gyro grid); if not, such a reading is applied at its step.
+    applies_reading_times = False
+
+    def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None,
+             offset_s: float = 0.0) -> np.ndarray:
         """Consume step ``k``'s measurements and return ``q̂[k]`` as a ``(4,)`` array.
 
         Measurements are checked here, where they enter: a rate that is not 3
@@ -199,6 +203,12 @@ class AttitudeEstimator:
         star_tracker_quat : (4,) array or None
             The star tracker's reading if one was taken at step ``k``
             (``available[k]``), else None.
+        offset_s : float
+            When the reading was taken, seconds after ``t_k`` (``0 <= τ < dt``;
+            0 on the gyro grid). With ``τ > 0`` the estimate of ``t_k`` comes
+            first, without the reading; the reading is applied at its own time
+            by estimators that can (:attr:`applies_reading_times`:
+            propagate to ``t_k + τ``, update, propagate on to ``t_{k+1}``).
         """
         omega = self._checked_rate(omega_meas_radps)
         if star_tracker_quat is not None:
@@ -207,7 +217,11 @@ class AttitudeEstimator:
         if self.diverged_step is not None:
             return np.full(4, np.nan)
         try:
-            estimate = self._step(omega, star_tracker_quat)
+            if offset_s and star_tracker_quat is not None:
+                estimate = self._step_at(omega, star_tracker_quat,
+                                         self._checked_offset(offset_s))
+            else:
+                estimate = self._step(omega, star_tracker_quat)
         except np.linalg.LinAlgError:      # a covariance no longer positive definite
             estimate = None
         except ValueError:                 # scipy refusing a non-finite matrix
@@ -232,6 +246,21 @@ class AttitudeEstimator:
                                  self._last_rate)
         self._last_rate = omega
         return omega
+
+    def _checked_offset(self, offset_s) -> float:
+        """A reading's offset after its step's time: in ``[0, dt)``."""
+        offset = float(offset_s)
+        if not 0.0 <= offset < self.dt:
+            raise InvalidMeasurementError(f"offset_s at step {self.step_index - 1}", offset_s,
+                                          f"must be in [0, dt = {self.dt:g}) seconds")
+        return offset
+
+    def _step_at(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
+                 offset_s: float) -> np.ndarray:
+        """A step whose reading was taken ``offset_s`` after ``t_k``. This
+        base applies it at the step (an estimator without a notion of time
+        within a step); :attr:`applies_reading_times` estimators override it."""
+        return self._step(omega_meas_radps, star_tracker_quat)
 
     def _checked_reading(self, star_tracker_quat):
         """The step's reading, or None under ``on_invalid="skip"``."""
@@ -263,7 +292,7 @@ class AttitudeEstimator:
         raise NotImplementedError
 
     def run(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
-            available: np.ndarray) -> np.ndarray:
+            available: np.ndarray, offset_s: np.ndarray | None = None) -> np.ndarray:
         """Reset, then step through a whole record; returns ``(N, 4)`` estimates.
 
         Parameters
@@ -271,28 +300,34 @@ class AttitudeEstimator:
         omega_meas_radps : (N, 3) array, rad/s
         star_tracker_quat : (N, 4) array, the held star tracker output
         available : (N,) bool array, True where a new reading was taken
+        offset_s : (N,) array, optional
+            Seconds after ``t_k`` each step's reading was taken (off the gyro
+            grid; see :meth:`step`); zeros if None.
         """
-        omega, star, available = self._start_record(omega_meas_radps, star_tracker_quat,
-                                                    available)
+        omega, star, available, offsets = self._start_record(
+            omega_meas_radps, star_tracker_quat, available, offset_s)
         estimates = np.empty((len(omega), 4))
         with _quiet_overflow():
             for k in range(len(omega)):
-                estimates[k] = self.step(omega[k], star[k] if available[k] else None)
+                estimates[k] = self.step(omega[k], star[k] if available[k] else None,
+                                         offsets[k])
         return estimates
 
-    def _start_record(self, omega_meas_radps, star_tracker_quat, available):
+    def _start_record(self, omega_meas_radps, star_tracker_quat, available, offset_s=None):
         """Reset, and check a whole record's shapes: ``(N, 3)`` rates, ``(N, 4)``
-        readings and ``(N,)`` booleans, one row per step (values are checked
-        step by step, in :meth:`step`)."""
+        readings, ``(N,)`` booleans and ``(N,)`` offsets, one row per step
+        (values are checked step by step, in :meth:`step`)."""
         self.reset()
         self._restart_count()
         omega = _real_array("omega_meas_radps", omega_meas_radps)
         star = _real_array("star_tracker_quat", star_tracker_quat)
         flags = np.asarray(available)
         n = len(omega) if omega.ndim == 2 else -1
+        offsets = (np.zeros(max(n, 0)) if offset_s is None
+                   else _real_array("offset_s", offset_s))
         for name, array, shape in (("omega_meas_radps", omega, (n, 3)),
                                    ("star_tracker_quat", star, (n, 4)),
-                                   ("available", flags, (n,))):
+                                   ("available", flags, (n,)), ("offset_s", offsets, (n,))):
             if n < 0 or array.shape != shape:
                 rule = (f"must have shape {shape}: one row per step, as the rates" if n >= 0
                         else "must have shape (N, 3): one row per step")
@@ -300,14 +335,14 @@ class AttitudeEstimator:
         if flags.dtype != bool:
             raise InvalidMeasurementError("available", flags, "must be booleans (True where "
                                           "a reading was taken)")
-        return omega, star, flags
+        return omega, star, flags, offsets
 
     def track(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
-              available: np.ndarray) -> "EstimateTrace":
+              available: np.ndarray, offset_s: np.ndarray | None = None) -> "EstimateTrace":
         """Like :meth:`run`, also collecting the covariance and bias estimate
         of every step (None where the estimator keeps none)."""
-        omega, star, available = self._start_record(omega_meas_radps, star_tracker_quat,
-                                                    available)
+        omega, star, available, offsets = self._start_record(
+            omega_meas_radps, star_tracker_quat, available, offset_s)
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
@@ -315,7 +350,7 @@ class AttitudeEstimator:
         with _quiet_overflow():
             for k in range(n):
                 skipped = self.skipped["reading"]
-                quat[k] = self.step(omega[k], star[k] if available[k] else None)
+                quat[k] = self.step(omega[k], star[k] if available[k] else None, offsets[k])
                 used = available[k] and self.skipped["reading"] == skipped
                 innovation = self.innovation_nis if used and self.diverged_step is None else None
                 if innovation is not None:
@@ -407,8 +442,9 @@ class KalmanEstimator(AttitudeEstimator):
         """The update with one reading (and, for an error-state filter, its reset)."""
         raise NotImplementedError
 
-    def propagate(self, omega_meas_radps: np.ndarray) -> None:
-        """The prediction from step ``k`` to ``k + 1`` with the gyro's rate."""
+    def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
+        """The prediction from step ``k`` to ``k + 1`` with the gyro's rate
+        (over ``dt`` seconds if given: part of a step, see :meth:`_step_at`)."""
         raise NotImplementedError
 
     def _record(self) -> None:
@@ -426,6 +462,13 @@ class KalmanEstimator(AttitudeEstimator):
         f.x_post, f.P_post = x.copy(), P.copy()
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
+        estimate = self._estimate_at_step(star_tracker_quat)
+        self.propagate(omega_meas_radps)
+        return estimate
+
+    def _estimate_at_step(self, star_tracker_quat) -> np.ndarray:
+        """Output the prior, or correct (with the step's reading, if any) and
+        output the posterior."""
         if self.output == "prior":
             self._record()
         if star_tracker_quat is not None:
@@ -434,8 +477,21 @@ class KalmanEstimator(AttitudeEstimator):
             self._without_reading()
         if self.output == "posterior":
             self._record()
-        estimate = self._output[0].copy()
-        self.propagate(omega_meas_radps)
+        return self._output[0].copy()
+
+    applies_reading_times = True
+
+    def _step_at(self, omega_meas_radps, star_tracker_quat, offset_s: float) -> np.ndarray:
+        """A reading taken ``τ = offset_s`` after ``t_k`` (a tracker on its own
+        clock): the estimate of ``t_k`` is output without it (prior and
+        posterior are one there); then the filter propagates to ``t_k + τ``
+        with the step's rate, updates, and propagates the rest of the step,
+        ``Δt − τ`` (the continuous–discrete filter of M&C 2014, §6.2: each
+        measurement is processed at its own time)."""
+        estimate = self._estimate_at_step(None)
+        self.propagate(omega_meas_radps, offset_s)
+        self.correct(star_tracker_quat)
+        self.propagate(omega_meas_radps, self.dt - offset_s)
         return estimate
 
 

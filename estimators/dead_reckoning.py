@@ -66,18 +66,25 @@ class DeadReckoning(AttitudeEstimator):
                                    else "step-average")
         return settings
 
+    #: It ignores readings, wherever they fall.
+    applies_reading_times = True
+
     def reset(self) -> None:
         self.attitude = self.initial_attitude.copy()
         self._pending_rate = None
+        #: The time the next propagation covers: dt, or what is left of a step
+        #: after a reading taken within it (dead reckoning with resets).
+        self._next_dt = self.dt
 
     def _advance(self, omega_meas_radps) -> None:
         """Propagate with the rate that belongs to this step under ``rate_timing``."""
         omega = np.asarray(omega_meas_radps, float)
+        step, self._next_dt = self._next_dt, self.dt
         if self.rate_timing == "workshop":
-            self.attitude = propagate(self.attitude, omega, self.dt)
+            self.attitude = propagate(self.attitude, omega, step)
             return
         if self._pending_rate is not None:
-            self.attitude = propagate(self.attitude, self._pending_rate, self.dt)
+            self.attitude = propagate(self.attitude, self._pending_rate, step)
         self._pending_rate = omega
 
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:

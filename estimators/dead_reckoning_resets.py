@@ -19,6 +19,7 @@ import numpy as np
 from dynamics.quaternion import IDENTITY
 from dynamics.validation import boolean
 from estimators.dead_reckoning import DeadReckoning
+from estimators.model import propagate
 
 
 class DeadReckoningWithResets(DeadReckoning):
@@ -51,10 +52,30 @@ class DeadReckoningWithResets(DeadReckoning):
     def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
         self._advance(omega_meas_radps)
         if star_tracker_quat is not None:
-            reading = np.array(star_tracker_quat, dtype=float)
-            # q and -q are one attitude: keep the representative nearest the
-            # estimate, so the held state never jumps across the sphere.
-            if self.align_sign and reading @ self.attitude < 0:
-                reading = -reading
-            self.attitude = reading
+            self.attitude = self._aligned(star_tracker_quat)
         return self.attitude.copy()
+
+    def _aligned(self, star_tracker_quat) -> np.ndarray:
+        """The reading, as the representative nearest the estimate if asked
+        (q and -q are one attitude: the held state never jumps across the sphere)."""
+        reading = np.array(star_tracker_quat, dtype=float)
+        if self.align_sign and reading @ self.attitude < 0:
+            reading = -reading
+        return reading
+
+    applies_reading_times = True
+
+    def _step_at(self, omega_meas_radps, star_tracker_quat, offset_s: float) -> np.ndarray:
+        """A reading taken ``τ`` after ``t_k``: output the estimate of ``t_k``,
+        take the reading as the attitude at ``t_k + τ``, and leave the next
+        propagation the rest of the step, ``Δt − τ`` (with step-average timing
+        it is made now, with this step's rate)."""
+        self._advance(omega_meas_radps)
+        estimate = self.attitude.copy()
+        self.attitude = self._aligned(star_tracker_quat)
+        if self.rate_timing == "workshop":
+            self._next_dt = self.dt - offset_s
+        else:
+            self.attitude = propagate(self.attitude, self._pending_rate, self.dt - offset_s)
+            self._pending_rate = None
+        return estimate

@@ -142,8 +142,8 @@ class QuaternionEKF(KalmanEstimator):
     #: The MEKF's default attitude prior, 0.1 rad per axis, in quaternion
     #: units ((σ/2)² per component): the derived P₀.
     DERIVED_INITIAL_COVARIANCE = (0.1 / 2.0) ** 2
-    #: The smallest derived Q per component (a noise-free gyro).
-    MIN_DERIVED_Q = 1e-30
+    #: The smallest derived Q or R per component (a noise-free gyro or tracker).
+    MIN_DERIVED_VARIANCE = 1e-30
 
     @classmethod
     def derived_fields(cls, scenario) -> dict:
@@ -172,8 +172,9 @@ class QuaternionEKF(KalmanEstimator):
         R_theta = scenario.star_tracker_attitude_covariance_rad2
         dt, su = scenario.dt, scenario.gyro_filter_bias_random_walk
         per_step = (scenario.gyro_noise * dt + su * su * dt ** 3 / 3.0) / 4.0
-        return {"pc_exponent": math.log(max(per_step, cls.MIN_DERIVED_Q)),
-                "measurement_covariance": np.trace(R_theta) / 12.0 * np.eye(4),
+        per_component = max(np.trace(R_theta) / 12.0, cls.MIN_DERIVED_VARIANCE)
+        return {"pc_exponent": math.log(max(per_step, cls.MIN_DERIVED_VARIANCE)),
+                "measurement_covariance": per_component * np.eye(4),
                 "initial_covariance": cls.DERIVED_INITIAL_COVARIANCE}
 
     @classmethod
@@ -240,6 +241,16 @@ class QuaternionEKF(KalmanEstimator):
         if self.output == "posterior":
             self.filter.x_post, self.filter.P_post = self.filter.x.copy(), self.filter.P.copy()
 
-    def propagate(self, omega_meas_radps: np.ndarray) -> None:
-        """``x ← f(x, ω̃)``, ``P ← F P Fᵀ + Q`` (filterpy's predict)."""
-        self.filter.predict(u=omega_meas_radps)
+    def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
+        """``x ← f(x, ω̃)``, ``P ← F P Fᵀ + Q`` (filterpy's predict); over part
+        of a step, ``dt`` seconds, with ``Q`` scaled by ``dt / Δt`` (white
+        noise adds variance in proportion to time)."""
+        if dt is None:
+            self.filter.predict(u=omega_meas_radps)
+            return
+        full_q = self.filter.Q
+        self.filter.dt, self.filter.Q = dt, full_q * (dt / self.dt)
+        try:
+            self.filter.predict(u=omega_meas_radps)
+        finally:
+            self.filter.dt, self.filter.Q = self.dt, full_q

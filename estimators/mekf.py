@@ -248,13 +248,15 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         self.beta_hat = self.beta_hat + delta_beta
         self.filter.x = np.zeros(6)
 
-    def propagate(self, omega_meas_radps: np.ndarray) -> None:
-        """Global state and covariance from ``k`` to ``k + 1`` with the gyro's step average."""
+    def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
+        """Global state and covariance from ``k`` to ``k + 1`` with the gyro's
+        step average (over ``dt`` if given: part of a step)."""
+        dt = self.dt if dt is None else dt
         omega_hat = np.asarray(omega_meas_radps, dtype=float) - self.beta_hat
-        phi, q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
+        phi, q = discrete_error_model(omega_hat, dt, self.gyro_noise,
                                       self.gyro_bias_random_walk)
         self.filter.predict(F=phi, Q=q)
-        propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt))
+        propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)
 
     def state_is_finite(self) -> bool:

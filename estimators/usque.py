@@ -220,14 +220,16 @@ class USQUE(AttitudeAndBiasEstimator):
         self.filter.update(self.measured_grp(star_tracker_quat))
         self._reset()
 
-    def propagate(self, omega_meas_radps: np.ndarray) -> None:
-        """Sigma points through the exact kinematics; P⁻ = UT + Q."""
+    def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
+        """Sigma points through the exact kinematics; P⁻ = UT + Q (over ``dt``
+        if given: part of a step)."""
+        dt = self.dt if dt is None else dt
         omega = np.asarray(omega_meas_radps, dtype=float)
         omega_hat = omega - self.filter.x[3:]
-        q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * self.dt)))
-        _, self.filter.Q = discrete_error_model(omega_hat, self.dt, self.gyro_noise,
+        q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt)))
+        _, self.filter.Q = discrete_error_model(omega_hat, dt, self.gyro_noise,
                                                 self.gyro_bias_random_walk)
-        self.filter.predict(omega_meas_radps=omega, q_reference_next=q_next)
+        self.filter.predict(dt=dt, omega_meas_radps=omega, q_reference_next=q_next)
         # The prior mean's δp stays in x until the next update or reset: the
         # sigma points filterpy drew for the update are relative to q_next.
         self.q_hat = q_next

@@ -46,10 +46,59 @@ class StarTrackerReadings:
 
     quat: np.ndarray
     available: np.ndarray
+    #: (N,) seconds after each step's time that its reading was taken (0 on
+    #: the gyro grid, and where there is none).
+    offset_s: np.ndarray | None = None
 
 
 #: The longest interval between readings, in steps (a run has at most 1e10).
 MAX_STEPS_BETWEEN = 1e12
+
+
+def reading_interval(time_between_measurements: float, dt: float) -> float:
+    """A tracker interval on its own clock: at least ``dt`` (a tracker faster
+    than the gyro would deliver two readings in one step) and at most
+    :data:`MAX_STEPS_BETWEEN` steps; need not be a multiple of ``dt``."""
+    name = "star_tracker.interval_s (time_between_measurements)"
+    interval = finite_number(name, time_between_measurements, strictly_positive=True)
+    ratio = interval / dt
+    if not ratio < MAX_STEPS_BETWEEN:
+        raise InvalidParameterError(name, interval,
+                                    f"must be at most {MAX_STEPS_BETWEEN:.0e} steps of dt = {dt:g}")
+    if ratio < 1.0 - _WHOLE_MULTIPLE_TOLERANCE:
+        raise InvalidParameterError(name, interval, f"must be >= the gyro's dt = {dt:g}: each "
+                                    "gyro step takes at most one reading")
+    return interval
+
+
+def on_gyro_grid(time_between_measurements: float, dt: float) -> bool:
+    """Whether readings fall on gyro steps: ``T_st`` a whole multiple of ``Δt``."""
+    ratio = time_between_measurements / dt
+    return abs(ratio - round(ratio)) <= _WHOLE_MULTIPLE_TOLERANCE * max(1.0, ratio)
+
+
+def reading_schedule(time_between_measurements: float, dt: float, n_steps: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    r"""When a tracker on its own clock reads: ``(steps, offsets)``.
+
+    Reading ``j`` is taken at :math:`t_j = j T_{st}` (up to the last gyro
+    step's time) and delivered at the gyro step :math:`k_j = \lfloor t_j /
+    \Delta t \rfloor` whose interval :math:`[t_k, t_{k+1})` holds it,
+    :math:`\tau_j = t_j - k_j \Delta t` after that step's time (0 on the
+    grid). An estimator outputs its estimate at :math:`t_k`, propagates to
+    :math:`t_k + \tau`, updates, and propagates on to :math:`t_{k+1}`
+    (:meth:`estimators.AttitudeEstimator.step`).
+    """
+    if on_gyro_grid(time_between_measurements, dt):
+        steps = np.arange(0, n_steps, steps_between_readings(time_between_measurements, dt))
+        return steps, np.zeros(len(steps))
+    last_time = (n_steps - 1) * dt
+    times = np.arange(int(last_time / time_between_measurements + 1e-9) + 1) * \
+        time_between_measurements
+    steps = np.minimum(np.floor(times / dt + 1e-9).astype(np.int64), n_steps - 1)
+    offsets = np.maximum(times - steps * dt, 0.0)
+    offsets[offsets < 1e-9 * dt] = 0.0
+    return steps, offsets
 
 
 def steps_between_readings(time_between_measurements: float, dt: float) -> int:
@@ -82,7 +131,8 @@ class StarTracker:
         Noise power ``p_s`` per quaternion component (Simulink band-limited
         white noise sampled at ``dt``).
     time_between_measurements : float
-        Seconds between readings; a positive whole multiple of ``dt``.
+        Seconds between readings, at least ``dt``; off the gyro's grid the
+        readings carry their own times (:func:`reading_schedule`).
     dt : float
         Simulation step in seconds.
     """
@@ -94,10 +144,11 @@ class StarTracker:
     def __init__(self, noise_power: float, time_between_measurements: float, dt: float):
         self.noise_power = finite_number("star_tracker_noise", noise_power, minimum=0.0)
         self.dt = finite_number("dt", dt, strictly_positive=True)
-        self.time_between_measurements = finite_number(
-            "time_between_measurements", time_between_measurements, strictly_positive=True)
-        self.steps_between_readings = steps_between_readings(self.time_between_measurements,
-                                                             self.dt)
+        self.time_between_measurements = reading_interval(time_between_measurements, self.dt)
+        #: ``m`` with readings every ``m`` steps, or None off the gyro grid.
+        self.steps_between_readings = (
+            steps_between_readings(self.time_between_measurements, self.dt)
+            if on_gyro_grid(self.time_between_measurements, self.dt) else None)
         self.std = noise_power_to_std(self.noise_power, self.dt)
 
     @property
@@ -110,24 +161,57 @@ class StarTracker:
         """``(N,)`` bool: all False (no outage windows)."""
         return np.zeros(np.shape(time_s), dtype=bool)
 
+    def schedule(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """The steps that take a reading and each reading's offset after its
+        step's time (:func:`reading_schedule`)."""
+        return reading_schedule(self.time_between_measurements, self.dt, n_steps)
+
     def measure(self, q_true: np.ndarray, rng: np.random.Generator,
-                dropout_rng: np.random.Generator | None = None) -> StarTrackerReadings:
-        """Held readings for true attitudes ``(N, 4)``.
+                dropout_rng: np.random.Generator | None = None,
+                reading_quat: np.ndarray | None = None) -> StarTrackerReadings:
+        """Held readings for true attitudes ``(N, 4)`` on the gyro's grid;
+        off the grid, ``reading_quat`` holds the true attitude at each
+        scheduled reading's own time (:meth:`schedule`).
 
         Draws one row of 4 standard normals from ``rng`` per reading, in time
         order (``dropout_rng`` is not drawn from: no reading is lost).
         """
         q_true = np.asarray(q_true, dtype=float)
         n_steps = len(q_true)
+        steps, offsets = self.schedule(n_steps)
+        truth = _truth_at_readings(q_true, steps, offsets, reading_quat)
         available = np.zeros(n_steps, dtype=bool)
-        available[::self.steps_between_readings] = True
-        noise = self.std * rng.standard_normal((int(available.sum()), 4))
-        readings = normalize(q_true[available] + noise)
+        available[steps] = True
+        noise = self.std * rng.standard_normal((len(steps), 4))
+        readings = normalize(truth + noise)
         # Sample and hold: every step carries the latest reading taken. The
         # first reading is at k = 0, so the [1, 0, 0, 0] that the Simulink
         # hold starts from is never seen on this grid.
         quat = readings[np.cumsum(available) - 1]
-        return StarTrackerReadings(quat=quat, available=available)
+        return StarTrackerReadings(quat=quat, available=available,
+                                   offset_s=_offsets_on_grid(n_steps, steps, offsets))
+
+
+def _truth_at_readings(q_true, steps, offsets, reading_quat) -> np.ndarray:
+    """The true attitude at each scheduled reading: on the grid, the step's;
+    off it, ``reading_quat`` (which the caller integrates at those times)."""
+    if reading_quat is None:
+        if np.any(offsets):
+            raise ValueError("readings off the gyro grid need reading_quat, the true "
+                             "attitude at each reading's time")
+        return q_true[steps]
+    reading_quat = np.asarray(reading_quat, dtype=float)
+    if reading_quat.shape != (len(steps), 4):
+        raise ValueError(f"reading_quat must have shape ({len(steps)}, 4): one row per "
+                         "scheduled reading")
+    return reading_quat
+
+
+def _offsets_on_grid(n_steps: int, steps, offsets) -> np.ndarray:
+    """``(N,)`` each step's reading offset, 0 where it takes none."""
+    grid = np.zeros(n_steps)
+    grid[steps] = offsets
+    return grid
 
 
 #: Arcseconds per radian.
@@ -161,7 +245,8 @@ class RotationStarTracker:
         Standard deviation of the error rotation about the sensor's x, y
         (cross-boresight) and z (boresight, roll) axes, arcseconds.
     time_between_measurements : float
-        Seconds between scheduled readings; a positive whole multiple of ``dt``.
+        Seconds between scheduled readings, at least ``dt``; off the gyro's
+        grid the readings carry their own times (:func:`reading_schedule`).
     dt : float
         Simulation step, seconds.
     dropout_probability : float
@@ -184,10 +269,11 @@ class RotationStarTracker:
             raise InvalidParameterError("star_tracker_sigma_arcsec", sigma_arcsec,
                                         "must be >= 0 on every axis")
         self.dt = finite_number("dt", dt, strictly_positive=True)
-        self.time_between_measurements = finite_number(
-            "time_between_measurements", time_between_measurements, strictly_positive=True)
-        self.steps_between_readings = steps_between_readings(self.time_between_measurements,
-                                                             self.dt)
+        self.time_between_measurements = reading_interval(time_between_measurements, self.dt)
+        #: ``m`` with readings every ``m`` steps, or None off the gyro grid.
+        self.steps_between_readings = (
+            steps_between_readings(self.time_between_measurements, self.dt)
+            if on_gyro_grid(self.time_between_measurements, self.dt) else None)
         self.dropout_probability = finite_number("star_tracker_dropout_probability",
                                                  dropout_probability, minimum=0.0)
         if self.dropout_probability >= 1.0:
@@ -205,11 +291,10 @@ class RotationStarTracker:
         """Covariance (rad²) of a reading's body-frame error: ``R_bs diag(σ²) R_bsᵀ``."""
         return self.sensor_to_body @ np.diag(self.sigma_rad ** 2) @ self.sensor_to_body.T
 
-    def scheduled(self, n_steps: int) -> np.ndarray:
-        """``(N,)`` bool: the steps a reading is due (``k`` a multiple of ``m``)."""
-        due = np.zeros(n_steps, dtype=bool)
-        due[::self.steps_between_readings] = True
-        return due
+    def schedule(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """The steps that take a scheduled reading and each one's offset after
+        its step's time (:func:`reading_schedule`)."""
+        return reading_schedule(self.time_between_measurements, self.dt, n_steps)
 
     def in_outage(self, time_s: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: the times inside a scheduled outage window."""
@@ -229,24 +314,31 @@ class RotationStarTracker:
         return readings
 
     def measure(self, q_true: np.ndarray, rng: np.random.Generator,
-                dropout_rng: np.random.Generator | None = None) -> StarTrackerReadings:
-        """Held readings for true attitudes ``(N, 4)`` on the grid ``t_k = k dt``.
+                dropout_rng: np.random.Generator | None = None,
+                reading_quat: np.ndarray | None = None) -> StarTrackerReadings:
+        """Held readings for true attitudes ``(N, 4)`` on the grid ``t_k = k dt``;
+        off the grid, ``reading_quat`` holds the true attitude at each
+        scheduled reading's own time (:meth:`schedule`).
 
         Draws 3 standard normals from ``rng`` per scheduled reading, in time
         order, and (with a dropout probability) one uniform per scheduled
-        reading from ``dropout_rng``.
+        reading from ``dropout_rng``. Outages are judged at each reading's time.
         """
         q_true = np.asarray(q_true, dtype=float)
         n_steps = len(q_true)
-        due = self.scheduled(n_steps)
-        normals = rng.standard_normal((int(due.sum()), 3))
-        available = due & ~self.in_outage(np.arange(n_steps) * self.dt)
+        steps, offsets = self.schedule(n_steps)
+        truth = _truth_at_readings(q_true, steps, offsets, reading_quat)
+        normals = rng.standard_normal((len(steps), 3))
+        kept = ~self.in_outage(steps * self.dt + offsets)
         if self.dropout_probability > 0:
             if dropout_rng is None:
                 raise ValueError("dropout_rng is needed when dropout_probability > 0")
-            kept = dropout_rng.random(int(due.sum())) >= self.dropout_probability
-            available[due] &= kept
+            kept &= dropout_rng.random(len(steps)) >= self.dropout_probability
+        available = np.zeros(n_steps, dtype=bool)
+        available[steps[kept]] = True
         readings = np.vstack([[1.0, 0.0, 0.0, 0.0],
-                              self.error_rotations(normals, q_true[due])[available[due]]])
+                              self.error_rotations(normals, truth)[kept]])
         # Sample and hold; row 0 is the [1, 0, 0, 0] held before any reading.
-        return StarTrackerReadings(quat=readings[np.cumsum(available)], available=available)
+        return StarTrackerReadings(quat=readings[np.cumsum(available)], available=available,
+                                   offset_s=_offsets_on_grid(n_steps, steps[kept],
+                                                             offsets[kept]))

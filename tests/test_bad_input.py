@@ -117,10 +117,11 @@ def test_huge_quaternions_normalise_and_huge_rates_are_refused():
 
 def test_workshop_checks_every_activity_before_writing(tmp_path, capsys):
     out = tmp_path / "w"
-    assert main(["workshop", "--dt", "0.03", "--time-between-measurements", "0.03",
+    # A 0.3 s gyro step: Activity 2's 0.2 s tracker would read twice in some steps.
+    assert main(["workshop", "--dt", "0.3", "--time-between-measurements", "0.3",
                  "--out", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "time_between_measurements = 0.2" in err and "step 5" in err
+    assert "interval_s (time_between_measurements) = 0.2" in err and "step 5" in err
     assert not out.exists()
 
 

@@ -70,7 +70,7 @@ BAD_FLAGS = [
     (["--dt", "0"], "dt"),
     (["--dt", "-0.01"], "dt"),
     (["--tstop", "0.001"], "tstop"),
-    (["--time-between-measurements", "0.015"], "time_between_measurements"),
+    (["--time-between-measurements", "0.005"], "time_between_measurements"),
     (["--time-between-measurements", "0"], "time_between_measurements"),
     (["--pc-exponent", "nan"], "pc_exponent"),
     (["--seed", "-1"], "seed"),
@@ -87,8 +87,8 @@ BAD_FILES = [
     ("initial_rate_radps = [0.05, 0.05]", "initial_rate_radps", "3 numbers"),
     ("gyro_noise = ", "scenario", "valid TOML"),
     ("gyro_nosie = 1e-5", "gyro_nosie", "not a scenario setting"),
-    ("dt = 0.01\ntime_between_measurements = 0.333", "time_between_measurements",
-     "whole multiple"),
+    ("dt = 0.01\ntime_between_measurements = 0.004", "time_between_measurements",
+     "must be >= the gyro's dt"),
 ]
 
 

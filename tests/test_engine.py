@@ -85,7 +85,7 @@ def test_only_requested_estimators_run():
 
 @pytest.mark.parametrize("settings, name", [
     ({"pc_exponent": [np.nan]}, "pc_exponent"),
-    ({"time_between_measurements": [0.015]}, "time_between_measurements"),
+    ({"time_between_measurements": [0.005]}, "time_between_measurements"),
     ({"gyro_noise": [-1.0]}, "gyro_noise"),
     ({"inertia": 1}, "inertia"),
 ])

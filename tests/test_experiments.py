@@ -42,7 +42,7 @@ def test_sweep_rows_equal_one_run_per_value(tmp_path):
 
 @pytest.mark.parametrize("param, values, bad", [
     ("gyro-noise", "1e-5,-1", "gyro_noise"),
-    ("time-between-measurements", "0.2,0.015", "time_between_measurements"),
+    ("time-between-measurements", "0.2,0.005", "time_between_measurements"),
     ("pc-exponent", "a,b", "values"),
 ])
 def test_bad_sweep_values_fail_cleanly(tmp_path, capsys, param, values, bad):

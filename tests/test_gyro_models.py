@@ -130,7 +130,8 @@ def test_filters_take_the_gauss_markov_part_as_its_driving_noise():
     assert equivalent_bias_random_walk(3e-9, 0.0, 1.0) == 3e-9
 
 
-def test_the_engine_hands_a_gauss_markov_scenario_to_the_per_run_path(capsys):
+def test_the_engine_hands_a_gauss_markov_scenario_to_the_per_run_path(capsys, monkeypatch):
+    monkeypatch.setattr("benchmarks.engine.runner._SAID", set())
     scenario = TUMBLE.replace(tstop=4.0, gyro_bias_instability_radps=1e-5,
                               gyro_bias_correlation_time_s=200.0)
     assert "Gauss-Markov" in engine_limitation(scenario)

@@ -68,8 +68,8 @@ def test_star_tracker_error_has_power_over_dt_variance():
     assert low < statistic < high
 
 
-@pytest.mark.parametrize("interval", [0.015, 0.0, -0.2, 0.005])
-def test_interval_not_whole_multiple_of_dt_is_rejected(interval):
+@pytest.mark.parametrize("interval", [0.0, -0.2, 0.005])
+def test_interval_shorter_than_dt_or_not_positive_is_rejected(interval):
     with pytest.raises(InvalidParameterError, match="time_between_measurements"):
         StarTracker(1e-6, interval, 0.01)
 

@@ -31,7 +31,7 @@ from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, senso
                                    simulate_truth, truth_and_rate_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS
-from sensors.star_tracker import steps_between_readings
+from sensors.star_tracker import on_gyro_grid, steps_between_readings
 
 #: Steps advanced per kernel call. It bounds the noise buffer (B × 2500 × 3
 #: floats, 61 MB at B = 1024) whatever the run length; larger blocks mean
@@ -102,12 +102,17 @@ def checked_estimators(estimators) -> tuple:
     return tuple(name for name in KERNELS if name in names)
 
 
-def engine_limitation(scenario: Scenario) -> str | None:
-    """Why the engine cannot run ``scenario`` (a sensor model its kernels do
-    not draw), or None. Those scenarios run on the per-run path
-    (:func:`benchmarks.engine.runner.run_many` falls back, saying so)."""
+def engine_limitation(scenario: Scenario, runs: RunTable | None = None) -> str | None:
+    """Why the engine cannot run ``scenario`` (with the intervals of ``runs``,
+    if given): a sensor model its kernels do not draw, or None. Those
+    scenarios run on the per-run path (:func:`benchmarks.engine.runner.run_many`
+    falls back, saying so)."""
     if scenario.gyro_bias_instability_radps > 0:
         return "a gyro bias with a Gauss-Markov part ([gyro] bias_instability)"
+    intervals = ([scenario.time_between_measurements] if runs is None
+                 else np.unique(runs.time_between_measurements))
+    if not all(on_gyro_grid(float(t), scenario.dt) for t in intervals):
+        return "star tracker readings off the gyro's time grid ([star_tracker] interval_s)"
     return None
 
 
@@ -450,7 +455,7 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     # trust shapes and lengths, so a bad table would read or write out of bounds.
     runs = checked_runs(scenario, runs)
     names = checked_estimators(estimators)
-    limitation = engine_limitation(scenario)
+    limitation = engine_limitation(scenario, runs)
     if limitation is not None:
         raise InvalidParameterError("scenario", limitation, "is not modelled by the engine's "
                                     "kernels; run it through benchmarks.engine.runner.run_many, "

@@ -58,7 +58,7 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
     kept = {"consistency": consistency, "nees_every": nees_every,
             "settle_steps": settle_steps, "keep_traces": keep_traces,
             "error_every": whole_number("error_every", error_every, 0)}
-    limitation = engine_limitation(scenario)
+    limitation = engine_limitation(scenario, runs)
     engine = [name for name in estimators if name in ENGINE_ESTIMATORS and limitation is None]
     if limitation is not None:
         _say_once(f"note: the engine does not model {limitation}; its estimators take the "

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import seaborn as sns
 
-from benchmarks.engine import make_runs, run_batch, run_many
+from benchmarks.engine import make_runs, run_many
 from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import atomic_path, write_csv, write_figure
 from benchmarks.figures.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
@@ -114,10 +114,10 @@ def compute_landscape(scenario: Scenario, pc_values, seeds=(0,), quiet: bool = F
                             "diverged_step": batch.diverged_step["ekf"]})
     first = make_runs(scenario, seeds[0], pc_exponent=pc_values)
     truth = simulate_truth(scenario)
-    curves = run_batch(scenario, first, ["ekf"], keep_traces=True).estimates["ekf"]
+    curves = run_many(scenario, first, ["ekf"], keep_traces=True).estimates["ekf"]
     ekf_curves = attitude_error_deg(truth.q_true, curves)
-    references = run_batch(scenario, make_runs(scenario, [seeds[0]]),
-                           ["dead-reckoning", "dead-reckoning-resets"], keep_traces=True)
+    references = run_many(scenario, make_runs(scenario, [seeds[0]]),
+                          ["dead-reckoning", "dead-reckoning-resets"], keep_traces=True)
     reference_curves = {
         ESTIMATORS[name].label: attitude_error_deg(truth.q_true, references.estimates[name][0])
         for name in ("dead-reckoning", "dead-reckoning-resets")}
