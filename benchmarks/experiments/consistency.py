@@ -268,5 +268,9 @@ def figure(result: ConsistencyResult):
         sigmas[name] = sample.sigma_deg
     bound_sigma = np.degrees(np.sqrt(np.diagonal(result.bound.posterior, axis1=1, axis2=2)))
     bands = {name: (row["anees_low"], row["anees_high"]) for name, row in result.summary.items()}
+    from benchmarks.experiments.runs import reading_window
+    runs = {name: row["runs"] for name, row in result.summary.items()}
+    level = next(iter(result.summary.values()), {}).get("band_level", BAND_LEVEL)
     return consistency_figure(result.time_s, result.anees, bands, errors, sigmas, bound_sigma,
-                              time_s, labels)
+                              time_s, labels, runs=runs,
+                              envelope_steps=reading_window(result.scenario), level=level)

@@ -35,12 +35,14 @@ class SweepParameter:
     field: str
     legend: str     # format string; {value} and {label} (the estimator's label)
     convert: object = None
+    unit: str = ""  # of the swept value, as given
 
 
 def _section_parameters() -> dict:
     """Every key a scenario section declares sweepable, as ``SECTION.KEY``."""
+    units = {(setting.section, setting.key): setting.unit for setting in SETTINGS}
     return {f"{section}.{key}": SweepParameter(spec.field, f"{section}.{key} = {{value:g}}",
-                                               spec.convert)
+                                               spec.convert, units.get((section, key), ""))
             for section, keys in SECTIONS.items() for key, spec in keys.items()
             if spec.sweepable}
 
@@ -49,7 +51,7 @@ def _section_parameters() -> dict:
 #: settings declared with a ``sweep`` name), then every sweepable key of the
 #: scenario's sections as ``SECTION.KEY`` (benchmarks.scenario.SETTINGS).
 SWEEP_PARAMETERS = {
-    **{setting.sweep: SweepParameter(setting.field, setting.legend)
+    **{setting.sweep: SweepParameter(setting.field, setting.legend, unit=setting.unit)
        for setting in SETTINGS if setting.sweep},
     **_section_parameters(),
 }
@@ -111,9 +113,16 @@ def flight_comparison_figure(result: RunResult):
         if trace.bias_radps is not None:
             biases[name] = (radps_to_deg_per_hr(trace.bias_radps), radps_to_deg_per_hr(
                 np.sqrt(np.diagonal(trace.bias_covariance, axis1=1, axis2=2))))
+    scenario = result.scenario
     return flight_figure(result.time_s, errors, sigmas,
                          radps_to_deg_per_hr(result.sensors.gyro_bias_radps), biases,
-                         result.labels)
+                         result.labels, envelope_steps=reading_window(scenario))
+
+
+def reading_window(scenario) -> int:
+    """Steps spanning one star tracker interval and the step after it: the
+    window over which an envelope is drawn through its peaks."""
+    return int(np.ceil(scenario.time_between_measurements / scenario.dt - 1e-9)) + 1
 
 
 def write_summary(path: Path, stats: dict) -> None:
@@ -149,10 +158,13 @@ def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out
         result = simulate(case, [estimator], seed=seed)
         error = result.error_deg[estimator]
         rows.append({"param": param, "value": float(value), **run_statistics(result, estimator)})
-        curves[spec.legend.format(value=value, label=result.labels[estimator])] = error
-        time_s = result.time_s
+        legend = spec.legend.format(value=value, label=result.labels[estimator])
+        curves[f"{legend} {spec.unit}".rstrip()] = error
+        time_s, label = result.time_s, result.labels[estimator]
     write_csv(out / "sweep.csv", SWEEP_COLUMNS, ([row[c] for c in SWEEP_COLUMNS] for row in rows))
-    write_figure(out / "sweep.png", comparison_figure(time_s, curves, ekf_labels=()))
+    write_figure(out / "sweep.png", comparison_figure(
+        time_s, curves, ekf_labels=(), title=f"{label}: attitude error as {param} varies "
+        f"(seed {seed})"))
     return rows
 
 

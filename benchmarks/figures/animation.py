@@ -71,7 +71,7 @@ class AttitudeView:
         self.ax.set_zlabel("z")
         self.ax.legend(handles=handles, loc="upper left")
         figure.suptitle(TITLE, fontsize=14)
-        self.subtitle = self.ax.set_title("Time = 0.0")
+        self.subtitle = self.ax.set_title("Time = 0.0 s")
 
     def _place(self, body, axes, q):
         rotation = rotation_matrix(q)

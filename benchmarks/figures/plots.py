@@ -9,9 +9,14 @@ import textwrap
 
 import numpy as np
 import seaborn as sns
+
+from benchmarks.figures.style import (COINCIDE_FRACTION, coincidence_note, coinciding,
+                                      estimator_styles, legend_outside, symlog_axis,
+                                      finite_max, upper_envelope, with_coincidences)
 from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 from PIL import Image
 
 TITLE = "Absolute Attitude Error"
@@ -42,10 +47,13 @@ def plot_errors(ax, time_s: np.ndarray, curves: dict, ekf_labels=("EKF",)) -> No
     ax.legend(loc="upper left")
 
 
-def comparison_figure(time_s: np.ndarray, curves: dict, ekf_labels=("EKF",)) -> Figure:
+def comparison_figure(time_s: np.ndarray, curves: dict, ekf_labels=("EKF",),
+                      title: str | None = None) -> Figure:
     """The workshop's comparison figure of error curves ``{label: degrees}``."""
     figure, (ax,) = new_figure()
     plot_errors(ax, time_s, curves, ekf_labels=ekf_labels)
+    if title:
+        ax.set_title(title)
     return figure
 
 
@@ -59,27 +67,49 @@ def freeze_layout(figure: Figure) -> None:
     figure.set_layout_engine("none")
 
 
-#: Statistics shown in the Monte Carlo distribution figure: (column, title).
-DISTRIBUTION_PANELS = (("mean_deg", "Mean error"), ("std_deg", "Error std (the loss)"),
+#: Statistics shown in the Monte Carlo distribution figure: (column, title);
+#: the RMS error first, the statistic the comparisons quote.
+DISTRIBUTION_PANELS = (("rms_deg", "RMS error"), ("std_deg", "Error std (the workshop's loss)"),
                        ("max_deg", "Maximum error"))
+#: Estimators whose medians differ by more than this factor share a log axis.
+LOG_AXIS_SPREAD = 10.0
 
 
 def distribution_figure(frame, labels: dict | None = None) -> Figure:
     """Per-estimator distributions over runs of a tidy per-run frame (one
-    violin per estimator and statistic, seaborn)."""
+    violin per estimator and statistic, seaborn). Angles are in arcseconds
+    when the errors are below 0.1°, and on a log axis when the estimators'
+    medians differ by orders of magnitude (the violins then show log values)."""
     import pandas as pd   # seaborn's own dependency; imported where it is used
 
     data = frame.copy()
     labels = labels or {}
     data["estimator"] = data["estimator"].map(
         lambda name: textwrap.fill(labels.get(name, name), 20))
+    columns = [column for column, _ in DISTRIBUTION_PANELS]
+    medians = data.groupby("estimator")["rms_deg"].median().to_numpy()
+    scale, unit = _angle_unit(float(np.nanmedian(data[columns].to_numpy())))
+    positive = medians[medians > 0]
+    log_axis = positive.size > 1 and positive.max() / positive.min() > LOG_AXIS_SPREAD
     figure, axes = new_figure(ncols=len(DISTRIBUTION_PANELS), width=4.5, height=4.5)
     for ax, (column, title) in zip(axes, DISTRIBUTION_PANELS):
-        sns.violinplot(data=data, x="estimator", y=column, hue="estimator", ax=ax,
+        values = data[column] * scale
+        if log_axis:
+            values = np.log10(values.where(values > 0))
+        plotted = data.assign(value=values)
+        sns.violinplot(data=plotted, x="estimator", y="value", hue="estimator", ax=ax,
                        cut=0, inner="quartile", legend=False)
         ax.set_title(title)
         ax.set_xlabel("")
-        ax.set_ylabel("Degrees")
+        if log_axis:
+            finite = values[np.isfinite(values)]
+            low, high = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
+            nice = [np.log10(m * 10.0 ** e) for e in range(-6, 9) for m in (1, 2, 5)]
+            ax.yaxis.set_major_locator(FixedLocator([v for v in nice if low - 0.3 <= v <= high + 0.3]))
+            ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{10 ** v:g}"))
+            ax.set_ylabel(f"{unit} (log scale)")
+        else:
+            ax.set_ylabel(unit)
     runs = data["run"].nunique() if isinstance(data, pd.DataFrame) else len(data)
     figure.suptitle(f"Attitude error over {runs} Monte Carlo runs")
     return figure
@@ -120,17 +150,24 @@ class BlittingPillowWriter(PillowWriter):
                                              bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1))
 
 
-#: Body axes as the per-axis figure names them.
-AXIS_NAMES = ("Roll (x)", "Pitch (y)", "Yaw (z)")
+#: Body axes as the per-axis figures name them (not roll, pitch and yaw,
+#: which would clash with a star tracker's roll about its own boresight).
+AXIS_NAMES = ("Body x", "Body y", "Body z")
 _ARCSEC_PER_DEG = 3600.0
 #: Below this steady-state size per-axis errors are shown in arcsec, above in degrees.
 ARCSEC_BELOW_DEG = 0.1
+_UNIT_SYMBOLS = {"arcsec": "″", "deg": "°"}
+
+
+def _angle_unit(typical_deg: float) -> tuple[float, str]:
+    """``(scale from degrees, unit)``: arcsec below :data:`ARCSEC_BELOW_DEG`."""
+    return (_ARCSEC_PER_DEG, "arcsec") if typical_deg < ARCSEC_BELOW_DEG else (1.0, "deg")
 
 
 def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_deg_per_hr,
-                  bias_estimates: dict, labels: dict) -> Figure:
+                  bias_estimates: dict, labels: dict, envelope_steps: int = 1) -> Figure:
     """Per-axis attitude error with ±3σ envelopes (left), bias estimates against
-    the true bias (right).
+    the true bias (right; no bias column when no estimator has a bias).
 
     Parameters
     ----------
@@ -141,63 +178,103 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
     bias_estimates : {name: ((N, 3) estimate, (N, 3) 1σ)} in deg/h, for
         estimators that estimate a bias
     labels : {name: legend label}
+    envelope_steps : int
+        The ±3σ bands are drawn through their peaks over this many steps (one
+        reading interval: a σ that drops at each reading is not a sawtooth).
 
     The error axes are symmetric-log: linear within the best filter's
     steady-state 3σ, logarithmic beyond, so a converged filter, a drifting
     dead reckoning and a start tens of degrees off are all readable. The unit
-    (arcsec or degrees) follows the size of the steady-state errors.
+    (arcsec or degrees) follows the size of the steady-state errors. Curves
+    that coincide are drawn in their own line styles and named below the
+    legend; one legend, outside the panels, lists every curve and band.
     """
+    columns = 2 if bias_estimates else 1
     with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(14.0, 9.0), layout="constrained")
-        axes = figure.subplots(3, 2, sharex=True, squeeze=False)
-    colors = dict(zip(error_vectors_deg, sns.color_palette("deep", len(error_vectors_deg))))
+        figure = Figure(figsize=(14.0 if columns == 2 else 9.0, 9.5), layout="constrained")
+        axes = figure.subplots(3, columns, sharex=True, squeeze=False)
+    styles = estimator_styles(error_vectors_deg)
     second_half = slice(len(time_s) // 2, None)
     steady = [3 * np.median(sigma[second_half]) for sigma in sigmas_deg.values()
               if sigma is not None]
     if not steady:
         steady = [np.median(np.abs(e[second_half])) for e in error_vectors_deg.values()]
     typical_deg = max(min(steady), 1e-12)
-    in_arcsec = typical_deg < ARCSEC_BELOW_DEG
-    scale, unit = (_ARCSEC_PER_DEG, "arcsec") if in_arcsec else (1.0, "deg")
+    scale, unit = _angle_unit(typical_deg)
+    scaled = {name: error * scale for name, error in error_vectors_deg.items()}
+    under = coinciding(scaled, COINCIDE_FRACTION * typical_deg * scale)
+    largest = finite_max(scaled.values())
+    envelopes = {name: None if sigma is None else upper_envelope(3 * sigma * scale,
+                                                                   envelope_steps)
+                 for name, sigma in sigmas_deg.items()}
     for axis in range(3):
-        ax = axes[axis, 0]
-        for name, error in error_vectors_deg.items():
-            color = colors[name]
-            ax.plot(time_s, error[:, axis] * scale, color=color, linewidth=0.8,
-                    label=labels[name])
-            sigma = sigmas_deg.get(name)
-            if sigma is not None:
-                envelope = 3 * sigma[:, axis] * scale
-                ax.fill_between(time_s, -envelope, envelope, color=color, alpha=0.15,
-                                linewidth=0, label=f"{labels[name]} ±3σ")
-        ax.set_yscale("symlog", linthresh=typical_deg * scale)
-        ax.set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
-        ax.set_xlim(time_s[0], time_s[-1])
-        ax = axes[axis, 1]
-        ax.plot(time_s, bias_true_deg_per_hr[:, axis], color="black", linestyle="--",
-                linewidth=1.5, label="True bias")
-        for name, (estimate, sigma) in bias_estimates.items():
-            ax.plot(time_s, estimate[:, axis], color=colors[name], linewidth=1.2,
-                    label=labels[name])
-            ax.fill_between(time_s, estimate[:, axis] - 3 * sigma[:, axis],
-                            estimate[:, axis] + 3 * sigma[:, axis], color=colors[name],
-                            alpha=0.15, linewidth=0, label=f"{labels[name]} ±3σ")
-        truth = bias_true_deg_per_hr[:, axis]
-        span = max(np.ptp(truth), np.abs(truth).max(), 1e-6)
-        ax.set_ylim(truth.min() - 1.5 * span, truth.max() + 1.5 * span)
-        ax.set_ylabel(f"{AXIS_NAMES[axis]} gyro bias (deg/h)")
+        _error_panel(axes[axis, 0], time_s, scaled, envelopes, axis, styles, under, labels)
+        symlog_axis(axes[axis, 0], typical_deg * scale, largest)
+        axes[axis, 0].set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
+        axes[axis, 0].set_xlim(time_s[0], time_s[-1])
+        if bias_estimates:
+            _bias_panel(axes[axis, 1], time_s, bias_true_deg_per_hr[:, axis],
+                        {name: (estimate[:, axis], sigma[:, axis])
+                         for name, (estimate, sigma) in bias_estimates.items()},
+                        styles, under, labels)
+            axes[axis, 1].set_ylabel(f"{AXIS_NAMES[axis]} gyro bias (deg/h)")
     axes[0, 0].set_title("Attitude error per body axis (symmetric log scale)")
-    axes[0, 1].set_title("Gyro bias: estimate against the truth")
     axes[2, 0].set_xlabel(X_LABEL)
-    axes[2, 1].set_xlabel(X_LABEL)
-    axes[0, 0].legend(loc="upper right", fontsize="small", ncols=2)
-    axes[0, 1].legend(loc="upper right", fontsize="small")
+    if bias_estimates:
+        axes[0, 1].set_title("Gyro bias: estimate against the truth, from the start")
+        axes[2, 1].set_xlabel(X_LABEL)
+    legend_outside(figure, axes, note=coincidence_note(under, labels, _UNIT_SYMBOLS[unit]))
     return figure
+
+
+def _error_panel(ax, time_s, scaled: dict, envelopes: dict, axis: int, styles: dict,
+                 under: dict, labels: dict) -> None:
+    """One body axis's errors and each filter's ±3σ band (its edges drawn in
+    the filter's line style, so that overlapping bands stay legible)."""
+    styles = with_coincidences(styles, under)
+    for name, error in scaled.items():
+        style = styles[name]
+        ax.plot(time_s, error[:, axis], color=style["color"], linestyle=style["linestyle"],
+                linewidth=style.get("linewidth", 0.9), label=labels[name],
+                zorder=style.get("zorder", 2))
+        envelope = envelopes.get(name)
+        if envelope is None or name in under:
+            continue
+        envelope = envelope[:, axis]
+        ax.fill_between(time_s, -envelope, envelope, color=style["color"], alpha=0.10,
+                        linewidth=0)
+        ax.plot(time_s, envelope, color=style["color"], linestyle=style["linestyle"],
+                linewidth=1.6, alpha=0.9, label=f"{labels[name]} ±3σ")
+        ax.plot(time_s, -envelope, color=style["color"], linestyle=style["linestyle"],
+                linewidth=1.6, alpha=0.9)
+
+
+def _bias_panel(ax, time_s, truth, estimates: dict, styles: dict, under: dict,
+                labels: dict) -> None:
+    """One axis's bias estimates (±3σ) against the truth, the y range holding
+    every estimate over the whole run (its initial transient included)."""
+    ax.plot(time_s, truth, color="black", linestyle="--", linewidth=1.5, label="True bias")
+    values = [truth]
+    for name, (estimate, sigma) in estimates.items():
+        style = styles[name]
+        ax.plot(time_s, estimate, color=style["color"], linestyle=style["linestyle"],
+                linewidth=1.2, label=labels[name])
+        values.append(estimate)
+        if name not in under:
+            ax.fill_between(time_s, estimate - 3 * sigma, estimate + 3 * sigma,
+                            color=style["color"], alpha=0.12, linewidth=0)
+    values = np.hstack(values)
+    values = values[np.isfinite(values)]
+    if values.size:                  # (a diverged estimate is NaN from its step on)
+        low, high = float(values.min()), float(values.max())
+        margin = max(0.08 * (high - low), 0.05 * max(abs(low), abs(high)), 1e-6)
+        ax.set_ylim(low - margin, high + margin)
 
 
 def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict,
                        sample_sigmas_deg: dict, bound_sigma_deg: np.ndarray, sample_time_s,
-                       labels: dict) -> Figure:
+                       labels: dict, runs: dict | None = None, envelope_steps: int = 1,
+                       level: float = 0.95) -> Figure:
     """ANEES over time against its χ² band per estimator (top left), and the
     per-axis error of a sample run with each filter's ±3σ and the bound's ±3σ
     ("best achievable", dashed) on the other three panels.
@@ -208,47 +285,104 @@ def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict
     anees : {name: (S,) or None}; bands : {name: (low, high)}
     sample_errors_deg : {name: (N, 3)}; sample_sigmas_deg : {name: (N, 3) or None}
     bound_sigma_deg : (N, 3) the bound's 1σ per axis; sample_time_s : (N,)
+    runs : {name: runs}: the ANEES axis is scaled to the band of the
+        estimator with the most runs; one outside it is marked at the edge
+        with its time-averaged value, never hidden
+    envelope_steps : the bound's ±3σ is drawn through its peaks over this
+        many steps (one reading interval), not as a sawtooth
     """
     with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(14.0, 8.5), layout="constrained")
+        figure = Figure(figsize=(14.0, 9.0), layout="constrained")
         axes = figure.subplots(2, 2, squeeze=False).ravel()
-    colors = dict(zip(labels, sns.color_palette("deep", len(labels))))
-    ax = axes[0]
-    for name, series in anees.items():
-        if series is None:
-            continue
-        ax.plot(time_s, series, color=colors[name], linewidth=1.0, label=labels[name])
-        low, high = bands[name]
-        ax.axhspan(low, high, color=colors[name], alpha=0.12, linewidth=0)
-    ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", label="3 (consistent mean)")
-    ax.set_yscale("log")
-    ax.set_xlim(time_s[0], time_s[-1])
-    ax.set_xlabel(X_LABEL)
-    ax.set_ylabel("ANEES (3 degrees of freedom)")
-    ax.set_title("Average NEES over runs, with its 95 % χ² band")
-    ax.legend(loc="upper right", fontsize="small")
+    styles = estimator_styles(labels)
     steady = max(3 * float(np.median(bound_sigma_deg[len(bound_sigma_deg) // 2:])), 1e-12)
-    scale, unit = ((_ARCSEC_PER_DEG, "arcsec") if steady < ARCSEC_BELOW_DEG else (1.0, "deg"))
+    scale, unit = _angle_unit(steady)
+    scaled = {name: error * scale for name, error in sample_errors_deg.items()}
+    under = coinciding(scaled, COINCIDE_FRACTION * steady * scale)
+    _anees_panel(axes[0], time_s, anees, bands, with_coincidences(styles, under), labels,
+                 runs or {}, level)
+    envelopes = {name: None if sigma is None else upper_envelope(3 * sigma * scale,
+                                                                   envelope_steps)
+                 for name, sigma in sample_sigmas_deg.items()}
+    bound = upper_envelope(3 * bound_sigma_deg * scale, envelope_steps)
+    largest = finite_max([*scaled.values(), bound])
     for axis, ax in enumerate(axes[1:]):
-        for name, error in sample_errors_deg.items():
-            ax.plot(sample_time_s, error[:, axis] * scale, color=colors[name], linewidth=0.7,
-                    label=labels[name])
-            sigma = sample_sigmas_deg.get(name)
-            if sigma is not None:
-                ax.fill_between(sample_time_s, -3 * sigma[:, axis] * scale,
-                                3 * sigma[:, axis] * scale, color=colors[name], alpha=0.12,
-                                linewidth=0)
-        envelope = 3 * bound_sigma_deg[:, axis] * scale
-        ax.plot(sample_time_s, envelope, color="black", linestyle="--", linewidth=1.0,
-                label="best achievable ±3σ")
-        ax.plot(sample_time_s, -envelope, color="black", linestyle="--", linewidth=1.0)
-        ax.set_yscale("symlog", linthresh=steady * scale)
+        _error_panel(ax, sample_time_s, scaled, envelopes, axis, styles, under, labels)
+        ax.plot(sample_time_s, bound[:, axis], color="black", linestyle="--", linewidth=1.2,
+                label="best achievable ±3σ (the bound)")
+        ax.plot(sample_time_s, -bound[:, axis], color="black", linestyle="--", linewidth=1.2)
+        symlog_axis(ax, steady * scale, largest)
         ax.set_xlim(sample_time_s[0], sample_time_s[-1])
         ax.set_xlabel(X_LABEL)
         ax.set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
-    axes[1].set_title("One run's per-axis error, each filter's ±3σ (shaded)")
-    axes[1].legend(loc="upper right", fontsize="small", ncols=2)
+        ax.set_title(f"One run's {AXIS_NAMES[axis]} error, each filter's ±3σ", fontsize="medium")
+    legend_outside(figure, axes, note=coincidence_note(under, labels, _UNIT_SYMBOLS[unit]))
     return figure
+
+
+def _anees_panel(ax, time_s, anees: dict, bands: dict, styles: dict, labels: dict,
+                 runs: dict, level: float) -> None:
+    """The ANEES of each estimator over time, its band (in the legend); the
+    axis holds the band of the estimator with the most runs, and an
+    estimator whose ANEES lies outside is marked at the edge with its value."""
+    shown = [name for name, series in anees.items() if series is not None]
+    if not shown:
+        ax.text(0.5, 0.5, "no estimator reports a covariance", ha="center",
+                transform=ax.transAxes)
+        return
+    main = max(shown, key=lambda name: (runs.get(name, 0), -shown.index(name)))
+    low, high = bands[main]
+    bottom, top = low / 2.5, high * 2.5
+    for name in shown:
+        style = styles[name]
+        series = np.asarray(anees[name], dtype=float)
+        ax.plot(time_s, np.clip(series, bottom, top), color=style["color"],
+                linestyle=style["linestyle"], linewidth=style.get("linewidth", 1.0),
+                zorder=style.get("zorder", 2), label=f"{labels[name]} ANEES")
+        band = bands[name]
+        ax.axhspan(*band, color=style["color"], alpha=0.15, linewidth=0,
+                   label=f"{labels[name]}: {100 * level:.0f} % band "
+                   f"[{band[0]:.2f}, {band[1]:.2f}], {runs.get(name, '?')} runs")
+        average = float(np.nanmean(series))
+        if not bottom <= average <= top:
+            edge = top if average > top else bottom
+            ax.annotate(f"{labels[name]}: {average:.3g} {'↑' if average > top else '↓'}",
+                        xy=(time_s[-1], edge), xytext=(-6, -12 if average > top else 6),
+                        textcoords="offset points", ha="right", color=style["color"],
+                        fontsize="small")
+    ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", label="3 (a consistent mean)")
+    ax.set_yscale("log")
+    ax.set_ylim(bottom, top)
+    nice = [m * 10.0 ** e for e in range(-6, 7) for m in (1, 2, 3, 5)]
+    ax.yaxis.set_major_locator(FixedLocator([v for v in nice if bottom <= v <= top]))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
+    ax.set_xlim(time_s[0], time_s[-1])
+    ax.set_xlabel(X_LABEL)
+    ax.set_ylabel("ANEES (3 degrees of freedom)")
+    ax.set_title(f"Average NEES over runs, with each estimator's {100 * level:.0f} % χ² band")
+
+
+#: Bins of the replay's error range: a 285 Hz record drawn point by point is a solid block.
+REPLAY_BINS = 600
+
+
+def binned_range(time_s, values, bins: int):
+    """``(centres, min, max, median)`` of ``values`` over ``bins`` equal spans
+    of ``time_s`` (empty spans dropped; NaN ignored)."""
+    values = np.asarray(values, dtype=float)
+    edges = np.linspace(time_s[0], time_s[-1], bins + 1)
+    index = np.clip(np.searchsorted(edges, time_s, side="right") - 1, 0, bins - 1)
+    centres, low, high, median = [], [], [], []
+    for b in range(bins):
+        chunk = values[index == b]
+        chunk = chunk[np.isfinite(chunk)]
+        if chunk.size:
+            centres.append(0.5 * (edges[b] + edges[b + 1]))
+            low.append(chunk.min())
+            high.append(chunk.max())
+            median.append(np.median(chunk))
+    return tuple(np.array(x) for x in (centres, low, high, median))
 
 
 def replay_figure(result) -> Figure:
@@ -258,7 +392,6 @@ def replay_figure(result) -> Figure:
     bias estimates against the gyro's mean over the initial rest (right)."""
     run, time_s = result.run, result.time_s
     names = list(run.error_deg)
-    colors = dict(zip(names, sns.color_palette("deep", len(names))))
     with_bias = [name for name in names if run.traces[name].bias_radps is not None]
     with sns.axes_style("whitegrid"):
         figure = Figure(figsize=(14.0, 7.5), layout="constrained")
@@ -271,30 +404,44 @@ def replay_figure(result) -> Figure:
             first, last = np.flatnonzero(movement)[[0, -1]]
             ax.axvspan(time_s[first], time_s[last], color="0.85", alpha=0.5, linewidth=0,
                        label="Movement phase" if ax is error_ax else None)
-    floor = 1e-3   # degrees: the log axis's bottom (an error of 0 at the start)
+    styles = estimator_styles(names)
+    bottoms = []
     for name in names:
-        style = {"color": "black", "linewidth": 1.2, "zorder": 3} if name == "ekf" \
-            else {"color": colors[name], "linewidth": 1.0}
-        error_ax.plot(time_s, np.maximum(run.error_deg[name], floor), label=run.labels[name],
-                      alpha=0.85, **style)
+        style = styles[name]
+        centres, low, high, median = binned_range(time_s, run.error_deg[name], REPLAY_BINS)
+        error_ax.fill_between(centres, low, high, color=style["color"], alpha=0.25,
+                              linewidth=0, label=f"{run.labels[name]}: min–max")
+        error_ax.plot(centres, median, color=style["color"], linestyle=style["linestyle"],
+                      linewidth=1.3, label=f"{run.labels[name]}: median")
+        positive = run.error_deg[name][run.error_deg[name] > 0]
+        if positive.size:
+            bottoms.append(np.nanpercentile(positive, 1))
     error_ax.set_yscale("log")
-    error_ax.set_ylim(bottom=floor)
+    # The log axis bounded by the data: from its 1st percentile (an error of
+    # 0 at a reset has no place on it) to its largest value.
+    top = finite_max(run.error_deg.values()) or 1.0
+    error_ax.set_ylim(0.5 * min(bottoms) if bottoms else 1e-3, 2 * top)
     error_ax.set_xlim(time_s[0], time_s[-1])
-    error_ax.set_title(f"Attitude error against the optical reference: {result.recording.name}")
+    bin_s = (time_s[-1] - time_s[0]) / REPLAY_BINS
+    error_ax.set_title(f"Attitude error against the optical reference: {result.recording.name}"
+                       f"\n(median and range per {bin_s:.2g} s of "
+                       f"{1 / np.median(np.diff(time_s)):.0f} Hz samples)", fontsize="medium")
     error_ax.set_xlabel(X_LABEL)
     error_ax.set_ylabel("Error (degrees, log scale)")
-    error_ax.legend(loc="upper left", fontsize="small")
     rest = np.degrees(result.rest_bias_radps)
     for axis, ax in enumerate(bias_axes):
         ax.axhline(rest[axis], color="black", linestyle="--", linewidth=1.5,
                    label="Gyro mean over the initial rest")
         for name in with_bias:
             trace = run.traces[name]
-            estimate = np.degrees(trace.bias_radps[:, axis])
-            sigma = np.degrees(np.sqrt(trace.bias_covariance[:, axis, axis]))
-            ax.plot(time_s, estimate, color=colors[name], linewidth=1.2, label=run.labels[name])
-            ax.fill_between(time_s, estimate - 3 * sigma, estimate + 3 * sigma,
-                            color=colors[name], alpha=0.15, linewidth=0)
+            every = max(1, len(time_s) // (4 * REPLAY_BINS))     # a bias moves slowly
+            estimate = np.degrees(trace.bias_radps[::every, axis])
+            sigma = np.degrees(np.sqrt(trace.bias_covariance[::every, axis, axis]))
+            ax.plot(time_s[::every], estimate, color=styles[name]["color"],
+                    linestyle=styles[name]["linestyle"], linewidth=1.2,
+                    label=f"{run.labels[name]} bias")
+            ax.fill_between(time_s[::every], estimate - 3 * sigma, estimate + 3 * sigma,
+                            color=styles[name]["color"], alpha=0.15, linewidth=0)
         # Show the rest mean and where the estimates spend 98 % of the time.
         values = [rest[axis]] + [np.degrees(run.traces[n].bias_radps[:, axis]) for n in with_bias]
         low, high = np.percentile(np.hstack(values), [1, 99])
@@ -303,8 +450,8 @@ def replay_figure(result) -> Figure:
         ax.set_ylim(low - margin, high + margin)
         ax.set_ylabel(f"{AXIS_NAMES[axis]} bias (deg/s)")
     bias_axes[0].set_title("Gyro bias estimates (±3σ) against the rest-phase mean")
-    bias_axes[0].legend(loc="upper right", fontsize="small")
     bias_axes[-1].set_xlabel(X_LABEL)
+    legend_outside(figure, [error_ax, *bias_axes], columns=5, where="upper center")
     if result.attribution:
         figure.supxlabel(textwrap.fill(result.attribution, 200), fontsize="x-small",
                          color="0.3")

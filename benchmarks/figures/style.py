@@ -1,0 +1,133 @@
+"""What every figure shares so that a reader can read it: one style per
+estimator (colour and line style, so that curves that coincide stay
+distinguishable and are named as coinciding), symmetric-log axes whose tick
+labels do not collide at zero, legends outside the data, and envelopes
+drawn through their upper values.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import seaborn as sns
+from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+from scipy.ndimage import maximum_filter1d
+
+#: Line styles in turn, so that estimators drawn on top of each other differ
+#: in more than colour.
+LINE_STYLES = ("-", "--", "-.", ":")
+#: Two curves whose largest difference is below this fraction of the axis's
+#: linear range are drawn as one, the later named as "under" the earlier.
+COINCIDE_FRACTION = 1e-3
+
+
+def estimator_styles(names) -> dict:
+    """``{name: {"color", "linestyle"}}``: seaborn's "deep" colours and the
+    :data:`LINE_STYLES` in turn."""
+    names = list(names)
+    colors = sns.color_palette("deep", max(len(names), 1))
+    return {name: {"color": colors[i], "linestyle": LINE_STYLES[i % len(LINE_STYLES)]}
+            for i, name in enumerate(names)}
+
+
+def coinciding(curves: dict, tolerance: float) -> dict:
+    """``{later: (earlier, largest difference)}`` for curves (arrays of one
+    shape) that an earlier one matches within ``tolerance`` everywhere (NaN
+    where either is NaN is ignored)."""
+    under = {}
+    names = list(curves)
+    for i, later in enumerate(names):
+        for earlier in names[:i]:
+            if earlier in under or np.shape(curves[earlier]) != np.shape(curves[later]):
+                continue
+            gap = np.abs(np.asarray(curves[later], dtype=float) -
+                         np.asarray(curves[earlier], dtype=float))
+            gap = gap[np.isfinite(gap)]
+            difference = float(gap.max()) if gap.size else math.nan
+            if np.isfinite(difference) and difference <= tolerance:
+                under[later] = (earlier, float(difference))
+                break
+    return under
+
+
+#: How a curve drawn over one it coincides with looks: thin, dashed, on top,
+#: so that the one beneath (drawn solid) shows between its dashes.
+OVER_STYLE = {"linestyle": (0, (3, 3)), "linewidth": 0.9, "zorder": 3}
+
+
+def with_coincidences(styles: dict, under: dict) -> dict:
+    """``styles`` with each curve that another coincides with drawn solid,
+    and each coinciding one in :data:`OVER_STYLE`."""
+    styles = {name: dict(style) for name, style in styles.items()}
+    for later, (earlier, _) in under.items():
+        styles[earlier]["linestyle"] = "-"
+        styles[later].update(OVER_STYLE)
+    return styles
+
+
+def coincidence_note(under: dict, labels: dict, unit: str) -> str:
+    """One line naming the curves drawn under others, and by how much they differ."""
+    return "; ".join(f"{labels[later]} under {labels[earlier]}: differ by < "
+                     f"{max(difference, 1e-300):.1g} {unit}"
+                     for later, (earlier, difference) in under.items())
+
+
+def symlog_axis(ax, linthresh: float, largest: float) -> None:
+    """A symmetric-log y axis, linear within ``±linthresh`` (rounded down to a
+    power of ten), with ticks at 0 and at powers of ten out to ``largest``:
+    every decade, or every other when there are more than four, so that no
+    two labels crowd (in particular none beside the 0)."""
+    threshold = 10.0 ** math.floor(math.log10(max(linthresh, 1e-300)))
+    ax.set_yscale("symlog", linthresh=threshold, linscale=1.0)
+    top = max(largest, threshold * 10) if math.isfinite(largest) else threshold * 10
+    decades = list(range(int(math.log10(threshold)), int(math.ceil(math.log10(top))) + 1))
+    stride = 1 if len(decades) <= 4 else 2
+    kept = decades[::stride]
+    ticks = [0.0] + [sign * 10.0 ** d for d in kept for sign in (1, -1)]
+    ax.yaxis.set_major_locator(FixedLocator(sorted(ticks)))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(_power_label))
+    ax.set_ylim(-top * 1.2, top * 1.2)
+
+
+def finite_max(arrays) -> float:
+    """The largest finite absolute value in ``arrays`` (0 if none: a
+    diverged run's curve is all NaN)."""
+    values = [np.abs(np.asarray(a, dtype=float)) for a in arrays]
+    finite = [v[np.isfinite(v)] for v in values]
+    return max((float(v.max()) for v in finite if v.size), default=0.0)
+
+
+def _power_label(value: float, _position=None) -> str:
+    if value == 0:
+        return "0"
+    exponent = round(math.log10(abs(value)))
+    sign = "−" if value < 0 else ""
+    if -2 <= exponent <= 3:
+        return f"{sign}{10.0 ** exponent:g}"
+    return f"{sign}$10^{{{exponent}}}$"
+
+
+def legend_outside(figure, axes, columns: int = 4, note: str = "",
+                   where: str = "lower center") -> None:
+    """One legend for ``axes`` (their labelled artists, each label once)
+    outside the panels (below them, or ``where``), off the data; ``note``
+    as its title."""
+    handles, labels = [], []
+    for ax in np.ravel(axes):
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            if label not in labels and not label.startswith("_"):
+                handles.append(handle)
+                labels.append(label)
+    if handles:
+        figure.legend(handles, labels, loc=f"outside {where}", ncols=columns,
+                      fontsize="small", title=note or None, title_fontsize="small")
+
+
+def upper_envelope(values: np.ndarray, window: int) -> np.ndarray:
+    """The running maximum of ``values`` ``(N,)`` or ``(N, k)`` over ``window``
+    steps centred on each: a covariance that grows between readings and drops
+    at each is drawn through its peaks, not as a sawtooth."""
+    window = max(int(window), 1)
+    return maximum_filter1d(np.asarray(values, dtype=float), size=window, axis=0,
+                            mode="nearest")
