@@ -299,9 +299,10 @@ def test_a_constant_bias_without_a_walk_reads_no_normals_past_its_row():
     buffer = np.full(6, np.nan)
     buffer[:3] = [0.1, -0.2, 0.3]
     normals = buffer[:3]                   # the row; NaN right after it
-    w, bias, bias_last = np.empty(3), np.array([1e-4, 0.0, -2e-4]), np.zeros(3)
+    w, bias, bias_last = np.empty(3), np.array([1e-4, 0.0, -2e-4, 0, 0, 0]), np.zeros(3)
+    no_walk = np.array([0.0, 1.0, 0.0, 0.0, 0.0])      # no walk, no Gauss–Markov part
     _flight_gyro(w, np.array([0.01, 0.02, 0.03]), 1e-3, normals, np.zeros((3, 3)), False, True,
-                 0.0, bias, bias_last, False)
-    np.testing.assert_array_equal(bias, [1e-4, 0.0, -2e-4])
+                 no_walk, bias, bias_last, False)
+    np.testing.assert_array_equal(bias, [1e-4, 0.0, -2e-4, 0, 0, 0])
     np.testing.assert_allclose(w, [0.01 + 1e-4 + 1e-4, 0.02 - 2e-4, 0.03 - 2e-4 + 3e-4],
                                rtol=1e-12)

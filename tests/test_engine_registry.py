@@ -49,7 +49,7 @@ def _advance(block, sensors, state, record, row):
             # The toy reads its gyro as every kernel does, and ignores it.
             gyro_reading(w, run, j, k0 + j, block.last_step, omega, std, normals,
                          block.gyro_scale, block.has_scale, block.has_bias,
-                         block.bias_step_std, sensors.bias, sensors.bias_last)
+                         block.bias_model, sensors.bias, sensors.bias_last)
             record_error(run, k0 + j, q_true[j], q_all[run], stats, hist, first_bits, traces,
                          keep, every, samples, diverged, bits, bits_int)
 

@@ -130,17 +130,27 @@ def test_filters_take_the_gauss_markov_part_as_its_driving_noise():
     assert equivalent_bias_random_walk(3e-9, 0.0, 1.0) == 3e-9
 
 
-def test_the_engine_hands_a_gauss_markov_scenario_to_the_per_run_path(capsys, monkeypatch):
-    monkeypatch.setattr("benchmarks.engine.runner._SAID", set())
-    scenario = TUMBLE.replace(tstop=4.0, gyro_bias_instability_radps=1e-5,
-                              gyro_bias_correlation_time_s=200.0)
-    assert "Gauss-Markov" in engine_limitation(scenario)
-    with pytest.raises(ValueError, match="not modelled by the engine"):
-        run_batch(scenario, make_runs(scenario, [0]), ["mekf"])
-    batch = run_many(scenario, make_runs(scenario, [0, 1]), ["mekf"], keep_traces=True)
-    assert "per-run path" in capsys.readouterr().err
-    reference = simulate(scenario, ["mekf"], seed=1)
-    assert np.array_equal(batch.estimates["mekf"][1], reference.estimates["mekf"])
+@pytest.mark.parametrize("walk", [4e-8, 0.0])
+def test_the_engine_draws_the_gauss_markov_bias_as_the_per_run_path_does(walk):
+    # Two paths, one truth: with and without a random walk beside it (the
+    # Gauss–Markov part's normals sit after the walk's, or in its place).
+    scenario = TUMBLE.replace(tstop=20.0, gyro_bias_random_walk=walk,
+                              gyro_bias_instability_radps=1e-5,
+                              gyro_bias_correlation_time_s=50.0)
+    assert engine_limitation(scenario) is None
+    names = ("dead-reckoning", "ekf", "mekf", "usque")
+    runs = make_runs(scenario, [0, 6])
+    batch = run_batch(scenario, runs, names, keep_traces=True, block_steps=9)
+    for i, seed in enumerate(runs.seeds):
+        reference = simulate(scenario, names, seed=int(seed))
+        for name in names:
+            difference = np.abs(batch.estimates[name][i] - reference.estimates[name]).max()
+            assert difference < 1e-9, (walk, name, difference)
+        assert np.allclose(batch.final["gyro_bias_radps"][i],
+                           reference.sensors.gyro_bias_radps[-1], rtol=1e-12, atol=0)
+    # and through the runner, on the engine: no note that it is not.
+    assert np.array_equal(run_many(scenario, runs, ["mekf"], keep_traces=True).estimates["mekf"],
+                          batch.estimates["mekf"])
 
 
 def test_datasheet_units_convert_as_their_doctests_say():

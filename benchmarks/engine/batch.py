@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.engine.kernels import KERNELS, kernel
+from benchmarks.engine.kernels.sensors import bias_model
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
@@ -107,8 +108,6 @@ def engine_limitation(scenario: Scenario, runs: RunTable | None = None) -> str |
     if given): a sensor model its kernels do not draw, or None. Those
     scenarios run on the per-run path (:func:`benchmarks.engine.runner.run_many`
     falls back, saying so)."""
-    if scenario.gyro_bias_instability_radps > 0:
-        return "a gyro bias with a Gauss-Markov part ([gyro] bias_instability)"
     intervals = ([scenario.time_between_measurements] if runs is None
                  else np.unique(runs.time_between_measurements))
     if not all(on_gyro_grid(float(t), scenario.dt) for t in intervals):
@@ -292,7 +291,7 @@ class _Sensors:
 
     settings: dict
     tracker: object              # the scenario's star tracker (its outages)
-    initial_bias: np.ndarray     # (B, 3) the gyro's true bias at the start
+    initial_bias: np.ndarray     # (B, 6) the gyro's true bias at the start: β_0, and b_0
     generators: list
     block_steps: int
     threads: int
@@ -301,7 +300,8 @@ class _Sensors:
         """A fresh :class:`~benchmarks.engine.kernels.sensors.SensorState`
         (each kernel advances its own copy of the true bias)."""
         from benchmarks.engine.kernels.sensors import SensorState
-        return SensorState(bias=self.initial_bias.copy(), bias_last=self.initial_bias.copy())
+        return SensorState(bias=self.initial_bias.copy(),
+                           bias_last=self.initial_bias[:, :3] + self.initial_bias[:, 3:])
 
 
 def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int) -> _Sensors:
@@ -317,11 +317,19 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
     block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
     dropout = float(tracker.dropout_probability)
+    generators = [sensor_generators(int(seed)) for seed in runs.seeds]
+    # β_0 and, with a Gauss–Markov part, its stationary start b_0 = σ_b N,
+    # drawn from each run's gyro stream before its first step, as sensors.Gyro does.
+    initial_bias = np.zeros((n_runs, 6))
+    initial_bias[:, :3] = gyro.initial_bias_radps
+    if gyro.bias_instability_radps > 0:
+        for r, (gyro_rng, _, _) in enumerate(generators):
+            initial_bias[r, 3:] = gyro.bias_instability_radps * gyro_rng.standard_normal(3)
     settings = dict(
         gyro_std=np.array([gyro.reading_std(p, dt, gyro.bias_random_walk)
                            for p in runs.gyro_noise]),
         gyro_normals=np.empty((n_runs, block_steps, gyro.normals_per_step)),
-        bias_step_std=gyro.bias_step_std,
+        bias_model=bias_model(gyro),
         gyro_scale=(np.zeros((3, 3)) if gyro.scale_misalignment is None
                     else np.ascontiguousarray(gyro.scale_misalignment)),
         has_scale=gyro.scale_misalignment is not None, has_bias=gyro.has_bias_model,
@@ -334,8 +342,7 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
         canonical=rotation and tracker.sign == "canonical", dropout_probability=dropout,
         dropout_uniforms=np.empty((n_runs, readings if dropout > 0 else 0)))
     return _Sensors(settings=settings, tracker=tracker,
-                    initial_bias=np.tile(gyro.initial_bias_radps, (n_runs, 1)),
-                    generators=[sensor_generators(int(seed)) for seed in runs.seeds],
+                    initial_bias=initial_bias, generators=generators,
                     block_steps=block_steps, threads=threads)
 
 

@@ -56,10 +56,11 @@ class Block(NamedTuple):
     q_true: np.ndarray           # (T, 4)
     omega_true: np.ndarray       # (T, 3) rad/s
     # The gyro (sensors.Gyro): per-sample σ, this block's normals (white
-    # noise, then the bias walk's), the bias walk's step σ, K = scale and misalignment.
+    # noise, then the bias walk's and the Gauss–Markov part's), the bias model, K = scale
+    # and misalignment.
     gyro_std: np.ndarray         # (B,) rad/s
     gyro_normals: np.ndarray     # (B, T, 3 or 6)
-    bias_step_std: float
+    bias_model: np.ndarray       # (5,) the bias walk's and Gauss–Markov part's (sensors.bias_model)
     gyro_scale: np.ndarray       # (3, 3)
     has_scale: bool
     has_bias: bool

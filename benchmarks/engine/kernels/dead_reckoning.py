@@ -32,7 +32,7 @@ def advance(block, sensors, state, record, row):
     """Every run through ``block``: the gyro integrated (see :mod:`benchmarks.engine.kernels`)."""
     k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
         block.q_true
-    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_step_std, bias,
+    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
@@ -48,7 +48,7 @@ def advance(block, sensors, state, record, row):
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
-                         has_bias, bias_step_std, bias, bias_last)
+                         has_bias, bias_model, bias, bias_last)
             if not step_average:
                 propagate(q, w, half_dt, q, F, False)
             elif k > 0:

@@ -32,14 +32,27 @@ class SensorState(NamedTuple):
     """What the sensors carry from step to step, one row per run: the gyro's
     true bias (each kernel advances its own copy, the same numbers)."""
 
-    bias: np.ndarray             # (B, 3) the true bias β_k
+    bias: np.ndarray             # (B, 6) β_k: its random-walk part (with β_0), its Gauss–Markov part
     bias_last: np.ndarray        # (B, 3) β at the run's last step
 
 
+#: ``bias_model``'s entries (an array, so that the kernels pass it on as one value).
+WALK_STD, MARKOV_PHI, MARKOV_STD, HAS_WALK, HAS_MARKOV = range(5)
+
+
+def bias_model(gyro) -> np.ndarray:
+    """The gyro's bias model as the kernels read it: the walk's step σ, the
+    Gauss–Markov part's φ and step σ, and whether each is there."""
+    return np.array([gyro.bias_step_std, gyro.markov_phi, gyro.markov_step_std,
+                     float(gyro.bias_random_walk > 0), float(gyro.bias_instability_radps > 0)])
+
+
 @njit(cache=True, error_model="numpy")
-def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias_step_std,
+def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, model,
                  bias, bias_last, last):
-    """w = ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias β (sensors.gyro)."""
+    """w = ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias β:
+    its random walk and its Gauss–Markov part, b ← φ b + σ_b √(1 − φ²) N_b
+    (sensors.gyro; the normals are [N_v, N_u if a walk, N_b if a Gauss–Markov part])."""
     for i in range(3):
         w[i] = omega[i]
     if has_scale:
@@ -47,16 +60,21 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, bias
             w[i] = w[i] + (omega[0] * scale_matrix[i, 0] + omega[1] * scale_matrix[i, 1]
                            + omega[2] * scale_matrix[i, 2])
     if has_bias:
-        if last:
-            for i in range(3):
-                bias_last[i] = bias[i]
-        # Without a bias walk (3 normals a step) the bias stays; reading
-        # normals[3 + i] there would run past the row (and the buffer's end).
-        walk = normals.shape[0] > 3
+        # Without a walk the walk's part stays; reading its normals there
+        # would run past the row (and the buffer's end).
+        walk, markov = model[HAS_WALK] > 0.0, model[HAS_MARKOV] > 0.0
+        markov_column = 6 if walk else 3
         for i in range(3):
-            following = bias[i] + bias_step_std * normals[3 + i] if walk else bias[i]
-            w[i] = w[i] + 0.5 * (bias[i] + following)
+            now = bias[i] + bias[3 + i]
+            if last:
+                bias_last[i] = now
+            following = bias[i] + model[WALK_STD] * normals[3 + i] if walk else bias[i]
+            markov_next = (model[MARKOV_PHI] * bias[3 + i]
+                           + model[MARKOV_STD] * normals[markov_column + i]
+                           if markov else bias[3 + i])
+            w[i] = w[i] + 0.5 * (now + (following + markov_next))
             bias[i] = following
+            bias[3 + i] = markov_next
     for i in range(3):
         w[i] = w[i] + std * normals[i]
 
@@ -67,7 +85,7 @@ def gyro_arrays(block, sensors):
     """What :func:`gyro_reading` reads, taken out of the block's tuples (before
     a kernel's parallel loop: see the module's docstring)."""
     return (block.omega_true, block.gyro_std, block.gyro_normals, block.gyro_scale,
-            block.has_scale, block.has_bias, block.bias_step_std, sensors.bias,
+            block.has_scale, block.has_bias, block.bias_model, sensors.bias,
             sensors.bias_last)
 
 
@@ -88,7 +106,7 @@ def first_countdown(k0, m):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def gyro_reading(w, run, t, k, last_step, omega, std, normals, scale, has_scale, has_bias,
-                 bias_step_std, bias, bias_last):
+                 bias_model, bias, bias_last):
     """The gyro's reading at step ``k`` (index ``t`` of its block) into ``w``:
     ω (+ K ω) (+ ½(β_k + β_{k+1})) + σ N_v, advancing the true bias."""
     if not (has_scale or has_bias):
@@ -96,7 +114,7 @@ def gyro_reading(w, run, t, k, last_step, omega, std, normals, scale, has_scale,
             w[i] = omega[t, i] + std[run] * normals[run, t, i]
     else:
         _flight_gyro(w, omega[t], std[run], normals[run, t], scale, has_scale, has_bias,
-                     bias_step_std, bias[run], bias_last[run], k == last_step)
+                     bias_model, bias[run], bias_last[run], k == last_step)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -308,7 +308,7 @@ def advance(block, sensors, state, record, row):
     then propagate (see :mod:`benchmarks.engine.kernels`)."""
     k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
         block.q_true
-    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_step_std, bias,
+    (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
@@ -332,7 +332,7 @@ def advance(block, sensors, state, record, row):
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
-                         has_bias, bias_step_std, bias, bias_last)
+                         has_bias, bias_model, bias, bias_last)
             available, countdown, reading = star_step(
                 z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
                 steps_between, star_normals, sigma_rad, mount, canonical, outage,
