@@ -146,11 +146,14 @@ def help_defaults(argv) -> Scenario:
         return Scenario()
     peek = argparse.ArgumentParser(add_help=False)
     peek.add_argument("--scenario", type=Path, action="append")
-    files = peek.parse_known_args(argv)[0].scenario
-    if not files:
+    peek.add_argument("--allow-import", action="append", default=[])
+    peek.add_argument("--estimators", type=lambda text: text.split(","))
+    peek.add_argument("--estimator")
+    known = peek.parse_known_args(argv)[0]
+    if not known.scenario:
         return Scenario()
     try:
-        return Scenario.from_toml(files, allow_imports=[a for a in argv if ":" in a])
+        return Scenario.from_toml(known.scenario, allow_imports=allowed_imports(known))
     except InvalidParameterError:
         return Scenario()         # the run itself will say what is wrong
 

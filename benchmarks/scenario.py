@@ -284,6 +284,7 @@ class Scenario:
         """The σ the sensors square into variances: refused here while the
         square would overflow (the sensors check the rest)."""
         standard_deviation("gyro_bias_random_walk", self.gyro_bias_random_walk)
+        standard_deviation("gyro_bias_instability_radps", self.gyro_bias_instability_radps)
         if np.ndim(self.star_tracker_sigma_arcsec) == 1:     # one σ per sensor axis
             axis_standard_deviations("star_tracker_sigma_arcsec", self.star_tracker_sigma_arcsec)
 

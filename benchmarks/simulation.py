@@ -176,8 +176,19 @@ def _truth_at_readings(scenario: Scenario, star_tracker) -> np.ndarray | None:
         return None
     steps, offsets = star_tracker.schedule(scenario.n_steps)
     times = steps * scenario.dt + offsets
-    return simulate_torque_free(scenario.inertia_tensor_kg_m2, scenario.initial_attitude_quat,
-                                scenario.initial_rate_radps, times).q_true
+    return _reading_truth_cached(scenario.inertia_tensor_kg_m2.tobytes(),
+                                 scenario.initial_attitude_quat.tobytes(),
+                                 scenario.initial_rate_radps.tobytes(), times.tobytes())
+
+
+@lru_cache(maxsize=8)
+def _reading_truth_cached(inertia, q0, omega0, times) -> np.ndarray:
+    """The truth at reading times (cached as the grid's truth is: it does not
+    depend on the seed, and every run of a campaign needs it)."""
+    q_true = simulate_torque_free(np.frombuffer(inertia).reshape(3, 3), np.frombuffer(q0),
+                                  np.frombuffer(omega0), np.frombuffer(times)).q_true
+    q_true.setflags(write=False)
+    return q_true
 
 
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:

@@ -249,7 +249,10 @@ class AttitudeEstimator:
 
     def _checked_offset(self, offset_s) -> float:
         """A reading's offset after its step's time: in ``[0, dt)``."""
-        offset = float(offset_s)
+        try:
+            offset = float(offset_s)
+        except (TypeError, ValueError):
+            offset = math.nan
         if not 0.0 <= offset < self.dt:
             raise InvalidMeasurementError(f"offset_s at step {self.step_index - 1}", offset_s,
                                           f"must be in [0, dt = {self.dt:g}) seconds")
@@ -435,6 +438,14 @@ class KalmanEstimator(AttitudeEstimator):
 
     #: The filterpy filter: inspect ``x_prior``, ``P_post``, ``y``, ``S``, ``K`` there.
     filter: object
+
+    def __init_subclass__(cls, **kwargs):
+        """A subclass applies readings at their own times only if its
+        ``propagate`` takes the part of a step (``dt``); one written to
+        ``propagate(omega)`` applies them at their steps (and is told so)."""
+        super().__init_subclass__(**kwargs)
+        if "applies_reading_times" not in cls.__dict__:
+            cls.applies_reading_times = "dt" in inspect.signature(cls.propagate).parameters
     output: str
     _output: tuple
 
@@ -488,6 +499,8 @@ class KalmanEstimator(AttitudeEstimator):
         with the step's rate, updates, and propagates the rest of the step,
         ``Δt − τ`` (the continuous–discrete filter of M&C 2014, §6.2: each
         measurement is processed at its own time)."""
+        if not self.applies_reading_times:
+            return self._step(omega_meas_radps, star_tracker_quat)
         estimate = self._estimate_at_step(None)
         self.propagate(omega_meas_radps, offset_s)
         self.correct(star_tracker_quat)
@@ -507,6 +520,18 @@ class AttitudeAndBiasEstimator(KalmanEstimator):
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
                          "gyro_bias_random_walk": "gyro_filter_bias_random_walk",
                          "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
+
+    @classmethod
+    def settings_from_scenario(cls, scenario) -> dict:
+        """The scenario's settings; with a Gauss–Markov bias of σ_b, a bias
+        prior of at least σ_b (``√(σ₀² + σ_b²)`` with σ₀ the default): the
+        true bias starts as a draw of that spread."""
+        settings = super().settings_from_scenario(scenario)
+        sigma_b = getattr(scenario, "gyro_bias_instability_radps", 0.0)
+        if sigma_b > 0:
+            default = inspect.signature(cls.__init__).parameters["initial_bias_sigma_radps"]
+            settings["initial_bias_sigma_radps"] = math.hypot(default.default, sigma_b)
+        return settings
 
     def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,
                    initial_bias_radps, initial_attitude_sigma_rad, initial_bias_sigma_radps,

@@ -58,6 +58,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import IDENTITY, kinematics_matrix
 from dynamics.validation import (
+    InvalidParameterError,
     boolean,
     covariance_matrix,
     finite_number,
@@ -152,16 +153,16 @@ class QuaternionEKF(KalmanEstimator):
         On the workshop's sensors (``scenario.is_workshop_sensors``), the
         exercise's: :math:`Q = e^{-8.7} I_4`, :math:`R = I_4`,
         :math:`P_0 = 10^{-12} I_4`. Otherwise, from the sensors, in quaternion
-        units (:math:`\delta q pprox 	frac12 \Xi(q)\,\delta	heta`, so an
+        units (:math:`\delta q \approx \tfrac12 \Xi(q)\,\delta\theta`, so an
         angle variance :math:`s` per axis is :math:`s/4` per component):
 
-        * ``measurement_covariance`` :math:`R = 	frac{1}{12}\operatorname{tr}(R_	heta)\, I_4`,
-          the tracker's body-frame covariance :math:`R_	heta` averaged over
+        * ``measurement_covariance`` :math:`R = \tfrac{1}{12}\operatorname{tr}(R_\theta)\, I_4`,
+          the tracker's body-frame covariance :math:`R_\theta` averaged over
           the three axes. A constant 4x4 ``R`` cannot follow an anisotropic
           error fixed in the body (its quaternion image turns with the
-          attitude); the MEKF, whose ``R`` is :math:`R_	heta` itself, can.
-        * ``pc_exponent`` :math:`= \lnigl(	frac14(\sigma_v^2\Delta t +
-          \sigma_u^2\Delta t^3/3)igr)`: the angle the gyro's noise and bias
+          attitude); the MEKF, whose ``R`` is :math:`R_\theta` itself, can.
+        * ``pc_exponent`` :math:`= \ln\bigl(\tfrac14(\sigma_v^2\Delta t +
+          \sigma_u^2\Delta t^3/3)\bigr)`: the angle the gyro's noise and bias
           walk add in one step (M&C 2014, eq. 6.93's attitude block). This
           filter has no bias state: a constant bias is not in its model.
         * ``initial_covariance`` :math:`= (0.1/2)^2`, the MEKF's default prior.
@@ -172,6 +173,10 @@ class QuaternionEKF(KalmanEstimator):
         R_theta = scenario.star_tracker_attitude_covariance_rad2
         dt, su = scenario.dt, scenario.gyro_filter_bias_random_walk
         per_step = (scenario.gyro_noise * dt + su * su * dt ** 3 / 3.0) / 4.0
+        if not math.isfinite(per_step):
+            raise InvalidParameterError(
+                "gyro_bias_random_walk", su, "(the filters' equivalent σ_u) makes the "
+                "angle noise of one step overflow; the EKF's Q cannot be derived from it")
         per_component = max(np.trace(R_theta) / 12.0, cls.MIN_DERIVED_VARIANCE)
         return {"pc_exponent": math.log(max(per_step, cls.MIN_DERIVED_VARIANCE)),
                 "measurement_covariance": per_component * np.eye(4),

@@ -171,6 +171,12 @@ class Gyro:
             "gyro_bias_correlation_time_s", bias_correlation_time_s, strictly_positive=True)
         self.std_radps = self.reading_std(self.noise_power, self.dt, self.bias_random_walk)
         self.bias_step_std = self.bias_random_walk * math.sqrt(self.dt)
+        if not math.isfinite(2.0 * self.bias_instability_radps ** 2
+                             / self.bias_correlation_time_s):
+            raise InvalidParameterError(
+                "gyro_bias_correlation_time_s", bias_correlation_time_s,
+                f"makes the Gauss-Markov bias's driving noise 2 σ_b²/τ overflow with σ_b = "
+                f"{self.bias_instability_radps:g} rad/s; give a longer correlation time")
         #: The Gauss–Markov part's step: b ← φ b + σ_b √(1 - φ²) N.
         self.markov_phi = math.exp(-self.dt / self.bias_correlation_time_s)
         self.markov_step_std = self.bias_instability_radps * math.sqrt(
@@ -211,9 +217,10 @@ class Gyro:
                           ) -> tuple[np.ndarray, np.ndarray]:
         """Readings ``(N, 3)`` and the true bias ``β_k`` ``(N, 3)``, both rad/s.
 
-        Draws ``N × normals_per_step`` standard normals from ``rng`` in row
-        order, so the same generator state gives the same noise whatever else
-        is simulated.
+        Draws (with a Gauss–Markov part, first ``b_0``'s 3 and then)
+        ``N × normals_per_step`` standard normals from ``rng`` in row order,
+        so the same generator state gives the same noise whatever else is
+        simulated.
         """
         omega_true = np.asarray(omega_true_radps, dtype=float)
         if not self.has_bias_model:

@@ -224,3 +224,61 @@ def test_show_config_says_where_each_setting_came_from(tmp_path, capsys):
     for name in ESTIMATORS:
         assert f"[{name}]" in printed
     assert MultiplicativeEKF.name in printed
+
+
+def test_runs_that_vary_the_sensors_derive_their_own_ekf_settings_on_both_paths():
+    # Off the workshop's sensors the EKF's Q follows each run's gyro noise and
+    # its R each run's tracker noise, on the engine as on the per-run path.
+    from benchmarks.engine import make_runs, run_batch
+    scenario = Scenario(tstop=3.0, gyro_bias_random_walk=1e-8)       # not the workshop's
+    assert "pc_exponent" in scenario.derived_fields
+    runs = make_runs(scenario, [0, 1], gyro_noise=[1e-5, 1e-3], star_tracker_noise=[1e-6, 1e-4])
+    assert runs.pc_exponent[1] == scenario.replace(gyro_noise=1e-3).pc_exponent
+    assert runs.pc_exponent[0] != runs.pc_exponent[1]
+    batch = run_batch(scenario, runs, ["ekf"], keep_traces=True)
+    for i in range(2):
+        case = scenario.replace(gyro_noise=float(runs.gyro_noise[i]),
+                                star_tracker_noise=float(runs.star_tracker_noise[i]))
+        reference = simulate(case, ["ekf"], seed=i)
+        assert np.abs(batch.estimates["ekf"][i] - reference.estimates["ekf"]).max() < 1e-9
+    # The workshop's own keep the exercise's Q whatever the noise.
+    assert make_runs(Scenario(), [0, 1], gyro_noise=[1e-5, 1e-3]).pc_exponent.tolist() == \
+        [-8.7, -8.7]
+
+
+def test_the_consistency_samples_see_every_phase_of_the_reading_cycle():
+    from benchmarks.experiments.consistency import error_sample_step
+    workshop = Scenario()                                   # readings every 20 steps
+    assert error_sample_step(5, workshop) == 7
+    assert error_sample_step(3, workshop.replace(time_between_measurements=0.4)) == 3
+    # (A multiple of the period would keep one phase: the workshop EKF's prior
+    # errors just before each reading, its largest.)
+
+
+def test_a_gauss_markov_bias_that_overflows_is_refused_by_name(tmp_path, capsys):
+    for body, name in (("bias_instability_radps = 1e160", "gyro_bias_instability_radps"),
+                       ("bias_instability_radps = 1e100\nbias_correlation_time_s = 1e-300",
+                        "gyro_bias_correlation_time_s")):
+        path = tmp_path / "gm.toml"
+        path.write_text(f"[gyro]\n{body}\n")
+        out = tmp_path / "out"
+        assert main(["compare", "--scenario", str(path), "--out", str(out)]) == 2
+        error = capsys.readouterr().err.strip()
+        assert error.startswith(f"attitude-bench: error: {name} = ") and "\n" not in error
+        assert not out.exists()
+    # And a filter's bias prior covers the Gauss–Markov part's spread.
+    scenario = Scenario(gyro_bias_instability_radps=2e-4)
+    prior = MultiplicativeEKF.from_scenario(scenario).initial_covariance
+    assert prior[3, 3] == pytest.approx(1e-4 ** 2 + 2e-4 ** 2)
+
+
+def test_help_reads_the_scenario_with_the_imports_it_is_allowed(tmp_path, monkeypatch, capsys):
+    package = tmp_path / "helpmod"
+    package.mkdir()
+    (package / "__init__.py").write_text("from estimators import DeadReckoning as Mine\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    path = tmp_path / "s.toml"
+    path.write_text('dt = 0.05\n[estimators."helpmod:Mine"]\nrate_timing = "workshop"\n')
+    with pytest.raises(SystemExit):
+        main(["compare", "--scenario", str(path), "--allow-import", "helpmod", "--help"])
+    assert "(default 0.05)" in " ".join(capsys.readouterr().out.split())

@@ -128,3 +128,19 @@ def test_an_offset_outside_the_step_is_refused():
     estimator = MultiplicativeEKF(dt=0.2)
     with pytest.raises(ValueError, match=r"offset_s at step 0 = 0.2: must be in \[0, dt"):
         estimator.step(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), 0.2)
+
+
+def test_a_subclass_with_the_old_propagate_applies_readings_at_its_steps():
+    class OldStyle(MultiplicativeEKF):
+        name = "old-style"
+
+        def propagate(self, omega_meas_radps):           # no dt: written before clocks
+            super().propagate(omega_meas_radps)
+
+    assert not OldStyle.applies_reading_times and MultiplicativeEKF.applies_reading_times
+    scenario = Scenario(tstop=3.0, **OWN_CLOCK)
+    with pytest.warns(UserWarning, match="old-style applies each star tracker reading"):
+        run = simulate(scenario, [OldStyle.from_scenario(scenario)], seed=0)
+    assert np.isfinite(run.error_deg["old-style"]).all()
+    with pytest.raises(ValueError, match="offset_s at step 0 = 'soon'"):
+        MultiplicativeEKF(dt=0.2).step(np.zeros(3), np.array([1.0, 0, 0, 0]), "soon")

@@ -22,11 +22,24 @@ def test_defaults_are_the_workshop_values():
     assert s.time_s[-1] == pytest.approx(50.0)
 
 
-def test_shipped_default_file_matches_the_defaults_and_names_every_workshop_field():
+def test_shipped_default_file_matches_the_defaults_and_names_every_workshop_field(tmp_path):
     from benchmarks.scenario import flatten_sections
-    with DEFAULT_FILE.open("rb") as handle:      # in its sections, [estimators.ekf] included
-        assert set(flatten_sections(tomllib.load(handle))) == set(WORKSHOP_FIELDS)
-    assert Scenario.from_toml(DEFAULT_FILE).as_dict() == Scenario().as_dict()
+    # In its sections; the EKF's three settings are there as comments, being
+    # what it derives on the workshop's sensors (so a copy with other sensors
+    # derives its own).
+    derived = {"pc_exponent", "measurement_covariance", "initial_covariance"}
+    with DEFAULT_FILE.open("rb") as handle:
+        assert set(flatten_sections(tomllib.load(handle))) == set(WORKSHOP_FIELDS) - derived
+    text = DEFAULT_FILE.read_text()
+    assert "# pc_exponent = -8.7" in text and "# initial_covariance = 1e-12" in text
+    loaded = Scenario.from_toml(DEFAULT_FILE)
+    assert loaded.as_dict() == Scenario().as_dict() and loaded.derived_fields == derived
+    # A copy with the rotation tracker: the EKF derives its R from that tracker.
+    copy = tmp_path / "copy.toml"
+    copy.write_text(text.replace("[star_tracker]\n", '[star_tracker]\nmodel = "rotation"\n'))
+    rotation = Scenario.from_toml(copy)
+    assert rotation.derived_fields == derived
+    assert rotation.measurement_covariance[0, 0] < 1e-6
 
 
 def test_the_workshops_flat_keys_still_give_the_defaults(tmp_path):

@@ -159,7 +159,14 @@ def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
     except ValueError:
         raise InvalidParameterError("settings", {n: np.shape(columns[n]) for n in columns},
                                     "must broadcast with the seeds") from None
-    return checked_runs(scenario, RunTable(seeds, *values))
+    values = dict(zip(PER_RUN_SETTINGS, values))
+    if "pc_exponent" not in settings and "pc_exponent" in scenario.derived_fields:
+        # A Q derived from the gyro follows each run's gyro noise, as the
+        # per-run path's scenario.replace(gyro_noise=...) derives it.
+        derived = {g: scenario.replace(gyro_noise=float(g)).pc_exponent
+                   for g in np.unique(values["gyro_noise"])}
+        values["pc_exponent"] = np.array([derived[g] for g in values["gyro_noise"]])
+    return checked_runs(scenario, RunTable(seeds, *(values[n] for n in PER_RUN_SETTINGS)))
 
 
 @dataclass
@@ -313,7 +320,8 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
     rotation = tracker.model == "rotation"
     steps_between = np.array([steps_between_readings(t, dt)
                               for t in runs.time_between_measurements], dtype=np.int64)
-    # Keep the gyro buffer's size whatever its columns (3, or 6 with a bias walk).
+    # Keep the gyro buffer's size whatever its columns (3, and 3 more each for a
+    # bias walk and a Gauss–Markov part).
     block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
     dropout = float(tracker.dropout_probability)

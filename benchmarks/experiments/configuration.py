@@ -8,12 +8,12 @@ precedence:
 ``scenario`` a scenario setting the file (or a flag) gives;
 ``derived``  derived from the scenario's sensors (the EKF's ``Q``, ``R`` and
              ``P₀``, the six-state filters' noise densities and ``R``, dead
-             reckoning's rate timing, the EKF's output), or a scenario
-             setting left at its default;
-``default``  the estimator's own default.
+             reckoning's rate timing, the EKF's output);
+``default``  the estimator's own default, or a scenario setting left at its default.
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
 
 import numpy as np
@@ -22,6 +22,8 @@ from benchmarks.scenario import Scenario, field_names
 from estimators import resolve_estimator
 
 SOURCES = ("file", "scenario", "derived", "default")
+#: Scenario fields whose default is to be derived (None until then).
+_DERIVED_UNLESS_GIVEN = frozenset(f.name for f in dataclasses.fields(Scenario) if f.default is None)
 
 
 def effective_settings(scenario: Scenario, name: str) -> list[dict]:
@@ -58,6 +60,8 @@ def _scenario_source(scenario: Scenario, defaults: Scenario, field: str | None):
         return "derived", f"the sensors ({field})"
     if field in scenario.derived_fields:
         return "derived", f"the sensors ({field})"
+    if field in _DERIVED_UNLESS_GIVEN:        # not derived: the file or a flag gave it
+        return "scenario", f"scenario {field}"
     if field != "dt" and _same(getattr(scenario, field), getattr(defaults, field)):
         return "default", f"scenario {field}"
     return "scenario", f"scenario {field}"
@@ -88,6 +92,8 @@ def _shown(value) -> str:
 
 def format_settings(rows: list[dict]) -> str:
     """The printed table, one estimator after another."""
+    if not rows:
+        return "(no settings)"
     width = max(len(row["setting"]) for row in rows)
     value_width = min(44, max(len(row["value"]) for row in rows))
     lines, current = [], None

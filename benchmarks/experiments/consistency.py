@@ -27,14 +27,16 @@ adds "(borderline)": more runs narrow the band (as :math:`1/\sqrt{N}`) and
 settle it.
 
 **Efficiency** is the estimator's RMS error over the bound's RMS
-(:mod:`benchmarks.bounds`), both over the same steps: the sampled steps from
-the settle time on, with the bound taken before or after each step's reading
-as the estimator outputs (its ``output``). Both start after the settle time
+(:mod:`benchmarks.bounds`), both from the settle time on (the estimator's
+from its errors sampled at a step that shares no factor with the readings'
+period, the bound's over every step), with the bound taken before or after
+each step's reading as the estimator outputs (its ``output``). Both start after the settle time
 because the bound's step-0 prior is the filters' declared one, while the
 runs start wherever the scenario puts them.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,12 +147,15 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     settle_steps = round((scenario.tstop / 10 if settle_s is None else settle_s) / scenario.dt)
     settle_steps = min(max(settle_steps, 0), n_steps - 1)
     bound = posterior_crb(scenario)
+    sample_every = error_sample_step(every, scenario)
     batch = run_many(scenario, make_runs(scenario, seed_range(base_seed, runs)), estimators,
                      per_run_limit=per_run_limit, consistency=True, nees_every=every,
-                     settle_steps=settle_steps, error_every=every, workers=workers,
+                     settle_steps=settle_steps, error_every=sample_every, workers=workers,
                      progress_bar=progress_bar)
-    # The sampled steps from the settle time on: the RMS and the bound's alike.
-    first = -(-settle_steps // every)
+    # Each run's RMS from its errors sampled after the settle time; the bound
+    # over every step after it (the sampling step shares no factor with the
+    # readings' period, so the samples see every phase of it alike).
+    first = -(-settle_steps // sample_every)
     per_run = {name: {"rms_deg": _rms(batch.error_samples[name][:, first:]),
                       "diverged_step": batch.diverged_step[name],
                       **batch.consistency.get(name, {})} for name in estimators}
@@ -158,8 +163,7 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
     summary, anees = {}, {}
     for name in estimators:
         output = getattr(build_estimator(name, scenario), "output", "posterior")
-        bound_rms = float(np.degrees(np.sqrt(np.mean(np.trace(
-            bound.covariance(output)[::every][first:], axis1=1, axis2=2)))))
+        bound_rms = bound.rms_deg(output, start=settle_steps)
         summary[name], anees[name] = _summary_row(per_run[name], bound_rms, level)
         summary[name]["output"] = output
     # One traced run (the base seed) of each estimator for the per-axis figure.
@@ -170,7 +174,21 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
                              bound_rms_deg=bound_rms, bound=bound, samples=samples,
                              diverged_step={name: per_run[name]["diverged_step"]
                                             for name in estimators},
-                             settle_s=first * every * scenario.dt)
+                             settle_s=settle_steps * scenario.dt)
+
+
+def error_sample_step(every: int, scenario) -> int:
+    """The step between the errors a campaign keeps: about ``every``, and
+    sharing no factor with the steps between readings, so the samples fall on
+    every phase of the reading cycle alike (a multiple of it would keep only
+    the errors just after a reading, and understate the RMS)."""
+    if not scenario.readings_on_gyro_grid:
+        return every
+    period = max(1, round(scenario.time_between_measurements / scenario.dt))
+    step = max(1, every)
+    while period > 1 and math.gcd(step, period) != 1:
+        step += 1
+    return step
 
 
 def _rms(samples: np.ndarray) -> np.ndarray:

@@ -59,7 +59,7 @@ class Block(NamedTuple):
     # noise, then the bias walk's and the Gauss–Markov part's), the bias model, K = scale
     # and misalignment.
     gyro_std: np.ndarray         # (B,) rad/s
-    gyro_normals: np.ndarray     # (B, T, 3 or 6)
+    gyro_normals: np.ndarray     # (B, T, 3, 6 or 9)
     bias_model: np.ndarray       # (5,) the bias walk's and Gauss–Markov part's (sensors.bias_model)
     gyro_scale: np.ndarray       # (3, 3)
     has_scale: bool

@@ -25,7 +25,7 @@ class State(NamedTuple):
     x: np.ndarray                # (B, 4)
     P: np.ndarray                # (B, 4, 4)
     q_variance: np.ndarray       # (B,) Q = q_variance I4, read off each run's filter
-    R: np.ndarray                # (4, 4)
+    R: np.ndarray                # (B, 4, 4): each run's (derived from its tracker's noise)
     posterior: bool
     align_sign: bool
 
@@ -37,7 +37,8 @@ def initial_state(estimators) -> State:
     return State(x=np.array([e.initial_attitude for e in estimators]),
                  P=np.array([e.initial_covariance * np.eye(4) for e in estimators]),
                  q_variance=np.array([e.filter.Q[0, 0] for e in estimators]),
-                 R=np.ascontiguousarray(first.filter.R), posterior=first.output == "posterior",
+                 R=np.array([e.filter.R for e in estimators]),
+                 posterior=first.output == "posterior",
                  align_sign=first.align_sign)
 
 
@@ -114,7 +115,7 @@ def advance(block, sensors, state, record, row):
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances) = nees_arrays(record, row)
-    x_all, P_all, q_variance, R = state.x, state.P, state.q_variance, state.R
+    x_all, P_all, q_variance, R_all = state.x, state.P, state.q_variance, state.R
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
     for run in prange(x_all.shape[0]):
         w, z, dq = np.empty(3), np.empty(4), np.empty(4)
@@ -149,7 +150,7 @@ def advance(block, sensors, state, record, row):
                                        + x[3] * z[3]) < 0
                 for i in range(4):
                     aligned[i] = -z[i] if flip else z[i]
-                nis = _ekf_update(x, P, aligned, R, scratch)
+                nis = _ekf_update(x, P, aligned, R_all[run], scratch)
                 if check:   # the additive update leaves |x| off 1 by design
                     check_health(x, False, P, 4, health[run], factor)
                 if streaming:

@@ -1,8 +1,9 @@
 """The sensors' draws, shared by every estimator kernel: each step's gyro
 reading and, when one is due, the star tracker's, made from the same standard
 normals the per-run path draws (:class:`sensors.Gyro` with its bias random
-walk, scale and misalignment; :class:`sensors.StarTracker` and
-:class:`sensors.RotationStarTracker` with dropouts, outages and sign).
+walk, its Gauss–Markov part, scale and misalignment;
+:class:`sensors.StarTracker` and :class:`sensors.RotationStarTracker` with
+dropouts, outages and sign).
 
 Every kernel makes the readings itself, inside its own loop, from the block's
 normals: the arithmetic is a few operations a step, and reading the normals
