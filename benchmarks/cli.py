@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import warnings
 from pathlib import Path
 from typing import Callable, NamedTuple
 
@@ -745,6 +746,19 @@ EXIT_IO = 1
 
 
 def main(argv=None) -> int:
+    """The command line: one command's run; a warning the library gives
+    (an estimator taking the per-run path, a reading applied at its step) is
+    one line on stderr, ``attitude-bench: note: …``."""
+    with warnings.catch_warnings():
+        warnings.showwarning = _note
+        return _main(argv)
+
+
+def _note(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"{PROG}: note: {message}", file=sys.stderr)
+
+
+def _main(argv) -> int:
     importable_from_here()
     try:
         args = build_parser(help_defaults(sys.argv[1:] if argv is None else argv)

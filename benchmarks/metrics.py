@@ -10,6 +10,19 @@ import numpy as np
 
 from dynamics.quaternion import attitude_error_rad
 
+#: Arcseconds per degree.
+ARCSEC_PER_DEG = 3600.0
+#: Angles of this size (degrees) and below are shown in arcseconds, above in degrees.
+ARCSEC_BELOW_DEG = 0.1
+
+
+def angle_unit(typical_deg: float) -> tuple[float, str]:
+    """``(scale from degrees, unit)`` for angles of about ``typical_deg``:
+    arcseconds below :data:`ARCSEC_BELOW_DEG`, degrees otherwise (one unit
+    per table or axis)."""
+    return (ARCSEC_PER_DEG, "arcsec") if typical_deg < ARCSEC_BELOW_DEG else (1.0, "deg")
+
+
 #: Column names of every statistics table, in order.
 STAT_COLUMNS = ("mean_deg", "median_deg", "std_deg", "three_sigma_deg", "rms_deg",
                 "max_deg", "final_deg")

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import re
-import sys
+import warnings
 
 import numpy as np
 
@@ -61,8 +61,8 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
     limitation = engine_limitation(scenario, runs)
     engine = [name for name in estimators if name in ENGINE_ESTIMATORS and limitation is None]
     if limitation is not None:
-        _say_once(f"note: the engine does not model {limitation}; its estimators take the "
-                  "per-run path on every run (slower, the same numbers)")
+        warnings.warn(f"the engine does not model {limitation}; its estimators take the "
+                      "per-run path on every run (slower, the same numbers)", stacklevel=2)
     results = {}
     if engine:
         results.update(_on_the_engine(scenario, runs, engine, kept, threads, chunk_runs,
@@ -84,16 +84,6 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
                        sample_time_s=(np.arange(0, scenario.n_steps, error_every) * scenario.dt
                                       if error_every else None),
                        consistency=each("consistency") if consistency else None)
-
-
-_SAID: set = set()
-
-
-def _say_once(message: str) -> None:
-    """A note on stderr, once per process."""
-    if message not in _SAID:
-        _SAID.add(message)
-        print(message, file=sys.stderr)
 
 
 #: What a run's record joins over chunks or runs, besides its statistics.

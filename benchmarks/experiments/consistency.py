@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
+from benchmarks.metrics import angle_unit
 from benchmarks.metrics import nees  # noqa: F401 (re-exported: the NEES defined above)
 from dynamics.quaternion import attitude_error_vector_rad
 
@@ -227,11 +228,10 @@ def _summary_row(record: dict, bound_rms_deg: float, level: float) -> tuple[dict
 
 def table_unit(values_deg) -> tuple[str, float]:
     """One unit for a table of angles, by the magnitude of its median finite
-    value: arcseconds below 0.1°, degrees otherwise; ``(unit, scale from degrees)``."""
+    value (:func:`benchmarks.metrics.angle_unit`); ``(unit, scale from degrees)``."""
     finite = [v for v in values_deg if np.isfinite(v)]
-    if finite and np.median(finite) < 0.1:
-        return "arcsec", 3600.0
-    return "deg", 1.0
+    scale, unit = angle_unit(float(np.median(finite)) if finite else 1.0)
+    return unit, scale
 
 
 def format_summary(summary: dict, settle_s: float | None = None) -> str:

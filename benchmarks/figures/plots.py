@@ -12,7 +12,9 @@ import seaborn as sns
 
 from benchmarks.figures.style import (COINCIDE_FRACTION, coincidence_note, coinciding,
                                       estimator_styles, legend_outside, symlog_axis,
-                                      finite_max, upper_envelope, with_coincidences)
+                                      finite_max, round_values, upper_envelope,
+                                      with_coincidences)
+from benchmarks.metrics import angle_unit
 from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -88,7 +90,7 @@ def distribution_figure(frame, labels: dict | None = None) -> Figure:
         lambda name: textwrap.fill(labels.get(name, name), 20))
     columns = [column for column, _ in DISTRIBUTION_PANELS]
     medians = data.groupby("estimator")["rms_deg"].median().to_numpy()
-    scale, unit = _angle_unit(float(np.nanmedian(data[columns].to_numpy())))
+    scale, unit = angle_unit(float(np.nanmedian(data[columns].to_numpy())))
     positive = medians[medians > 0]
     log_axis = positive.size > 1 and positive.max() / positive.min() > LOG_AXIS_SPREAD
     figure, axes = new_figure(ncols=len(DISTRIBUTION_PANELS), width=4.5, height=4.5)
@@ -104,8 +106,8 @@ def distribution_figure(frame, labels: dict | None = None) -> Figure:
         if log_axis:
             finite = values[np.isfinite(values)]
             low, high = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
-            nice = [np.log10(m * 10.0 ** e) for e in range(-6, 9) for m in (1, 2, 5)]
-            ax.yaxis.set_major_locator(FixedLocator([v for v in nice if low - 0.3 <= v <= high + 0.3]))
+            ax.yaxis.set_major_locator(FixedLocator(
+                np.log10(round_values(10.0 ** (low - 0.3), 10.0 ** (high + 0.3)))))
             ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{10 ** v:g}"))
             ax.set_ylabel(f"{unit} (log scale)")
         else:
@@ -153,15 +155,7 @@ class BlittingPillowWriter(PillowWriter):
 #: Body axes as the per-axis figures name them (not roll, pitch and yaw,
 #: which would clash with a star tracker's roll about its own boresight).
 AXIS_NAMES = ("Body x", "Body y", "Body z")
-_ARCSEC_PER_DEG = 3600.0
-#: Below this steady-state size per-axis errors are shown in arcsec, above in degrees.
-ARCSEC_BELOW_DEG = 0.1
 _UNIT_SYMBOLS = {"arcsec": "″", "deg": "°"}
-
-
-def _angle_unit(typical_deg: float) -> tuple[float, str]:
-    """``(scale from degrees, unit)``: arcsec below :data:`ARCSEC_BELOW_DEG`."""
-    return (_ARCSEC_PER_DEG, "arcsec") if typical_deg < ARCSEC_BELOW_DEG else (1.0, "deg")
 
 
 def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_deg_per_hr,
@@ -200,7 +194,7 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
     if not steady:
         steady = [np.median(np.abs(e[second_half])) for e in error_vectors_deg.values()]
     typical_deg = max(min(steady), 1e-12)
-    scale, unit = _angle_unit(typical_deg)
+    scale, unit = angle_unit(typical_deg)
     scaled = {name: error * scale for name, error in error_vectors_deg.items()}
     under = coinciding(scaled, COINCIDE_FRACTION * typical_deg * scale)
     largest = finite_max(scaled.values())
@@ -296,7 +290,7 @@ def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict
         axes = figure.subplots(2, 2, squeeze=False).ravel()
     styles = estimator_styles(labels)
     steady = max(3 * float(np.median(bound_sigma_deg[len(bound_sigma_deg) // 2:])), 1e-12)
-    scale, unit = _angle_unit(steady)
+    scale, unit = angle_unit(steady)
     scaled = {name: error * scale for name, error in sample_errors_deg.items()}
     under = coinciding(scaled, COINCIDE_FRACTION * steady * scale)
     _anees_panel(axes[0], time_s, anees, bands, with_coincidences(styles, under), labels,
@@ -353,8 +347,7 @@ def _anees_panel(ax, time_s, anees: dict, bands: dict, styles: dict, labels: dic
     ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", label="3 (a consistent mean)")
     ax.set_yscale("log")
     ax.set_ylim(bottom, top)
-    nice = [m * 10.0 ** e for e in range(-6, 7) for m in (1, 2, 3, 5)]
-    ax.yaxis.set_major_locator(FixedLocator([v for v in nice if bottom <= v <= top]))
+    ax.yaxis.set_major_locator(FixedLocator(round_values(bottom, top, (1, 2, 3, 5))))
     ax.yaxis.set_minor_locator(NullLocator())
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
     ax.set_xlim(time_s[0], time_s[-1])

@@ -98,6 +98,14 @@ def finite_max(arrays) -> float:
     return max((float(v.max()) for v in finite if v.size), default=0.0)
 
 
+def round_values(low: float, high: float, mantissas=(1, 2, 5)) -> list[float]:
+    """The round numbers ``m × 10^e`` (``m`` in ``mantissas``) from ``low`` to
+    ``high``: tick positions for a log axis that a reader reads at a glance."""
+    first, last = math.floor(math.log10(low)), math.ceil(math.log10(high))
+    return [m * 10.0 ** e for e in range(first, last + 1) for m in mantissas
+            if low <= m * 10.0 ** e <= high]
+
+
 def _power_label(value: float, _position=None) -> str:
     if value == 0:
         return "0"

@@ -60,7 +60,7 @@ class Block(NamedTuple):
     # and misalignment.
     gyro_std: np.ndarray         # (B,) rad/s
     gyro_normals: np.ndarray     # (B, T, 3, 6 or 9)
-    bias_model: np.ndarray       # (5,) the bias walk's and Gauss–Markov part's (sensors.bias_model)
+    bias_model: np.ndarray       # (5,) the walk's and the Gauss–Markov part's (sensors.py)
     gyro_scale: np.ndarray       # (3, 3)
     has_scale: bool
     has_bias: bool
@@ -376,6 +376,25 @@ def keep_variances(run, k, C, variances, keep_traces):
     if keep_traces:
         for i in range(3):
             variances[run, k, i] = C[i, i]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, variances,
+                keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch):
+    """What a six-state kernel keeps of the estimate ``out`` it outputs at step
+    ``k`` (before or after the step's reading, as the filter outputs): the
+    attitude variances with traces, the bias ``beta`` and 6x6 ``P`` at the
+    last step for the final report, and the NEES."""
+    keep_variances(run, k, P, variances, keep_traces)
+    if k == last_step:
+        for i in range(3):
+            beta_last[run, i] = beta[i]
+        for i in range(6):
+            for j in range(6):
+                P_last[run, i, j] = P[i, j]
+    if streaming:
+        fold_nees(run, k, nees(q_true_k, out, P, scratch), nees_every, settle, nees_samples,
+                  nees_sum)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

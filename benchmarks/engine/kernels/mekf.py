@@ -10,8 +10,8 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_nees, gauss_jordan, keep_variances,
-                                              log_error, mark_diverged, nees, nees_arrays,
+                                              gauss_jordan, keep_output,
+                                              log_error, mark_diverged, nees_arrays,
                                               quadratic_form, quat_exp, quat_times_normalized,
                                               record_error)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
@@ -168,16 +168,6 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
 
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _keep_last(beta, P, beta_last, P_last):
-    """The output bias and covariance at the last step, for the final report."""
-    for i in range(3):
-        beta_last[i] = beta[i]
-    for i in range(6):
-        for j in range(6):
-            P_last[i, j] = P[i, j]
-
-
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
@@ -213,12 +203,9 @@ def advance(block, sensors, state, record, row):
             for i in range(4):
                 out[i] = q[i]
             if not posterior:
-                keep_variances(run, k, P, variances, keep_traces)
-                if k == last_step:
-                    _keep_last(beta, P, beta_last[run], P_last[run])
-            if streaming and not posterior:
-                fold_nees(run, k, nees(q_true[j], q, P, scratch6), nees_every, settle,
-                          nees_samples, nees_sum)
+                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch6)
             if available:
                 nis = _mekf_update(q, beta, P, z, R_all[run], scratch6, dq)
                 if check:
@@ -229,12 +216,9 @@ def advance(block, sensors, state, record, row):
             if posterior:
                 for i in range(4):
                     out[i] = q[i]
-                keep_variances(run, k, P, variances, keep_traces)
-                if k == last_step:
-                    _keep_last(beta, P, beta_last[run], P_last[run])
-                if streaming:
-                    fold_nees(run, k, nees(q_true[j], q, P, scratch6), nees_every, settle,
-                              nees_samples, nees_sum)
+                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch6)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             _mekf_propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq)

@@ -33,7 +33,7 @@ class SensorState(NamedTuple):
     """What the sensors carry from step to step, one row per run: the gyro's
     true bias (each kernel advances its own copy, the same numbers)."""
 
-    bias: np.ndarray             # (B, 6) β_k: its random-walk part (with β_0), its Gauss–Markov part
+    bias: np.ndarray             # (B, 6) β_k: its walk part (with β_0), its Gauss–Markov part
     bias_last: np.ndarray        # (B, 3) β at the run's last step
 
 

@@ -29,8 +29,8 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_nees, gauss_jordan, keep_variances,
-                                              mark_diverged, nees, nees_arrays, quadratic_form,
+                                              gauss_jordan, keep_output,
+                                              mark_diverged, nees_arrays, quadratic_form,
                                               quat_exp, record_error)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
@@ -292,16 +292,6 @@ def _update(q, x, P, sigmas, z, R, Wm, Wc, scratch):
     return nis
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _keep_last(x, P, beta_last, P_last):
-    """The output bias and covariance at the last step, for the final report."""
-    for i in range(3):
-        beta_last[i] = x[3 + i]
-    for i in range(STATE_SIZE):
-        for j in range(STATE_SIZE):
-            P_last[i, j] = P[i, j]
-
-
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset (or reset alone), output,
@@ -342,12 +332,9 @@ def advance(block, sensors, state, record, row):
                 continue
             if not posterior:
                 _output(q, x, out)
-                keep_variances(run, k, P, variances, keep_traces)
-                if k == last_step:
-                    _keep_last(x, P, beta_last[run], P_last[run])
-                if streaming:
-                    fold_nees(run, k, nees(q_true[j], out, P, scratch), nees_every, settle,
-                              nees_samples, nees_sum)
+                keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch)
             if available:
                 nis = _update(q, x, P, sigmas, z, R_all[run], Wm, Wc, scratch)
                 if streaming:
@@ -358,12 +345,9 @@ def advance(block, sensors, state, record, row):
                 check_health(q, True, P, 6, health[run], scratch[0])
             if posterior:
                 _output(q, x, out)
-                keep_variances(run, k, P, variances, keep_traces)
-                if k == last_step:
-                    _keep_last(x, P, beta_last[run], P_last[run])
-                if streaming:
-                    fold_nees(run, k, nees(q_true[j], out, P, scratch), nees_every, settle,
-                              nees_samples, nees_sum)
+                keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             factored = _predict(q, x, P, sigmas, w, dt, noise[run], bias_rw[run], spread[run],
