@@ -11,7 +11,13 @@ start, or its average over the step, :mod:`sensors.gyro`) and the gyro's own
 walk, exact over times short against its correlation time),
 and each star tracker reading measures :math:`y = \delta\theta + v`,
 :math:`v \sim \mathcal N(0, R)` with :math:`R` the tracker's body-frame
-covariance (for the workshop tracker, :math:`(2\sigma)^2 I_3`).
+covariance (for the workshop tracker, :math:`(2\sigma)^2 I_3`). Each vector
+reading (:mod:`sensors.vector`) measures :math:`y = [b\times]\delta\theta + v`,
+:math:`v \sim \mathcal N(0, \sigma^2 I_3)`, with :math:`b = A(q)^\mathsf{T} r`
+along the *true* attitude: it adds the information
+:math:`H^\mathsf{T} R^{-1} H = \sigma^{-2}(|b|^2 I_3 - b b^\mathsf{T})` (none
+along :math:`b`), at the steps it is read (the sun sensors' eclipses and
+fields of view follow from the truth, so the bound knows them).
 
 **Posterior Cramér–Rao bound along the true trajectory** (Tichavský,
 Muravchik & Nehorai, *IEEE Trans. Signal Processing* 46(5), 1998): the
@@ -123,11 +129,13 @@ def check_bound_inputs(scenario) -> None:
     both must be positive definite — a noise-free tracker or a perfectly known
     start has no finite information to add."""
     _, _, R, prior, _ = linear_model(scenario)
-    if scenario.star_tracker_model == "rotation":
+    if scenario.star_tracker_model == "none":
+        pass
+    elif scenario.star_tracker_model == "rotation":
         name, value = "star_tracker_sigma_arcsec", scenario.star_tracker_sigma_arcsec
     else:
         name, value = "star_tracker_noise", scenario.star_tracker_noise
-    if not np.all(np.linalg.eigvalsh(R) > 0):
+    if scenario.star_tracker_model != "none" and not np.all(np.linalg.eigvalsh(R) > 0):
         raise InvalidParameterError(name, value, "must be > 0 on every axis for the bound "
                                     "(benchmarks.bounds inverts the reading's covariance)")
     if not np.all(np.linalg.eigvalsh(prior) > 0):
@@ -155,14 +163,15 @@ def posterior_crb(scenario) -> AttitudeBound:
     R_inverse = np.linalg.inv(R)
     P = prior.copy()
     n = scenario.n_steps
+    vector_information = _vector_information(scenario, truth)
 
     def propagated(P, k, dt):
         phi, q = discrete_error_model(rates[k], dt, noise, bias_rw)
         return phi[:states, :states] @ P @ phi[:states, :states].T + q[:states, :states]
 
-    def updated(P):
+    def updated(P, information_added=R_inverse):
         information = np.linalg.inv(P)
-        information[:3, :3] += R_inverse
+        information[:3, :3] += information_added
         P = np.linalg.inv(information)
         return 0.5 * (P + P.T)
 
@@ -172,12 +181,32 @@ def posterior_crb(scenario) -> AttitudeBound:
         tau = reading_offset[k]
         if tau == 0.0:
             P = updated(P)
+        if vector_information is not None and k in vector_information:
+            P = updated(P, vector_information[k])
         posteriors[k] = P[:3, :3]
         if tau > 0.0:        # a reading within the step, at t_k + τ
             P = propagated(updated(propagated(P, k, tau)), k, scenario.dt - tau)
         else:
             P = propagated(P, k, scenario.dt)
     return AttitudeBound(time_s=truth.time_s, prior=priors, posterior=posteriors)
+
+
+def _vector_information(scenario, truth) -> dict | None:
+    r"""Step → the vector readings' information about the attitude at that
+    step, :math:`\sum_i \sigma_i^{-2}(|b_i|^2 I_3 - b_i b_i^\mathsf{T})` along
+    the truth (noise-free readings of the scenario's sensors), or None."""
+    if not scenario.has_vector_sensors:
+        return None
+    from benchmarks.simulation import scenario_references, vector_readings
+    from sensors.vector import to_body
+    information = {}
+    for readings in vector_readings(scenario, truth.q_true, scenario_references(scenario), 0):
+        steps = np.flatnonzero(readings.available)
+        b = to_body(truth.q_true[steps], readings.reference[steps])
+        for k, vector, variance in zip(steps, b, readings.variance[steps]):
+            term = (vector @ vector * np.eye(3) - np.outer(vector, vector)) / variance
+            information[k] = information.get(k, 0.0) + term
+    return information
 
 
 def riccati(phi: np.ndarray, q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.ndarray,

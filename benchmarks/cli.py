@@ -219,10 +219,11 @@ def _parse_compare(commands) -> None:
     """The ``compare`` command's arguments."""
     compare = commands.add_parser("compare", help="estimators on the same data; "
                                   "write compare.png and summary.csv")
-    compare.add_argument("--estimators", type=_estimator_list,
-                         default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
+    compare.add_argument("--estimators", type=_estimator_list, default=None,
+                         metavar="A,B,...",
                          help=f"any of {', '.join(ESTIMATORS)} or package.module:ClassName "
-                         "(default: the workshop's three)")
+                         "(default: the workshop's three; with vector sensors, "
+                         f"{','.join(VECTOR_DEFAULTS)})")
     _add_common(compare)
 
 
@@ -300,10 +301,10 @@ def _parse_montecarlo(commands) -> None:
     """The ``montecarlo`` command's arguments."""
     montecarlo = commands.add_parser("montecarlo", help="many runs on the batched engine; "
                                      "write montecarlo.csv and montecarlo.png")
-    montecarlo.add_argument("--estimators", type=_estimator_list,
-                            default=tuple(WORKSHOP_ESTIMATORS), metavar="A,B,...",
+    montecarlo.add_argument("--estimators", type=_estimator_list, default=None,
+                            metavar="A,B,...",
                             help=f"any of {', '.join(ESTIMATORS)} (default: the workshop's "
-                            "three)")
+                            f"three; with vector sensors, {','.join(VECTOR_DEFAULTS)})")
     montecarlo.add_argument("--runs", type=_whole("runs", 1), default=100, metavar="N",
                             help="number of runs; run i uses seed S + i (default 100)")
     montecarlo.add_argument("--seed", type=_whole("seed", 0), default=0, metavar="S",
@@ -325,9 +326,12 @@ def _parse_consistency(commands) -> None:
     consistency = commands.add_parser(
         "consistency", help="do the filters know their error? NEES against chi-square bands, "
         "efficiency against the best achievable; write consistency.csv and consistency.png")
-    consistency.add_argument("--estimators", type=_estimator_list,
-                             default=tuple(ESTIMATORS), metavar="A,B,...",
-                             help=f"any of {', '.join(ESTIMATORS)} (default all)")
+    consistency.add_argument("--estimators", type=_estimator_list, default=None,
+                             metavar="A,B,...",
+                             help=f"any of {', '.join(ESTIMATORS)} (default: those the "
+                             "scenario's sensors feed: the star tracker's "
+                             f"{','.join(STAR_TRACKER_DEFAULTS)}, or with vector sensors "
+                             f"{','.join(VECTOR_DEFAULTS)})")
     consistency.add_argument("--runs", type=_whole("runs", 1), default=100, metavar="N",
                              help="runs (seeds S … S+N-1) of each estimator (default 100)")
     consistency.add_argument("--seed", type=_whole("seed", 0), default=0, metavar="S",
@@ -372,6 +376,62 @@ def _parse_replay(commands) -> None:
     _add_divergence_option(replay)
 
 
+def _parse_convergence(commands) -> None:
+    """The ``convergence`` command's arguments."""
+    convergence = commands.add_parser(
+        "convergence", help="filters from large initial errors over seeds (Crassidis & "
+        "Markley 2003, e.g. on scenarios/magnetometer_only.toml); write convergence.csv and "
+        "convergence.png")
+    convergence.add_argument("--estimators", type=_estimator_list, default=("mekf", "usque"),
+                             metavar="A,B,...", help="default mekf,usque")
+    convergence.add_argument("--seeds", type=_seed_list, default=tuple(range(5)),
+                             metavar="SPEC", help="seeds: 0, 0-19 or 1,5,9 (default 0-4)")
+    convergence.add_argument("--angles", type=_number_list, default=[90.0, 150.0],
+                             metavar="A1,A2,...", help="initial errors to start from besides "
+                             "the scenario's, degrees (default 90,150)")
+    _add_common(convergence, seed=False)
+
+
+def command_convergence(args, scenario):
+    from benchmarks.experiments import convergence
+    from benchmarks.output import write_figure, write_text
+    from benchmarks.simulation import build_estimator
+    for angle in args.angles:
+        if not 0.0 <= angle <= 180.0:
+            raise UsageError(f"angles = {angle!r}: each must be within 0 and 180 degrees")
+    table, curves = convergence.convergence_study(scenario, args.estimators, list(args.seeds),
+                                                  args.angles)
+    print(convergence.summary(table).to_string(index=False))
+    labels = {name: build_estimator(name, scenario).label for name in args.estimators}
+    write_text(args.out / "convergence.csv", table.to_csv(index=False))
+    write_figure(args.out / "convergence.png",
+                 convergence.figure(scenario.time_s, curves, labels))
+    print(f"wrote {args.out / 'convergence.csv'} and {args.out / 'convergence.png'}")
+    return None
+
+
+def _parse_wahba(commands) -> None:
+    """The ``wahba`` command's arguments."""
+    wahba = commands.add_parser("wahba", help="the static solvers (TRIAD, q-method, QUEST, "
+                                "ESOQ2, FOAM, SVD) on Markley & Mortari's test cases: "
+                                "accuracy and time per solution; write wahba.csv")
+    wahba.add_argument("--trials", type=_whole("trials", 1), default=1000, metavar="N",
+                       help="random attitudes per case (default 1000)")
+    wahba.add_argument("--seed", type=_whole("seed", 0), default=0, help="seed (default 0)")
+    wahba.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
+                       help="output folder (default results/)")
+
+
+def command_wahba(args, _scenario):
+    from benchmarks.experiments.wahba_table import format_table, solver_table
+    from benchmarks.output import write_text
+    table = solver_table(trials=args.trials, seed=args.seed)
+    print(format_table(table))
+    write_text(args.out / "wahba.csv", table.to_csv(index=False))
+    print(f"wrote {args.out / 'wahba.csv'}")
+    return None
+
+
 def _parse_workshop(commands) -> None:
     """The ``workshop`` command's arguments."""
     workshop = commands.add_parser("workshop", help="the whole exercise, steps 1-9, "
@@ -410,7 +470,7 @@ def allowed_imports(args: argparse.Namespace) -> list[str]:
 def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     """The scenario file (or defaults) with the command-line overrides applied
     (None for ``replay``, whose scenario comes from its recording)."""
-    if args.command == "replay":
+    if args.command in ("replay", "wahba"):
         return None
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
@@ -740,6 +800,9 @@ COMMAND_TABLE = (
     Command("workshop", _parse_workshop, command_workshop, ("report.md",),
             _per_run_memory(True)),
     Command("show-config", _parse_show_config, command_show_config, (), None),
+    Command("convergence", _parse_convergence, command_convergence,
+            ("convergence.csv", "convergence.png"), _per_run_memory(False)),
+    Command("wahba", _parse_wahba, command_wahba, ("wahba.csv",), None),
 )
 COMMANDS = {command.name: command for command in COMMAND_TABLE}
 EXIT_IO = 1
@@ -754,6 +817,21 @@ def main(argv=None) -> int:
         return _main(argv)
 
 
+#: The estimators a command runs when --estimators is not given, by the
+#: scenario's sensors: a star tracker alone, or vector sensors.
+STAR_TRACKER_DEFAULTS = ("dead-reckoning", "dead-reckoning-resets", "ekf", "mekf", "usque")
+VECTOR_DEFAULTS = ("dead-reckoning", "triad", "quest", "ekf", "mekf", "usque")
+
+
+def default_estimators(command: str, scenario) -> tuple:
+    """``--estimators`` when not given: the workshop's three for ``compare``
+    and ``montecarlo`` (the filters and the static solvers with vector
+    sensors), every star tracker estimator for ``consistency``."""
+    if scenario is not None and scenario.has_vector_sensors:
+        return VECTOR_DEFAULTS
+    return STAR_TRACKER_DEFAULTS if command == "consistency" else tuple(WORKSHOP_ESTIMATORS)
+
+
 def _note(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"{PROG}: note: {message}", file=sys.stderr)
 
@@ -764,6 +842,8 @@ def _main(argv) -> int:
         args = build_parser(help_defaults(sys.argv[1:] if argv is None else argv)
                             ).parse_args(argv)
         scenario = scenario_from_args(args)
+        if getattr(args, "estimators", "") is None:
+            args.estimators = default_estimators(args.command, scenario)
         check_effects(args, scenario)
         command = COMMANDS[args.command]
         if hasattr(args, "out"):

@@ -20,6 +20,15 @@ both::
                      # scale_misalignment; sampling ("sample" or "average")
     [star_tracker]   # model ("workshop" or "rotation"), interval_s, noise_power,
                      # sigma_arcsec, dropout_probability, outages_s, sign, to_body_quat
+    [environment]    # epoch, magnetic_field_model ("igrf" or "dipole"),
+                     # shadow_model ("conical" or "cylindrical")
+    [orbit]          # altitude_km, inclination_deg, raan_deg,
+                     # argument_of_latitude_deg, or tle (two lines)
+    [site]           # latitude_deg, longitude_deg, altitude_km (a ground IMU)
+    [magnetometer]   # interval_s, sigma_nT, bias_nT, soft_iron
+    [sun_sensor]     # interval_s, sigma_deg, fov_deg, boresight
+    [coarse_sun_sensors]  # interval_s, sigma, normals
+    [accelerometer]  # interval_s, sigma_mps2, bias_mps2
     [estimators.mekf]   # any constructor keyword of that estimator
     [estimators."package.module:ClassName"]   # your own estimator's keywords;
                      # its module is imported only with the caller's consent
@@ -59,7 +68,13 @@ from dynamics.validation import (
     standard_deviation,
 )
 from estimators import ESTIMATORS, resolve_estimator
+from dynamics.environment import FIELD_MODELS, SHADOW_MODELS
+from dynamics.orbit import epoch_datetime, make_orbit
+from sensors.accelerometer import Accelerometer
 from sensors.gyro import Gyro
+from sensors.magnetometer import Magnetometer
+from sensors.star_tracker import NoStarTracker
+from sensors.sun_sensor import CUBE_FACES, CoarseSunSensors, FineSunSensor
 from sensors.noise import (
     arw_deg_per_rthr_to_rad_per_rts,
     bias_instability_deg_per_hr_to_radps,
@@ -75,7 +90,7 @@ from sensors.star_tracker import (
     reading_interval,
 )
 
-STAR_TRACKER_MODELS = ("workshop", "rotation")
+STAR_TRACKER_MODELS = ("workshop", "rotation", "none")
 #: Body rates above this (rad/s, about 1600 revolutions a minute) are refused:
 #: no attitude sensor suite is built for them, and the truth's integrator
 #: would need billions of steps.
@@ -152,9 +167,10 @@ class Scenario:
         σ_b of the bias's first-order Gauss–Markov part, rad/s (0: none).
     gyro_bias_correlation_time_s : float
         τ of that part, seconds (3600).
-    star_tracker_model : {"workshop", "rotation"}
+    star_tracker_model : {"workshop", "rotation", "none"}
         Additive quaternion noise of power ``star_tracker_noise`` (the
-        workshop's), or a small error rotation of ``star_tracker_sigma_arcsec``.
+        workshop's), a small error rotation of ``star_tracker_sigma_arcsec``,
+        or no star tracker (vector sensors only).
     star_tracker_sigma_arcsec : (3,) array
         Rotation model: error σ about the sensor x, y (across the boresight)
         and z (roll) axes, arcsec ([6, 6, 40]).
@@ -166,6 +182,26 @@ class Scenario:
         Rotation model: report ``q`` as it comes, or with ``w >= 0`` ("raw").
     star_tracker_to_body_quat : (4,) array
         Rotation model: sensor-to-body rotation ([1, 0, 0, 0]).
+    epoch : str
+        ISO 8601 UTC time of t = 0 ("2026-03-20T12:00:00+00:00"): the Sun's and
+        the field's epoch.
+    magnetic_field_model, shadow_model : str
+        "igrf" or "dipole"; "conical" or "cylindrical" (:mod:`dynamics.environment`).
+    orbit_altitude_km : float or None
+        A circular orbit's altitude (None: no orbit), with
+        ``orbit_inclination_deg``, ``orbit_raan_deg`` and
+        ``orbit_argument_of_latitude_deg`` at the epoch; or ``orbit_tle``,
+        a two-line element set propagated with SGP4 (:mod:`dynamics.orbit`).
+    site_latitude_deg : float or None
+        A ground IMU's geodetic latitude (None: none), with
+        ``site_longitude_deg`` and ``site_altitude_km``: the reference frame
+        is then east-north-up there.
+    magnetometer_interval_s, sun_sensor_interval_s, coarse_sun_interval_s,
+    accelerometer_interval_s : float or None
+        Each vector sensor's interval (a whole multiple of dt), or None for
+        no such sensor; their noise and geometry in the fields that follow
+        each (:mod:`sensors.magnetometer`, :mod:`sensors.sun_sensor`,
+        :mod:`sensors.accelerometer`).
     estimator_options : dict
         ``{estimator name: {keyword: value}}``, from ``[estimators.NAME]``
         sections: each estimator's own settings beyond the scenario's
@@ -198,6 +234,31 @@ class Scenario:
     star_tracker_outages_s: tuple = ()
     star_tracker_sign: str = "raw"
     star_tracker_to_body_quat: np.ndarray = _vector(1.0, 0.0, 0.0, 0.0)
+    epoch: str = "2026-03-20T12:00:00+00:00"
+    magnetic_field_model: str = "igrf"
+    shadow_model: str = "conical"
+    orbit_altitude_km: float | None = None
+    orbit_inclination_deg: float = 97.4
+    orbit_raan_deg: float = 0.0
+    orbit_argument_of_latitude_deg: float = 0.0
+    orbit_tle: tuple = ()
+    site_latitude_deg: float | None = None
+    site_longitude_deg: float = 0.0
+    site_altitude_km: float = 0.0
+    magnetometer_interval_s: float | None = None
+    magnetometer_sigma_nT: float = 100.0
+    magnetometer_bias_nT: np.ndarray = _vector(0.0, 0.0, 0.0)
+    magnetometer_soft_iron: np.ndarray = _diag(1.0, 1.0, 1.0)
+    sun_sensor_interval_s: float | None = None
+    sun_sensor_sigma_deg: float = 0.1
+    sun_sensor_fov_deg: float = 70.0
+    sun_sensor_boresight: np.ndarray = _vector(0.0, 0.0, 1.0)
+    coarse_sun_interval_s: float | None = None
+    coarse_sun_sigma: float = 0.01
+    coarse_sun_normals: np.ndarray = field(default_factory=lambda: np.array(CUBE_FACES))
+    accelerometer_interval_s: float | None = None
+    accelerometer_sigma_mps2: float = 0.01
+    accelerometer_bias_mps2: np.ndarray = _vector(0.0, 0.0, 0.0)
     estimator_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -255,6 +316,7 @@ class Scenario:
         set_("star_tracker_sigma_arcsec", rotation.sigma_arcsec)
         set_("star_tracker_dropout_probability", rotation.dropout_probability)
         set_("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
+        self._check_environment()
         self._derive_estimator_fields()
         set_("pc_exponent", process_exponent("pc_exponent", self.pc_exponent))
         set_("measurement_covariance", covariance_matrix("measurement_covariance",
@@ -297,11 +359,107 @@ class Scenario:
                     bias_instability_radps=self.gyro_bias_instability_radps,
                     bias_correlation_time_s=self.gyro_bias_correlation_time_s)
 
-    def build_star_tracker(self) -> StarTracker | RotationStarTracker:
+    def build_star_tracker(self) -> StarTracker | RotationStarTracker | NoStarTracker:
         """The star tracker this scenario describes."""
         if self.star_tracker_model == "workshop":
             return StarTracker(self.star_tracker_noise, self.time_between_measurements, self.dt)
+        if self.star_tracker_model == "none":
+            return NoStarTracker(self.time_between_measurements, self.dt)
         return self._rotation_star_tracker()
+
+    def _check_environment(self) -> None:
+        """The orbit, the site and the vector sensors: each built once (its
+        class checks its settings), and each sensor where it can read."""
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        set_("epoch", epoch_datetime("environment.epoch", self.epoch).isoformat())
+        one_of("environment.magnetic_field_model", self.magnetic_field_model, FIELD_MODELS)
+        one_of("environment.shadow_model", self.shadow_model, SHADOW_MODELS)
+        set_("orbit_tle", tuple(str(line) for line in self.orbit_tle))
+        orbit, site = self.build_orbit(), self.site
+        if orbit is not None and site is not None:
+            raise InvalidParameterError("site.latitude_deg", self.site_latitude_deg,
+                                        "cannot be set with an [orbit]: a scenario is in orbit "
+                                        "or on the ground")
+        sensors = self.build_vector_sensors()
+        for sensor in sensors:
+            where = {"accelerometer": site, "sun_sensor": orbit,
+                     "coarse_sun_sensors": orbit}.get(sensor.name, orbit or site)
+            if where is None:
+                needs = ("a [site] (on the ground; in orbit it reads no gravity)"
+                         if sensor.name == "accelerometer" else "an [orbit] (for the Sun)"
+                         if sensor.name != "magnetometer" else "an [orbit] or a [site]")
+                raise InvalidParameterError(f"{sensor.name}.interval_s", sensor.interval_s,
+                                            f"needs {needs}")
+        if self.star_tracker_model == "none" and not sensors:
+            raise InvalidParameterError("star_tracker.model", "none", "leaves no attitude "
+                                        "sensor: add a vector sensor ([magnetometer], "
+                                        "[sun_sensor], …) or choose a star tracker model")
+
+    def build_orbit(self):
+        """The :class:`~dynamics.orbit.CircularOrbit` or
+        :class:`~dynamics.orbit.TLEOrbit` this scenario describes, or None."""
+        return make_orbit(**self.orbit_settings)
+
+    @property
+    def orbit_settings(self) -> dict:
+        """The keywords of :func:`dynamics.orbit.make_orbit` (hashable values)."""
+        return {"epoch": epoch_datetime("environment.epoch", self.epoch),
+                "tle": tuple(self.orbit_tle), "altitude_km": self.orbit_altitude_km,
+                "inclination_deg": self.orbit_inclination_deg, "raan_deg": self.orbit_raan_deg,
+                "argument_of_latitude_deg": self.orbit_argument_of_latitude_deg}
+
+    @property
+    def site(self) -> tuple | None:
+        """``(latitude_deg, longitude_deg, altitude_km)`` of a ground IMU, or None."""
+        if self.site_latitude_deg is None:
+            return None
+        latitude = finite_number("site.latitude_deg", self.site_latitude_deg)
+        if abs(latitude) > 90.0:
+            raise InvalidParameterError("site.latitude_deg", latitude,
+                                        "must be within -90 and 90 degrees")
+        return (latitude, finite_number("site.longitude_deg", self.site_longitude_deg),
+                finite_number("site.altitude_km", self.site_altitude_km))
+
+    def build_vector_sensors(self) -> list:
+        """The vector sensors this scenario has, in a fixed order
+        (magnetometer, fine sun sensor, coarse sun sensors, accelerometer)."""
+        sensors = []
+        if self.magnetometer_interval_s is not None:
+            sensors.append(Magnetometer(self.magnetometer_sigma_nT,
+                                        self._interval("magnetometer"), self.dt,
+                                        bias_nT=self.magnetometer_bias_nT,
+                                        soft_iron=self.magnetometer_soft_iron))
+        if self.sun_sensor_interval_s is not None:
+            sensors.append(FineSunSensor(self.sun_sensor_sigma_deg, self._interval("sun_sensor"),
+                                         self.dt, fov_deg=self.sun_sensor_fov_deg,
+                                         boresight=self.sun_sensor_boresight))
+        if self.coarse_sun_interval_s is not None:
+            sensors.append(CoarseSunSensors(self.coarse_sun_sigma,
+                                            self._interval("coarse_sun"), self.dt,
+                                            normals=self.coarse_sun_normals))
+        if self.accelerometer_interval_s is not None:
+            sensors.append(Accelerometer(self.accelerometer_sigma_mps2,
+                                         self._interval("accelerometer"), self.dt,
+                                         bias_mps2=self.accelerometer_bias_mps2))
+        return sensors
+
+    def _interval(self, prefix: str) -> float:
+        """A vector sensor's interval: a whole multiple of ``dt`` (its section named)."""
+        from sensors.star_tracker import steps_between_readings
+        section = {"coarse_sun": "coarse_sun_sensors"}.get(prefix, prefix)
+        name = f"{section}.interval_s"
+        value = finite_number(name, getattr(self, f"{prefix}_interval_s"), strictly_positive=True)
+        try:
+            steps_between_readings(value, self.dt)
+        except InvalidParameterError as err:
+            raise InvalidParameterError(name, value, err.rule) from None
+        return value
+
+    @property
+    def has_vector_sensors(self) -> bool:
+        return any(getattr(self, name) is not None for name in (
+            "magnetometer_interval_s", "sun_sensor_interval_s", "coarse_sun_interval_s",
+            "accelerometer_interval_s"))
 
     def _rotation_star_tracker(self) -> RotationStarTracker:
         return RotationStarTracker(
@@ -330,7 +488,7 @@ class Scenario:
         take the exercise's settings; on any other scenario they derive
         theirs from the sensors (each estimator's ``settings_from_scenario``)."""
         return (self.star_tracker_model == "workshop" and self.gyro_sampling == "sample"
-                and not self.build_gyro().has_bias_model)
+                and not self.build_gyro().has_bias_model and not self.has_vector_sensors)
 
     @property
     def readings_on_gyro_grid(self) -> bool:
@@ -567,6 +725,43 @@ SETTINGS = (
             model="rotation"),
     Setting("star_tracker_to_body_quat", "star_tracker", "to_body_quat", "",
             "rotation model: sensor-to-body rotation", model="rotation"),
+    Setting("epoch", "environment", "epoch", "", "UTC date and time of t = 0 (ISO 8601)"),
+    Setting("magnetic_field_model", "environment", "magnetic_field_model", "",
+            "igrf or dipole"),
+    Setting("shadow_model", "environment", "shadow_model", "", "conical or cylindrical"),
+    Setting("orbit_altitude_km", "orbit", "altitude_km", "km", "circular orbit's altitude"),
+    Setting("orbit_inclination_deg", "orbit", "inclination_deg", "deg", "inclination"),
+    Setting("orbit_raan_deg", "orbit", "raan_deg", "deg", "right ascension of the node"),
+    Setting("orbit_argument_of_latitude_deg", "orbit", "argument_of_latitude_deg", "deg",
+            "argument of latitude at the epoch"),
+    Setting("orbit_tle", "orbit", "tle", "", "two-line element set (SGP4)"),
+    Setting("site_latitude_deg", "site", "latitude_deg", "deg", "ground site's latitude"),
+    Setting("site_longitude_deg", "site", "longitude_deg", "deg", "ground site's longitude"),
+    Setting("site_altitude_km", "site", "altitude_km", "km", "ground site's altitude"),
+    Setting("magnetometer_interval_s", "magnetometer", "interval_s", "s",
+            "magnetometer interval (a multiple of dt)"),
+    Setting("magnetometer_sigma_nT", "magnetometer", "sigma_nT", "nT",
+            "magnetometer noise sigma per axis", sweepable=True),
+    Setting("magnetometer_bias_nT", "magnetometer", "bias_nT", "nT", "hard-iron bias"),
+    Setting("magnetometer_soft_iron", "magnetometer", "soft_iron", "", "soft-iron matrix"),
+    Setting("sun_sensor_interval_s", "sun_sensor", "interval_s", "s",
+            "fine sun sensor interval (a multiple of dt)"),
+    Setting("sun_sensor_sigma_deg", "sun_sensor", "sigma_deg", "deg",
+            "fine sun sensor noise sigma per axis", sweepable=True),
+    Setting("sun_sensor_fov_deg", "sun_sensor", "fov_deg", "deg", "field of view half-angle"),
+    Setting("sun_sensor_boresight", "sun_sensor", "boresight", "", "boresight, body frame"),
+    Setting("coarse_sun_interval_s", "coarse_sun_sensors", "interval_s", "s",
+            "coarse sun sensors' interval (a multiple of dt)"),
+    Setting("coarse_sun_sigma", "coarse_sun_sensors", "sigma", "",
+            "current noise sigma, fraction of full sun", sweepable=True),
+    Setting("coarse_sun_normals", "coarse_sun_sensors", "normals", "",
+            "faces' outward normals, body frame"),
+    Setting("accelerometer_interval_s", "accelerometer", "interval_s", "s",
+            "accelerometer interval (a multiple of dt)"),
+    Setting("accelerometer_sigma_mps2", "accelerometer", "sigma_mps2", "m/s^2",
+            "accelerometer noise sigma per axis", sweepable=True),
+    Setting("accelerometer_bias_mps2", "accelerometer", "bias_mps2", "m/s^2",
+            "accelerometer bias"),
     Setting("pc_exponent", "estimators.ekf", "pc_exponent", "",
             "EKF process covariance Q = exp(X) I4", flag="--pc-exponent", per_run=True,
             sweep="pc-exponent", legend="{label}, pc exponent = {value:g}"),

@@ -43,6 +43,10 @@ class SensorData:
     star_tracker_offset_s : (N,) seconds after ``t_k`` that step ``k``'s
         reading was taken (0 on the gyro grid and where there is none; see
         :func:`sensors.star_tracker.reading_schedule`)
+    vectors : tuple of :class:`~sensors.vector.VectorReadings`, one per
+        vector sensor (magnetometer, sun sensors, accelerometer), or ()
+    references : :class:`~dynamics.environment.References` the vector
+        sensors saw (eclipses among them), or None
     """
 
     omega_meas_radps: np.ndarray
@@ -50,6 +54,8 @@ class SensorData:
     available: np.ndarray
     gyro_bias_radps: np.ndarray | None = None
     star_tracker_offset_s: np.ndarray | None = None
+    vectors: tuple = ()
+    references: object = None
 
     @property
     def record(self) -> tuple:
@@ -142,6 +148,14 @@ def _truth_cached(dt, n_steps, inertia, q0, omega0) -> RigidBodyTruth:
                                 np.frombuffer(omega0), np.arange(n_steps) * dt)
 
 
+def vector_generators(seed: int, count: int) -> tuple[np.random.Generator, ...]:
+    """One generator per vector sensor for ``seed``: children 3, 4, … of the
+    seed's sequence, after :func:`sensor_generators`' three (so adding a
+    vector sensor changes no gyro or star tracker draw)."""
+    return tuple(np.random.Generator(np.random.SFC64(sequence))
+                 for sequence in np.random.SeedSequence(seed).spawn(3 + count)[3:])
+
+
 def sensor_generators(seed: int) -> tuple[np.random.Generator, ...]:
     """The gyro's, the star tracker's and the star tracker dropouts' random
     generators for ``seed``.
@@ -164,9 +178,49 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
     gyro = scenario.build_gyro()
     omega, bias = gyro.measure_with_bias(gyro.true_rates(truth.q_true, truth.omega_true_radps),
                                          gyro_rng)
+    references = scenario_references(scenario)
+    vectors = vector_readings(scenario, truth.q_true, references, seed)
     return SensorData(omega_meas_radps=omega, star_tracker_quat=readings.quat,
                       available=readings.available, gyro_bias_radps=bias,
-                      star_tracker_offset_s=readings.offset_s)
+                      star_tracker_offset_s=readings.offset_s, vectors=vectors,
+                      references=references)
+
+
+def vector_readings(scenario: Scenario, q_true: np.ndarray, references, seed: int) -> tuple:
+    """Each vector sensor's readings of ``q_true`` for ``seed`` (its own stream)."""
+    sensors = scenario.build_vector_sensors()
+    readings = []
+    for sensor, rng in zip(sensors, vector_generators(seed, len(sensors))):
+        if sensor.name == "magnetometer":
+            readings.append(sensor.measure(q_true, references.magnetic_field_nT, rng))
+        elif sensor.name == "accelerometer":
+            readings.append(sensor.measure(q_true, rng))
+        else:
+            readings.append(sensor.measure(q_true, references.sun_unit, references.illumination,
+                                           rng))
+    return tuple(readings)
+
+
+def scenario_references(scenario: Scenario):
+    """The reference vectors of ``scenario``'s environment at every step
+    (:mod:`dynamics.environment`; cached, they do not depend on the seed),
+    or None without vector sensors."""
+    if not scenario.has_vector_sensors:
+        return None
+    return _references_cached(tuple(scenario.orbit_settings.items()), scenario.site,
+                              scenario.magnetic_field_model, scenario.shadow_model,
+                              scenario.dt, scenario.n_steps)
+
+
+@lru_cache(maxsize=8)
+def _references_cached(orbit_settings, site, field_model, shadow_model, dt, n_steps):
+    from dynamics.environment import orbit_references, site_references
+    from dynamics.orbit import make_orbit
+    settings = dict(orbit_settings)
+    if site is not None:
+        return site_references(*site, settings["epoch"], n_steps)
+    return orbit_references(make_orbit(**settings), settings["epoch"],
+                            np.arange(n_steps) * dt, field_model, shadow_model)
 
 
 def _truth_at_readings(scenario: Scenario, star_tracker) -> np.ndarray | None:
@@ -196,6 +250,19 @@ def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
     built from ``scenario`` (its ``from_scenario``, which also applies a
     user's class's ``[estimators."package.module:ClassName"]`` section)."""
     return resolve_estimator(name).from_scenario(scenario)
+
+
+def _vectors_for(estimator, key: str, vectors: tuple):
+    """The vector readings for ``estimator``: all of them if it takes them;
+    None (and a warning, for an estimator that does not say) if not."""
+    if not vectors:
+        return None
+    if estimator.uses_vector_readings:
+        return vectors
+    if estimator.uses_vector_readings is None:
+        warnings.warn(f"{key} ignores the scenario's vector sensors (it does not set "
+                      "uses_vector_readings; see estimators.AttitudeEstimator.step)", stacklevel=3)
+    return None
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
@@ -234,11 +301,12 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         if len(record) == 4 and not estimator.applies_reading_times:
             warnings.warn(f"{key} applies each star tracker reading at its gyro step, not at "
                           "its own time (it does not override _step_at)", stacklevel=2)
+        vectors = _vectors_for(estimator, key, sensors.vectors)
         if traces:
-            kept[key] = estimator.track(*record)
+            kept[key] = estimator.track(*record, vectors=vectors)
             q_est = kept[key].quat
         else:
-            q_est = estimator.run(*record)
+            q_est = estimator.run(*record, vectors=vectors)
         estimates[key] = q_est
         errors[key] = attitude_error_deg(truth.q_true, q_est)
         labels[key] = estimator.label

@@ -8,6 +8,9 @@ name                           class
 ``ekf``                        :class:`QuaternionEKF` (filterpy EKF)
 ``mekf``                       :class:`MultiplicativeEKF` (filterpy KF)
 ``usque``                      :class:`USQUE` (filterpy UKF)
+``triad``, ``q-method``,       the static solutions of Wahba's problem
+``quest``, ``esoq2``,          (:mod:`estimators.static`, solvers in
+``foam``, ``svd``              :mod:`estimators.wahba`)
 =============================  ==========================================
 
 Each takes keyword-only settings, steps on 1-D arrays and returns ``(4,)``
@@ -21,12 +24,13 @@ from estimators.dead_reckoning import DeadReckoning
 from estimators.dead_reckoning_resets import DeadReckoningWithResets
 from estimators.ekf import QuaternionEKF
 from estimators.mekf import MultiplicativeEKF
+from estimators.static import STATIC_ESTIMATORS
 from estimators.usque import USQUE
 
 #: Command-line name → class: the workshop's three in the order it introduces
 #: them, then the flight filters. Adding an estimator is one line here.
 ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
-                                        MultiplicativeEKF, USQUE)}
+                                        MultiplicativeEKF, USQUE, *STATIC_ESTIMATORS)}
 
 #: What a concrete estimator must override: the base class's raise NotImplementedError.
 ABSTRACT_METHODS = ("_step", "reset")

@@ -28,7 +28,8 @@ from __future__ import annotations
 import inspect
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -76,6 +77,12 @@ class AttitudeEstimator:
     #: this estimator alone: ``[estimators.NAME]`` sets that field itself (so
     #: campaigns that vary it per run, such as the EKF's ``pc_exponent``, see it).
     owned_fields: tuple = ()
+    #: Whether :meth:`step` applies vector readings (magnetometer, sun
+    #: sensors, accelerometer: :class:`sensors.vector.VectorObservation`):
+    #: True for the filters and the static solvers, False for dead reckoning;
+    #: None (undeclared, as a user's class is until it says) means it does
+    #: not, and :func:`benchmarks.simulation.simulate` warns that it ignores them.
+    uses_vector_readings: bool | None = None
 
     def __init__(self, *, dt: float, initial_attitude, on_invalid: str = "raise"):
         self.dt = finite_number("dt", dt, strictly_positive=True)
@@ -87,7 +94,11 @@ class AttitudeEstimator:
         #: Steps taken since construction or the last run/track.
         self.step_index = 0
         #: Measurements skipped under ``on_invalid="skip"``: rates and readings.
-        self.skipped = {"rate": 0, "reading": 0}
+        self.skipped = {"rate": 0, "reading": 0, "vector": 0}
+        #: Readings rejected by innovation gating, by sensor (filters with a
+        #: ``gate_probability``), and the ``(step, sensor)`` of each.
+        self.rejected = {}
+        self.rejections = []
         self._last_rate = np.zeros(3)
         #: The step where the estimate or its covariance stopped being finite
         #: (see :meth:`step`), or None.
@@ -168,6 +179,8 @@ class AttitudeEstimator:
         others return None."""
         kept = getattr(self, "filter", self)
         y, S = getattr(kept, "y", None), getattr(kept, "S", None)
+        if getattr(self, "_tracker_innovation", None) is not None:
+            y, S = self._tracker_innovation      # vector updates came after it
         if y is None or S is None or np.ndim(S) != 2:
             return None
         y = np.ravel(y)
@@ -183,7 +196,7 @@ class AttitudeEstimator:
     applies_reading_times = False
 
     def step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None = None,
-             offset_s: float = 0.0) -> np.ndarray:
+             offset_s: float = 0.0, vectors=()) -> np.ndarray:
         """Consume step ``k``'s measurements and return ``q̂[k]`` as a ``(4,)`` array.
 
         Measurements are checked here, where they enter: a rate that is not 3
@@ -209,17 +222,28 @@ class AttitudeEstimator:
             first, without the reading; the reading is applied at its own time
             by estimators that can (:attr:`applies_reading_times`:
             propagate to ``t_k + τ``, update, propagate on to ``t_{k+1}``).
+        vectors : sequence of :class:`sensors.vector.VectorObservation`
+            The vector readings taken at ``t_k`` (applied, in order, after the
+            star tracker's, by estimators with :attr:`uses_vector_readings`;
+            ignored by the others). One whose vectors are not 3 finite
+            numbers (a zero reference) or whose variance is not > 0 is refused
+            like a bad reading (or, with ``"skip"``, counted in ``skipped["vector"]``).
         """
         omega = self._checked_rate(omega_meas_radps)
         if star_tracker_quat is not None:
             star_tracker_quat = self._checked_reading(star_tracker_quat)
+        if vectors:
+            vectors = self._checked_vectors(vectors) if self.uses_vector_readings else ()
         self.step_index += 1
         if self.diverged_step is not None:
             return np.full(4, np.nan)
         try:
             if offset_s and star_tracker_quat is not None:
-                estimate = self._step_at(omega, star_tracker_quat,
-                                         self._checked_offset(offset_s))
+                offset = self._checked_offset(offset_s)
+                estimate = (self._step_at(omega, star_tracker_quat, offset, vectors) if vectors
+                            else self._step_at(omega, star_tracker_quat, offset))
+            elif vectors:
+                estimate = self._step(omega, star_tracker_quat, vectors)
             else:
                 estimate = self._step(omega, star_tracker_quat)
         except np.linalg.LinAlgError:      # a covariance no longer positive definite
@@ -247,6 +271,24 @@ class AttitudeEstimator:
         self._last_rate = omega
         return omega
 
+    def _checked_vectors(self, vectors) -> tuple:
+        """The step's usable vector readings (a bad one raises, or is skipped and counted)."""
+        kept = []
+        for observation in vectors:
+            body = _real_array("vector body", getattr(observation, "body", None), strict=False)
+            reference = _real_array("vector reference", getattr(observation, "reference", None),
+                                    strict=False)
+            variance = getattr(observation, "variance", math.nan)
+            if (body.shape == (3,) and reference.shape == (3,)
+                    and np.all(np.isfinite(body)) and np.all(np.isfinite(reference))
+                    and reference @ reference > 0 and math.isfinite(variance) and variance > 0):
+                kept.append(observation)
+                continue
+            self._invalid("vector", f"vector reading of {getattr(observation, 'sensor', '?')}",
+                          observation, "must have 3 finite numbers in body and reference (a "
+                          "non-zero reference) and a variance > 0", None)
+        return tuple(kept)
+
     def _checked_offset(self, offset_s) -> float:
         """A reading's offset after its step's time: in ``[0, dt)``."""
         try:
@@ -259,10 +301,12 @@ class AttitudeEstimator:
         return offset
 
     def _step_at(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
-                 offset_s: float) -> np.ndarray:
+                 offset_s: float, vectors=()) -> np.ndarray:
         """A step whose reading was taken ``offset_s`` after ``t_k``. This
         base applies it at the step (an estimator without a notion of time
         within a step); :attr:`applies_reading_times` estimators override it."""
+        if vectors:
+            return self._step(omega_meas_radps, star_tracker_quat, vectors)
         return self._step(omega_meas_radps, star_tracker_quat)
 
     def _checked_reading(self, star_tracker_quat):
@@ -289,13 +333,15 @@ class AttitudeEstimator:
         self.skipped[kind] += 1
         return replacement
 
-    def _step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None
-              ) -> np.ndarray:
-        """The estimator's own step, on checked measurements."""
+    def _step(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray | None,
+              vectors=()) -> np.ndarray:
+        """The estimator's own step, on checked measurements (``vectors`` only
+        given to an estimator with :attr:`uses_vector_readings`)."""
         raise NotImplementedError
 
     def run(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
-            available: np.ndarray, offset_s: np.ndarray | None = None) -> np.ndarray:
+            available: np.ndarray, offset_s: np.ndarray | None = None, *,
+            vectors=None) -> np.ndarray:
         """Reset, then step through a whole record; returns ``(N, 4)`` estimates.
 
         Parameters
@@ -306,14 +352,17 @@ class AttitudeEstimator:
         offset_s : (N,) array, optional
             Seconds after ``t_k`` each step's reading was taken (off the gyro
             grid; see :meth:`step`); zeros if None.
+        vectors : sequence of :class:`sensors.vector.VectorReadings`, optional
+            Each vector sensor's readings over the record (``(N, 3)`` rows).
         """
         omega, star, available, offsets = self._start_record(
             omega_meas_radps, star_tracker_quat, available, offset_s)
+        vectors = _checked_vector_record(vectors, len(omega))
         estimates = np.empty((len(omega), 4))
         with _quiet_overflow():
             for k in range(len(omega)):
                 estimates[k] = self.step(omega[k], star[k] if available[k] else None,
-                                         offsets[k])
+                                         offsets[k], observations_at(vectors, k))
         return estimates
 
     def _start_record(self, omega_meas_radps, star_tracker_quat, available, offset_s=None):
@@ -341,11 +390,14 @@ class AttitudeEstimator:
         return omega, star, flags, offsets
 
     def track(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
-              available: np.ndarray, offset_s: np.ndarray | None = None) -> "EstimateTrace":
+              available: np.ndarray, offset_s: np.ndarray | None = None, *,
+              vectors=None) -> "EstimateTrace":
         """Like :meth:`run`, also collecting the covariance and bias estimate
-        of every step (None where the estimator keeps none)."""
+        of every step (None where the estimator keeps none) and the steps of
+        readings rejected by gating."""
         omega, star, available, offsets = self._start_record(
             omega_meas_radps, star_tracker_quat, available, offset_s)
+        vectors = _checked_vector_record(vectors, len(omega))
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
@@ -353,7 +405,8 @@ class AttitudeEstimator:
         with _quiet_overflow():
             for k in range(n):
                 skipped = self.skipped["reading"]
-                quat[k] = self.step(omega[k], star[k] if available[k] else None, offsets[k])
+                quat[k] = self.step(omega[k], star[k] if available[k] else None, offsets[k],
+                                    observations_at(vectors, k))
                 used = available[k] and self.skipped["reading"] == skipped
                 innovation = self.innovation_nis if used and self.diverged_step is None else None
                 if innovation is not None:
@@ -363,8 +416,13 @@ class AttitudeEstimator:
                 self._collect(columns, k, n)
                 if nis is not None and self.diverged_step is not None:
                     nis[k] = np.nan
+        rejected = {}
+        for k, sensor in self.rejections:
+            rejected.setdefault(sensor, []).append(k)
         return EstimateTrace(quat=quat, **columns, nis=nis,
-                             nis_dof=None if nis is None else self.innovation_dof)
+                             nis_dof=None if nis is None else self.innovation_dof,
+                             rejected={sensor: np.array(steps) for sensor, steps in
+                                       rejected.items()})
 
     def _collect(self, columns: dict, k: int, n: int) -> None:
         """Step ``k``'s covariance and bias estimate into ``columns`` (NaN once diverged)."""
@@ -387,6 +445,31 @@ def _quiet_overflow():
     return np.errstate(over="ignore", invalid="ignore", divide="ignore")
 
 
+def observations_at(vectors, k: int) -> tuple:
+    """Step ``k``'s vector readings: each sensor's ``observation(k)`` where it
+    is ``available`` (:class:`sensors.vector.VectorReadings`, duck-typed:
+    estimators do not import sensors), or ()."""
+    if not vectors:
+        return ()
+    return tuple(readings.observation(k) for readings in vectors if readings.available[k])
+
+
+def _checked_vector_record(vectors, n_steps: int) -> tuple:
+    """A record's vector readings: each sensor's arrays one row per step."""
+    if vectors is None:
+        return ()
+    vectors = tuple(vectors)
+    for readings in vectors:
+        for name, shape in (("body", (n_steps, 3)), ("reference", (n_steps, 3)),
+                            ("available", (n_steps,)), ("variance", (n_steps,))):
+            array = np.asarray(getattr(readings, name, None))
+            if array.shape != shape:
+                raise InvalidMeasurementError(f"vectors[{getattr(readings, 'sensor', '?')}]."
+                                              f"{name} of shape", array.shape,
+                                              f"must have shape {shape}: one row per step")
+    return vectors
+
+
 def _real_array(name: str, value, strict: bool = True) -> np.ndarray:
     """``value`` as a float array. Complex, boolean, string or object data are
     refused (numpy would drop an imaginary part, or fail deep inside a
@@ -402,6 +485,24 @@ def _real_array(name: str, value, strict: bool = True) -> np.ndarray:
         return np.empty(0)
     raise InvalidMeasurementError(name, value, "must be real numbers (not complex, booleans "
                                   "or text)")
+
+
+@lru_cache(maxsize=64)
+def gate_threshold(probability: float, dof: int) -> float:
+    """The χ² quantile a reading's NIS must not exceed to pass the gate."""
+    from scipy.stats import chi2
+    return float(chi2.ppf(probability, dof))
+
+
+def gate_probability_setting(value) -> float | None:
+    """A gating probability: None (off) or within (0, 1)."""
+    if value is None:
+        return None
+    probability = finite_number("gate_probability", value)
+    if not 0.0 < probability < 1.0:
+        raise InvalidParameterError("gate_probability", value, "must be within 0 and 1 "
+                                    "(e.g. 0.9999), or None for no gating")
+    return probability
 
 
 def finite_state(vector, covariance=None) -> bool:
@@ -472,27 +573,65 @@ class KalmanEstimator(AttitudeEstimator):
         f.x_prior, f.P_prior = x.copy(), P.copy()
         f.x_post, f.P_post = x.copy(), P.copy()
 
-    def _step(self, omega_meas_radps, star_tracker_quat=None) -> np.ndarray:
-        estimate = self._estimate_at_step(star_tracker_quat)
+    #: The filters apply vector readings: one sequential update per vector
+    #: (:meth:`correct_vector`), after the star tracker's.
+    uses_vector_readings = True
+    #: The χ² probability of innovation gating, or None (off; see :meth:`accepts`).
+    gate_probability = None
+
+    def correct_vector(self, observation) -> None:
+        """The update with one vector reading (:class:`sensors.vector.VectorObservation`)."""
+        raise NotImplementedError
+
+    def accepts(self, y: np.ndarray, S: np.ndarray, dof: int, sensor: str) -> bool:
+        r"""Innovation gating: whether a reading of innovation ``y`` and
+        innovation covariance ``S`` passes the χ² test of its NIS,
+        :math:`y^\mathsf{T} S^{-1} y \le \chi^2_{\text{dof}}(p)` with ``p`` the
+        :attr:`gate_probability` (always, when it is None). A rejected reading
+        is counted in :attr:`rejected` and is not applied: spacecraft reject
+        albedo and glints this way, ground IMUs magnetic disturbances and
+        linear acceleration."""
+        if self.gate_probability is None:
+            return True
+        nis = float(y @ np.linalg.solve(S, y))
+        if nis <= gate_threshold(self.gate_probability, dof):
+            return True
+        self.rejected[sensor] = self.rejected.get(sensor, 0) + 1
+        self.rejections.append((self.step_index - 1, sensor))
+        return False
+
+    #: The star tracker update's (y, S) on a step whose vector updates followed it.
+    _tracker_innovation = None
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
+        self._tracker_innovation = None
+        estimate = self._estimate_at_step(star_tracker_quat, vectors)
         self.propagate(omega_meas_radps)
         return estimate
 
-    def _estimate_at_step(self, star_tracker_quat) -> np.ndarray:
-        """Output the prior, or correct (with the step's reading, if any) and
+    def _estimate_at_step(self, star_tracker_quat, vectors=()) -> np.ndarray:
+        """Output the prior, or correct (with the step's readings, if any) and
         output the posterior."""
         if self.output == "prior":
             self._record()
         if star_tracker_quat is not None:
             self.correct(star_tracker_quat)
-        else:
+            if vectors:
+                kept = getattr(self, "filter", self)
+                self._tracker_innovation = (np.copy(getattr(kept, "y", None)),
+                                            np.copy(getattr(kept, "S", None)))
+        elif not vectors:
             self._without_reading()
+        for observation in vectors:
+            self.correct_vector(observation)
         if self.output == "posterior":
             self._record()
         return self._output[0].copy()
 
     applies_reading_times = True
 
-    def _step_at(self, omega_meas_radps, star_tracker_quat, offset_s: float) -> np.ndarray:
+    def _step_at(self, omega_meas_radps, star_tracker_quat, offset_s: float,
+                 vectors=()) -> np.ndarray:
         """A reading taken ``τ = offset_s`` after ``t_k`` (a tracker on its own
         clock): the estimate of ``t_k`` is output without it (prior and
         posterior are one there); then the filter propagates to ``t_k + τ``
@@ -500,8 +639,8 @@ class KalmanEstimator(AttitudeEstimator):
         ``Δt − τ`` (the continuous–discrete filter of M&C 2014, §6.2: each
         measurement is processed at its own time)."""
         if not self.applies_reading_times:
-            return self._step(omega_meas_radps, star_tracker_quat)
-        estimate = self._estimate_at_step(None)
+            return self._step(omega_meas_radps, star_tracker_quat, vectors)
+        estimate = self._estimate_at_step(None, vectors)
         self.propagate(omega_meas_radps, offset_s)
         self.correct(star_tracker_quat)
         self.propagate(omega_meas_radps, self.dt - offset_s)
@@ -577,6 +716,7 @@ class EstimateTrace:
     nis : (N,) the normalised innovation squared at reading steps (NaN
         elsewhere), or None
     nis_dof : its degrees of freedom, or None
+    rejected : sensor name → steps of readings rejected by gating
     """
 
     quat: np.ndarray
@@ -585,3 +725,5 @@ class EstimateTrace:
     bias_covariance: np.ndarray | None = None
     nis: np.ndarray | None = None
     nis_dof: int | None = None
+    #: sensor → the steps whose reading innovation gating rejected (empty without gating).
+    rejected: dict = field(default_factory=dict)

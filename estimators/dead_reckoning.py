@@ -47,6 +47,8 @@ class DeadReckoning(AttitudeEstimator):
         :meth:`~estimators.AttitudeEstimator.step`).
     """
 
+    #: Dead reckoning integrates the gyro alone (with resets: and the star tracker).
+    uses_vector_readings = False
     name = "dead-reckoning"
     label = "Dead Reckoning"
 

@@ -37,6 +37,21 @@ and ignores the quaternion's norm constraint in ``P``; the multiplicative EKF
 of Markley & Crassidis (2014, §6.2), :mod:`estimators.mekf`, is the standard
 remedy.
 
+**Vector measurements** (its own Jacobian, on the four components): a
+reading :math:`b = A(q)^\mathsf{T} r + v` (:mod:`sensors.vector`) is
+predicted from the normalised state :math:`n = x / \lVert x\rVert`,
+:math:`h(x) = A(n)^\mathsf{T} r` with, for :math:`n = (w, u)`,
+
+.. math:: A(n)^\mathsf{T} r = (w^2 - u\cdot u)\, r + 2 (u \cdot r)\, u - 2 w\, u \times r,
+
+    \frac{\partial h}{\partial x} = \Bigl[\, 2 w r - 2 u \times r \ \ \Big|\ \
+        2 (u\cdot r) I_3 + 2 u r^\mathsf{T} - 2 r u^\mathsf{T} + 2 w [r\times] \,\Bigr]
+        \frac{I_4 - n n^\mathsf{T}}{\lVert x\rVert},
+
+:math:`R = \sigma^2 I_3`, one filterpy update per vector. Gating
+(``gate_probability``) tests each reading's NIS, :math:`S = H P
+H^\mathsf{T} + R`, before its update.
+
 To compare it with filters whose error state is a body-frame small angle,
 its 4x4 ``P`` is projected (:attr:`QuaternionEKF.attitude_covariance`): with
 :math:`q = \hat q \otimes \delta q(\delta\theta) \approx \hat q + \tfrac12
@@ -56,7 +71,7 @@ import math
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from dynamics.quaternion import IDENTITY, kinematics_matrix
+from dynamics.quaternion import IDENTITY, kinematics_matrix, skew, to_body_frame
 from dynamics.validation import (
     InvalidParameterError,
     boolean,
@@ -65,7 +80,8 @@ from dynamics.validation import (
     one_of,
     process_exponent,
 )
-from estimators.base import OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state
+from estimators.base import (OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state,
+                             gate_probability_setting)
 from estimators.model import propagate_with_jacobian
 
 _IDENTITY_4 = np.eye(4)
@@ -79,6 +95,23 @@ def _measurement_jacobian(_x: np.ndarray) -> np.ndarray:
 def _measurement_function(x: np.ndarray) -> np.ndarray:
     """``h(q) = q``: the star tracker measures the quaternion itself."""
     return x
+
+
+def vector_prediction(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``h(x) = A(x/|x|)ᵀ r``: the body vector the state predicts."""
+    return to_body_frame(x / np.sqrt(x @ x), reference)
+
+
+def vector_jacobian(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``∂h/∂x`` (3x4) of :func:`vector_prediction` (module docstring)."""
+    norm = np.sqrt(x @ x)
+    n = x / norm
+    w, u, r = n[0], n[1:], reference
+    quadratic = np.empty((3, 4))
+    quadratic[:, 0] = 2.0 * w * r - 2.0 * np.cross(u, r)
+    quadratic[:, 1:] = (2.0 * (u @ r) * np.eye(3) + 2.0 * np.outer(u, r) - 2.0 * np.outer(r, u)
+                        + 2.0 * w * skew(r))
+    return quadratic @ (np.eye(4) - np.outer(n, n)) / norm
 
 
 class WorkshopModelEKF(ExtendedKalmanFilter):
@@ -122,6 +155,8 @@ class QuaternionEKF(KalmanEstimator):
         where the true ``w`` crosses zero. The workshop's readings always lie
         on the prediction's side, so its numbers are unchanged (tested);
         ``align_sign=False`` shows the failure.
+    gate_probability : float or None
+        Innovation gating (see :class:`~estimators.MultiplicativeEKF`); None: off.
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`).
@@ -194,7 +229,8 @@ class QuaternionEKF(KalmanEstimator):
     def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
                  measurement_covariance=1.0, initial_attitude=IDENTITY,
                  initial_covariance: float = 1e-12, output: str = "prior",
-                 align_sign: bool = True, on_invalid: str = "raise", initial_state=None):
+                 align_sign: bool = True, gate_probability: float | None = None,
+                 on_invalid: str = "raise", initial_state=None):
         # initial_state, the former name of initial_attitude, wins when given
         # (an [estimators.ekf] section's over the scenario's default).
         if initial_state is not None:
@@ -203,6 +239,7 @@ class QuaternionEKF(KalmanEstimator):
                                    on_invalid=on_invalid)
         self.filter = WorkshopModelEKF(self.dt)
         self.align_sign = boolean("align_sign", align_sign)
+        self.gate_probability = gate_probability_setting(gate_probability)
         self.pc_exponent = process_exponent("pc_exponent", pc_exponent)
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
@@ -240,7 +277,24 @@ class QuaternionEKF(KalmanEstimator):
         reading = np.asarray(star_tracker_quat, dtype=float)
         if self.align_sign and reading @ self.filter.x < 0:
             reading = -reading
+        if self.gate_probability is not None and not self.accepts(
+                reading - self.filter.x, self.filter.P + self.filter.R, 4, "star_tracker"):
+            return
         self.filter.update(reading, _measurement_jacobian, _measurement_function)
+
+    def correct_vector(self, observation) -> None:
+        """filterpy's update with one vector reading and its Jacobian (module docstring)."""
+        reference = np.asarray(observation.reference, dtype=float)
+        R = observation.variance * np.eye(3)
+        z = np.asarray(observation.body, dtype=float)
+        if self.gate_probability is not None:
+            H = vector_jacobian(self.filter.x, reference)
+            if not self.accepts(z - vector_prediction(self.filter.x, reference),
+                                H @ self.filter.P @ H.T + R, observation.dof,
+                                observation.sensor):
+                return
+        self.filter.update(z, vector_jacobian, vector_prediction, R=R, args=(reference,),
+                           hx_args=(reference,))
 
     def _without_reading(self) -> None:
         if self.output == "posterior":

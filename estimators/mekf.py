@@ -93,6 +93,25 @@ correction, and does the reset itself; ``x`` (the error state, 1-D ``(6,)``),
 ``P``, ``y``, ``S``, ``K``, ``x_prior``/``P_prior`` and ``x_post``/``P_post``
 are filterpy's, there to inspect.
 
+**Vector measurements** (§6.2.2; Lefferts, Markley & Shuster 1982): a
+vector sensor measures :math:`b = A(q)^\mathsf{T} r + v`,
+:math:`v \sim \mathcal N(0, \sigma^2 I_3)` (:mod:`sensors.vector`). With
+:math:`A(q) = A(\hat q)(I_3 + [\delta\theta\times])` to first order,
+
+.. math:: \hat b = A(\hat q)^\mathsf{T} r, \qquad
+          y = b - \hat b = [\hat b\times]\,\delta\theta + v, \qquad
+          H = \bigl[\,[\hat b\times]\ \ 0_3\,\bigr], \qquad R = \sigma^2 I_3,
+
+applied one vector at a time (sequential updates, each followed by its
+reset, so the next vector's :math:`\hat b` comes from the updated
+:math:`\hat q`), after the star tracker's reading of the same step.
+
+**Gating** (``gate_probability``): each reading's NIS
+:math:`y^\mathsf{T} S^{-1} y`, :math:`S = H P H^\mathsf{T} + R`, is tested
+against its χ² quantile before the update
+(:meth:`~estimators.base.KalmanEstimator.accepts`); a reading that fails is
+counted and not applied.
+
 Order within step ``k``: correct with the reading :math:`z_k` if there is
 one, output the corrected :math:`\hat q_{k|k}` (``output="posterior"``, the
 default; ``"prior"`` outputs :math:`\hat q_{k|k-1}` as the workshop EKF
@@ -107,8 +126,9 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
-                                 rotvec_from_quat, skew)
-from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
+                                 rotvec_from_quat, skew, to_body_frame)
+from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
+                             gate_probability_setting)
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -191,6 +211,9 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         Standard deviation of the initial bias error per axis, rad/s.
     output : {"posterior", "prior"}
         Which estimate :meth:`step` returns.
+    gate_probability : float or None
+        Innovation gating: a reading whose NIS exceeds the χ² quantile of
+        this probability is rejected (None: no gating).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
@@ -209,9 +232,10 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, output: str = "posterior",
-                 on_invalid: str = "raise"):
+                 gate_probability: float | None = None, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self.gate_probability = gate_probability_setting(gate_probability)
         self.filter = KalmanFilter(dim_x=6, dim_z=3)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
@@ -241,7 +265,33 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """Kalman update with one reading, then the reset."""
-        self.filter.update(self.innovation(star_tracker_quat))
+        y = self.innovation(star_tracker_quat)
+        if self.gate_probability is not None and not self.accepts(
+                y, self.filter.P[:3, :3] + self.R, 3, "star_tracker"):
+            return
+        self.filter.update(y)
+        self._reset()
+
+    def vector_model(self, observation) -> tuple[np.ndarray, np.ndarray]:
+        """``(y, H)``: the innovation ``b − A(q̂)ᵀ r`` of a vector reading and
+        its error-state Jacobian ``[[b̂×] 0]`` (module docstring)."""
+        predicted = to_body_frame(self.q_hat, np.asarray(observation.reference, dtype=float))
+        H = np.zeros((3, 6))
+        H[:, :3] = skew(predicted)
+        return np.asarray(observation.body, dtype=float) - predicted, H
+
+    def correct_vector(self, observation) -> None:
+        """Kalman update with one vector reading, then the reset."""
+        y, H = self.vector_model(observation)
+        R = observation.variance * _I3
+        if self.gate_probability is not None and not self.accepts(
+                y, H @ self.filter.P @ H.T + R, observation.dof, observation.sensor):
+            return
+        self.filter.update(y, R=R, H=H)
+        self._reset()
+
+    def _reset(self) -> None:
+        """Move the error state into the global state (§6.2.3)."""
         delta_theta, delta_beta = self.filter.x[:3], self.filter.x[3:]
         q = quat_multiply(self.q_hat, quat_from_rotvec(delta_theta))
         self.q_hat = q / np.sqrt(q @ q)

@@ -47,6 +47,16 @@ with :math:`\hat q`, as GRPs about :math:`\hat q`,
 :math:`h(x) = \delta p` and :math:`R` the tracker's body-frame covariance
 (rad²; GRPs equal the rotation vector to first order).
 
+**Vector measurements**: for a reading :math:`b = A(q)^\mathsf{T} r + v`
+(:mod:`sensors.vector`), each sigma point predicts its own
+:math:`h(\chi^{(i)}) = A\bigl(\hat q \otimes \delta q(\delta p^{(i)})\bigr)^\mathsf{T} r`
+and filterpy's unscented update takes :math:`R = \sigma^2 I_3`; vectors are
+applied one at a time (sequential updates), each followed by the reset, and
+the sigma points of a second update in one step are drawn anew from the
+updated :math:`(x, P)` (filterpy's ``sigma_points``). **Gating**
+(``gate_probability``) tests each reading's NIS with the unscented
+:math:`S` before its update.
+
 **Reset**: after each update (or, without a reading, before the next
 propagation) the mean's :math:`\delta p` moves into the reference,
 :math:`\hat q \leftarrow \hat q \otimes \delta q(\delta p)`,
@@ -63,12 +73,13 @@ updates, and the tests run on the version this project resolves.
 from __future__ import annotations
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
 
 from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_from_rotvec,
-                                 quat_multiply, relative_rotation)
+                                 quat_multiply, relative_rotation, to_body_frame)
 from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
-from estimators.base import AttitudeAndBiasEstimator, AttitudeEstimator, finite_state
+from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
+                             gate_probability_setting)
 from estimators.mekf import discrete_error_model
 
 #: n, the filter's state: the attitude error's GRPs and the gyro bias.
@@ -130,7 +141,7 @@ class USQUE(AttitudeAndBiasEstimator):
     ----------
     dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
-    initial_bias_sigma_radps, output, on_invalid
+    initial_bias_sigma_radps, output, gate_probability, on_invalid
         As for :class:`~estimators.MultiplicativeEKF`.
     alpha, beta, kappa : float
         The scaled sigma points' spread, prior-knowledge and secondary
@@ -154,9 +165,10 @@ class USQUE(AttitudeAndBiasEstimator):
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, alpha: float = 1.0, beta: float = 2.0,
                  kappa: float = 0.0, output: str = "posterior",
-                 on_invalid: str = "raise"):
+                 gate_probability: float | None = None, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self.gate_probability = gate_probability_setting(gate_probability)
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
         _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
         _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
@@ -178,6 +190,7 @@ class USQUE(AttitudeAndBiasEstimator):
         # An update before the first predict needs sigma points about (x₀, P₀),
         # which filterpy only draws in predict.
         self.filter.sigmas_f = self.filter.points_fn.sigma_points(self.filter.x, self.filter.P)
+        self._updated = False
         self._record()
 
     def _record(self) -> None:
@@ -217,13 +230,50 @@ class USQUE(AttitudeAndBiasEstimator):
 
     def correct(self, star_tracker_quat: np.ndarray) -> None:
         """filterpy's unscented update with one reading, then the reset."""
-        self.filter.update(self.measured_grp(star_tracker_quat))
+        self._fresh_sigma_points()
+        z = self.measured_grp(star_tracker_quat)
+        if self.gate_probability is None or self._gate(z, self._hx, self.R, 3, "star_tracker"):
+            self.filter.update(z)
         self._reset()
+        self._updated = True
+
+    def correct_vector(self, observation) -> None:
+        """filterpy's unscented update with one vector reading, then the reset."""
+        self._fresh_sigma_points()
+        reference = np.asarray(observation.reference, dtype=float)
+        R = observation.variance * np.eye(3)
+        z = np.asarray(observation.body, dtype=float)
+        if self.gate_probability is None or self._gate(z, self._hx_vector, R, observation.dof,
+                                                       observation.sensor,
+                                                       reference=reference):
+            self.filter.update(z, R=R, hx=self._hx_vector, reference=reference)
+        self._reset()
+        self._updated = True
+
+    def _hx_vector(self, x, reference):
+        """A sigma point's predicted body vector ``A(q̂ ⊗ δq(δp))ᵀ r``."""
+        return to_body_frame(_unit(quat_multiply(self.q_hat, quat_from_grp(x[:3]))), reference)
+
+    def _fresh_sigma_points(self) -> None:
+        """Sigma points about the current ``(x, P)`` for a second update within
+        one step (those of the predict no longer describe the state)."""
+        if self._updated:
+            self.filter.sigmas_f = self.filter.points_fn.sigma_points(self.filter.x,
+                                                                      self.filter.P)
+
+    def _gate(self, z, hx, R, dof: int, sensor: str, **hx_args) -> bool:
+        """The gating test with the unscented innovation covariance (filterpy's
+        transform of the sigma points through ``hx``, as its update computes it)."""
+        f = self.filter
+        sigmas_h = np.atleast_2d([hx(s, **hx_args) for s in f.sigmas_f])
+        zp, S = unscented_transform(sigmas_h, f.Wm, f.Wc, R)
+        return self.accepts(z - zp, S, dof, sensor)
 
     def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
         """Sigma points through the exact kinematics; P⁻ = UT + Q (over ``dt``
         if given: part of a step)."""
         dt = self.dt if dt is None else dt
+        self._updated = False
         omega = np.asarray(omega_meas_radps, dtype=float)
         omega_hat = omega - self.filter.x[3:]
         q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt)))

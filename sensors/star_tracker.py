@@ -342,3 +342,38 @@ class RotationStarTracker:
         return StarTrackerReadings(quat=readings[np.cumsum(available)], available=available,
                                    offset_s=_offsets_on_grid(n_steps, steps[kept],
                                                              offsets[kept]))
+
+
+class NoStarTracker:
+    """No star tracker (``[star_tracker] model = "none"``): a spacecraft that
+    determines its attitude from vector sensors alone. It answers the
+    trackers' interface with no reading ever (held readings are the identity,
+    never flagged available)."""
+
+    model = "none"
+    dropout_probability = 0.0
+
+    def __init__(self, time_between_measurements: float, dt: float):
+        self.time_between_measurements = time_between_measurements
+        self.dt = dt
+
+    @property
+    def attitude_covariance_rad2(self) -> np.ndarray:
+        """1 rad² per axis: a placeholder that no update ever uses (there is no reading)."""
+        return np.eye(3)
+
+    def in_outage(self, time_s: np.ndarray) -> np.ndarray:
+        return np.ones(np.shape(time_s), dtype=bool)
+
+    def schedule(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+
+    def measure(self, q_true: np.ndarray, rng: np.random.Generator,
+                dropout_rng: np.random.Generator | None = None,
+                reading_quat: np.ndarray | None = None) -> StarTrackerReadings:
+        """No readings: nothing is drawn from either generator."""
+        n_steps = len(q_true)
+        quat = np.zeros((n_steps, 4))
+        quat[:, 0] = 1.0
+        return StarTrackerReadings(quat=quat, available=np.zeros(n_steps, dtype=bool),
+                                   offset_s=np.zeros(n_steps))

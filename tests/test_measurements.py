@@ -79,7 +79,7 @@ def test_skip_treats_them_as_missing_and_counts_them(name):
     estimator = ESTIMATORS[name](dt=0.01, on_invalid="skip")
     out = estimator.run(damaged_omega, damaged_star, available)
     assert np.all(np.isfinite(out))
-    assert estimator.skipped == {"rate": 1, "reading": 1}
+    assert estimator.skipped == {"rate": 1, "reading": 1, "vector": 0}
     assert np.array_equal(out[:15], clean[:15])
     expected_rate = omega.copy()
     expected_rate[15] = omega[14]

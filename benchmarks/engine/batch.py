@@ -108,6 +108,10 @@ def engine_limitation(scenario: Scenario, runs: RunTable | None = None) -> str |
     if given): a sensor model its kernels do not draw, or None. Those
     scenarios run on the per-run path (:func:`benchmarks.engine.runner.run_many`
     falls back, saying so)."""
+    if scenario.has_vector_sensors:
+        return "vector sensors (magnetometer, sun sensors, accelerometer)"
+    if scenario.star_tracker_model == "none":
+        return "a scenario without a star tracker"
     intervals = ([scenario.time_between_measurements] if runs is None
                  else np.unique(runs.time_between_measurements))
     if not all(on_gyro_grid(float(t), scenario.dt) for t in intervals):

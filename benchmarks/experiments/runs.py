@@ -114,9 +114,14 @@ def flight_comparison_figure(result: RunResult):
             biases[name] = (radps_to_deg_per_hr(trace.bias_radps), radps_to_deg_per_hr(
                 np.sqrt(np.diagonal(trace.bias_covariance, axis1=1, axis2=2))))
     scenario = result.scenario
+    references = result.sensors.references
+    rejected = {name: np.unique(np.concatenate(list(trace.rejected.values())))
+                for name, trace in result.traces.items() if trace.rejected}
     return flight_figure(result.time_s, errors, sigmas,
                          radps_to_deg_per_hr(result.sensors.gyro_bias_radps), biases,
-                         result.labels, envelope_steps=reading_window(scenario))
+                         result.labels, envelope_steps=reading_window(scenario),
+                         eclipse=None if references is None or references.sun_unit is None
+                         else references.eclipse, rejected=rejected)
 
 
 def reading_window(scenario) -> int:

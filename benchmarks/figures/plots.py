@@ -159,7 +159,8 @@ _UNIT_SYMBOLS = {"arcsec": "″", "deg": "°"}
 
 
 def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_deg_per_hr,
-                  bias_estimates: dict, labels: dict, envelope_steps: int = 1) -> Figure:
+                  bias_estimates: dict, labels: dict, envelope_steps: int = 1,
+                  eclipse=None, rejected: dict | None = None) -> Figure:
     """Per-axis attitude error with ±3σ envelopes (left), bias estimates against
     the true bias (right; no bias column when no estimator has a bias).
 
@@ -175,6 +176,11 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
     envelope_steps : int
         The ±3σ bands are drawn through their peaks over this many steps (one
         reading interval: a σ that drops at each reading is not a sawtooth).
+    eclipse : (N,) bool, optional
+        The steps in the Earth's shadow, shaded grey in every panel.
+    rejected : {name: (steps,)}, optional
+        Each filter's readings rejected by innovation gating, marked ✕ on its
+        error curve.
 
     The error axes are symmetric-log: linear within the best filter's
     steady-state 3σ, logarithmic beyond, so a converged filter, a drifting
@@ -189,10 +195,11 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
         axes = figure.subplots(3, columns, sharex=True, squeeze=False)
     styles = estimator_styles(error_vectors_deg)
     second_half = slice(len(time_s) // 2, None)
-    steady = [3 * np.median(sigma[second_half]) for sigma in sigmas_deg.values()
-              if sigma is not None]
+    steady = [3 * np.nanmedian(sigma[second_half]) for sigma in sigmas_deg.values()
+              if sigma is not None and np.isfinite(sigma[second_half]).any()]
     if not steady:
-        steady = [np.median(np.abs(e[second_half])) for e in error_vectors_deg.values()]
+        steady = [np.nanmedian(np.abs(e[second_half])) for e in error_vectors_deg.values()
+                  if np.isfinite(e[second_half]).any()] or [1.0]
     typical_deg = max(min(steady), 1e-12)
     scale, unit = angle_unit(typical_deg)
     scaled = {name: error * scale for name, error in error_vectors_deg.items()}
@@ -203,6 +210,7 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
                  for name, sigma in sigmas_deg.items()}
     for axis in range(3):
         _error_panel(axes[axis, 0], time_s, scaled, envelopes, axis, styles, under, labels)
+        _events(axes[axis, 0], time_s, scaled, axis, styles, labels, eclipse, rejected or {})
         symlog_axis(axes[axis, 0], typical_deg * scale, largest)
         axes[axis, 0].set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
         axes[axis, 0].set_xlim(time_s[0], time_s[-1])
@@ -241,6 +249,21 @@ def _error_panel(ax, time_s, scaled: dict, envelopes: dict, axis: int, styles: d
                 linewidth=1.6, alpha=0.9, label=f"{labels[name]} ±3σ")
         ax.plot(time_s, -envelope, color=style["color"], linestyle=style["linestyle"],
                 linewidth=1.6, alpha=0.9)
+
+
+def _events(ax, time_s, scaled: dict, axis: int, styles: dict, labels: dict, eclipse,
+            rejected: dict) -> None:
+    """Eclipses shaded grey; readings rejected by gating marked on each filter's curve."""
+    if eclipse is not None and np.any(eclipse):
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], eclipse.astype(int), [0]])))
+        for first, (start, stop) in enumerate(zip(edges[::2], edges[1::2])):
+            ax.axvspan(time_s[start], time_s[min(stop, len(time_s) - 1)], color="0.55",
+                       alpha=0.18, linewidth=0, label="Eclipse" if first == 0 else None)
+    for name, steps in rejected.items():
+        if name in scaled and len(steps):
+            ax.plot(time_s[steps], scaled[name][steps, axis], linestyle="none", marker="x",
+                    markersize=6, color=styles[name]["color"],
+                    label=f"{labels[name]}: reading rejected by gating")
 
 
 def _bias_panel(ax, time_s, truth, estimates: dict, styles: dict, under: dict,

@@ -1,0 +1,210 @@
+r"""Static attitude determination: a Wahba solution at every step with two
+or more non-parallel vector readings, and the gyro between them.
+
+Each of the six solvers of :mod:`estimators.wahba` is a registry estimator
+(``triad``, ``q-method``, ``quest``, ``esoq2``, ``foam``, ``svd``) with the
+common interface. At a step whose vector readings
+(:class:`sensors.vector.VectorObservation`) hold two directions at least
+``min_separation_deg`` apart, the estimate is that step's solution and its
+covariance the solver's (Shuster's :math:`[\sum_i \sigma_i^{-2}(I_3 - b_i
+b_i^\mathsf{T})]^{-1}` for the optimal solvers, Shuster & Oh's for TRIAD;
+:mod:`estimators.wahba`), each direction weighed by
+:math:`a_i = \sigma_i^{-2}` with :math:`\sigma_i` its angular noise (a
+magnetometer's σ in nT over the field's strength). Nothing of earlier steps
+is kept: that is what makes it static, and what a filter adds.
+
+Between solutions (one sensor in eclipse, or none), ``between`` says what
+it does:
+
+* ``"propagate"`` (the default): the last estimate is carried by the gyro,
+  :math:`\hat q_{k+1} = \hat q_k \otimes \delta q(\tilde\omega_k \Delta t)`,
+  and its covariance grows by the gyro's angle noise,
+  :math:`P \leftarrow \Phi P \Phi^\mathsf{T} + \sigma_v^2 \Delta t\, I_3` with
+  :math:`\Phi` the step's rotation. The gyro bias is not estimated, so an
+  uncompensated bias makes the covariance optimistic in long gaps.
+* ``"hold"``: the last solution is held, with its covariance (which then
+  understates the error as the body turns).
+
+Star tracker readings are not used: these are the vector-only solutions.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynamics.quaternion import IDENTITY, quat_from_rotvec, quat_multiply, rotation_matrix
+from dynamics.validation import finite_number, one_of
+from estimators import wahba
+from estimators.base import AttitudeEstimator, axis_sigmas, finite_state
+
+BETWEEN = ("propagate", "hold")
+
+
+class StaticAttitude(AttitudeEstimator):
+    """A Wahba solver as an estimator (module docstring); subclasses name the solver.
+
+    Parameters
+    ----------
+    dt : float
+        Gyro step, seconds.
+    initial_attitude : (4,)
+        The estimate before the first solution.
+    gyro_noise : float
+        σ_v², rad²/s: the covariance's growth between solutions.
+    initial_attitude_sigma_rad : float or (3,)
+        The covariance before the first solution, rad per axis.
+    between : {"propagate", "hold"}
+        What the estimate does between solutions.
+    min_separation_deg : float
+        Two directions closer than this (or to its supplement) count as
+        one: no solution from them alone.
+    on_invalid : {"raise", "skip"}
+    """
+
+    uses_vector_readings = True
+    solver = staticmethod(wahba.svd)
+    scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise"}
+
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
+                 initial_attitude_sigma_rad=0.1, between: str = "propagate",
+                 min_separation_deg: float = 1.0, on_invalid: str = "raise"):
+        super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+        self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
+        self.initial_covariance = np.diag(axis_sigmas("initial_attitude_sigma_rad",
+                                                      initial_attitude_sigma_rad) ** 2)
+        self.between = one_of("between", between, BETWEEN)
+        separation = finite_number("min_separation_deg", min_separation_deg, minimum=0.0)
+        self.min_sine = math.sin(math.radians(min(separation, 90.0)))
+        self.reset()
+
+    def reset(self) -> None:
+        self.q_hat = self.initial_attitude.copy()
+        self.P = self.initial_covariance.copy()
+        #: Steps with a solution since the last reset.
+        self.solutions = 0
+
+    @property
+    def attitude(self) -> np.ndarray:
+        return self.q_hat.copy()
+
+    @property
+    def attitude_covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
+        solved = self.solve(vectors) if len(vectors) >= 2 else None
+        if solved is not None:
+            self.q_hat, self.P = solved
+            self.solutions += 1
+        estimate = self.q_hat.copy()
+        if self.between == "propagate":
+            self._propagate(omega_meas_radps)
+        return estimate
+
+    def solve(self, vectors) -> tuple[np.ndarray, np.ndarray] | None:
+        """The solution and its covariance from one step's vector readings,
+        or None without two separated directions."""
+        body = np.array([np.asarray(v.body, dtype=float) for v in vectors])
+        reference = np.array([np.asarray(v.reference, dtype=float) for v in vectors])
+        body_norm = np.linalg.norm(body, axis=1)
+        if np.any(body_norm == 0):
+            keep = body_norm > 0
+            body, reference, vectors = body[keep], reference[keep], \
+                [v for v, k in zip(vectors, keep) if k]
+            body_norm = body_norm[keep]
+        body = body / body_norm[:, None]
+        reference = reference / np.linalg.norm(reference, axis=1, keepdims=True)
+        sigmas = np.array([math.sqrt(v.variance) / np.linalg.norm(v.reference) for v in vectors])
+        if len(body) < 2 or not _separated(body, reference, self.min_sine):
+            return None
+        weights = 1.0 / sigmas ** 2
+        return self.solution(body, reference, weights), self.covariance(body, reference, sigmas)
+
+    def solution(self, body, reference, weights) -> np.ndarray:
+        """The solver's quaternion for unit vectors and their weights."""
+        return self.solver(body, reference, weights)
+
+    def covariance(self, body, reference, sigmas) -> np.ndarray:
+        """The solution's body-frame covariance, rad² (Shuster's)."""
+        return wahba.wahba_covariance(body, sigmas)
+
+    def _propagate(self, omega_meas_radps) -> None:
+        rotation = np.asarray(omega_meas_radps, dtype=float) * self.dt
+        step = quat_from_rotvec(rotation)
+        q = quat_multiply(self.q_hat, step)
+        self.q_hat = q / np.sqrt(q @ q)
+        phi = rotation_matrix(step).T          # the body-frame error turns with the body
+        self.P = phi @ self.P @ phi.T + self.gyro_noise * self.dt * np.eye(3)
+
+    def state_is_finite(self) -> bool:
+        return finite_state(self.q_hat, self.P)
+
+
+def _separated(body: np.ndarray, reference: np.ndarray, min_sine: float) -> bool:
+    """Whether two observations are at least ``asin(min_sine)`` apart in both
+    frames (two readings of one direction, the Sun's, do not fix an attitude)."""
+    for i in range(len(body)):
+        for j in range(i + 1, len(body)):
+            if wahba.separated(body[i], body[j], min_sine) and \
+                    wahba.separated(reference[i], reference[j], min_sine):
+                return True
+    return False
+
+
+class TRIAD(StaticAttitude):
+    """TRIAD on the two most accurate separated directions (:func:`estimators.wahba.triad`)."""
+
+    name = "triad"
+    label = "TRIAD"
+    solver = staticmethod(wahba.triad)
+
+    def solution(self, body, reference, weights) -> np.ndarray:
+        return wahba.triad(body, reference, weights, self.min_sine)
+
+    def covariance(self, body, reference, sigmas) -> np.ndarray:
+        first, second = wahba.triad_pair(body, reference, 1.0 / sigmas ** 2, self.min_sine)
+        return wahba.triad_covariance(body, sigmas, first, second)
+
+
+class DavenportQ(StaticAttitude):
+    """Davenport's q-method (:func:`estimators.wahba.davenport_q`)."""
+
+    name = "q-method"
+    label = "q-method"
+    solver = staticmethod(wahba.davenport_q)
+
+
+class QUEST(StaticAttitude):
+    """QUEST (:func:`estimators.wahba.quest`)."""
+
+    name = "quest"
+    label = "QUEST"
+    solver = staticmethod(wahba.quest)
+
+
+class ESOQ2(StaticAttitude):
+    """ESOQ2 (:func:`estimators.wahba.esoq2`)."""
+
+    name = "esoq2"
+    label = "ESOQ2"
+    solver = staticmethod(wahba.esoq2)
+
+
+class FOAM(StaticAttitude):
+    """FOAM (:func:`estimators.wahba.foam`)."""
+
+    name = "foam"
+    label = "FOAM"
+    solver = staticmethod(wahba.foam)
+
+
+class SVD(StaticAttitude):
+    """The SVD solution, scipy's ``Rotation.align_vectors`` (:func:`estimators.wahba.svd`)."""
+
+    name = "svd"
+    label = "SVD"
+    solver = staticmethod(wahba.svd)
+
+
+STATIC_ESTIMATORS = (TRIAD, DavenportQ, QUEST, ESOQ2, FOAM, SVD)

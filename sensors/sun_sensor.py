@@ -1,0 +1,186 @@
+r"""Sun sensors: a fine sun sensor (a unit vector with angular noise) and a
+set of coarse sun sensors (cosine-law currents from the faces, as on CubeSats).
+
+Both read only in sunlight: a step whose illumination
+(:func:`dynamics.environment.illumination`) is below :data:`FULL_SUN` gives
+no reading (the penumbra's dimmed Sun would bias either sensor). Earth
+albedo is not modelled; innovation gating is how a filter rejects it.
+
+**Fine sun sensor** (:class:`FineSunSensor`): with :math:`s = A(q)^\mathsf{T}
+\hat r_\odot` the true body-frame Sun direction, it reads when the Sun is
+within ``fov_deg`` of its boresight :math:`n`, :math:`s \cdot n \ge
+\cos(\text{fov})`,
+
+.. math:: b = \exp\bigl([\delta\times]\bigr)\, s, \qquad
+          \delta \sim \mathcal N\bigl(0, \sigma^2 (I_3 - s s^\mathsf{T})\bigr),
+
+a unit vector whose error, of σ per axis (rad), lies across it (2 degrees of
+freedom). A datasheet's accuracy is this σ (e.g. the NewSpace Systems
+NFSS-411: < 0.1° RMS over a 140° field of view).
+
+**Coarse sun sensors** (:class:`CoarseSunSensors`): ``N`` photodiodes on
+faces of outward normals :math:`n_i` (the six faces of a cube by default)
+give currents, as fractions of the full-sun, normal-incidence current,
+
+.. math:: c_i = \max(0,\ n_i \cdot s) + v_i, \qquad v_i \sim \mathcal N(0, \sigma_c^2)
+
+(the cosine law; a face in the dark reads its noise). The faces reading
+above :data:`LIT_THRESHOLD_SIGMA` σ_c give a first solution, the faces it
+lights the final one: the least-squares solution
+:math:`b = (N_L^\mathsf{T} N_L)^{-1} N_L^\mathsf{T} c_L`, a full 3-vector with
+covariance :math:`\sigma_c^2 (N_L^\mathsf{T} N_L)^{-1}` (:math:`\sigma_c^2
+I_3` for the cube's three orthogonal lit faces), reported as its mean
+variance per axis; fewer than three lit faces of independent normals give no
+reading.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dynamics.validation import InvalidParameterError, finite_number, float_array, \
+    standard_deviation
+from sensors.vector import VectorReadings, VectorSensor, to_body
+
+#: Illumination below which a sun sensor gives no reading (1: full Sun).
+FULL_SUN = 0.99
+#: A coarse sensor's face counts as lit when it reads above this many σ_c.
+LIT_THRESHOLD_SIGMA = 3.0
+#: The lit faces' normal matrix must be better conditioned than this.
+MAX_CONDITION = 1e6
+#: The six faces of a cube, outward normals in the body frame.
+CUBE_FACES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0),
+              (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+
+
+def _unit_vector(name: str, value) -> np.ndarray:
+    vector = float_array(name, value, "must be 3 finite numbers of non-zero length")
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) == 0:
+        raise InvalidParameterError(name, value, "must be 3 finite numbers of non-zero length")
+    return vector / np.linalg.norm(vector)
+
+
+class FineSunSensor(VectorSensor):
+    """A fine sun sensor (module docstring).
+
+    Parameters
+    ----------
+    sigma_deg : float
+        Angular noise σ per axis across the Sun vector, degrees (> 0).
+    interval_s, dt : float
+    fov_deg : float
+        Half-angle of the field of view about the boresight, degrees (0–90].
+    boresight : (3,)
+        The boresight in the body frame (normalised).
+    """
+
+    name = "sun_sensor"
+    dof = 2
+
+    def __init__(self, sigma_deg: float, interval_s: float, dt: float, *, fov_deg: float = 70.0,
+                 boresight=(0.0, 0.0, 1.0)):
+        super().__init__(interval_s, dt)
+        self.sigma_rad = math.radians(standard_deviation("sun_sensor.sigma_deg", sigma_deg,
+                                                         strictly_positive=True))
+        fov = finite_number("sun_sensor.fov_deg", fov_deg, strictly_positive=True)
+        if fov > 90.0:
+            raise InvalidParameterError("sun_sensor.fov_deg", fov_deg,
+                                        "must be at most 90 degrees (a half-angle)")
+        self.fov_deg = fov
+        self.boresight = _unit_vector("sun_sensor.boresight", boresight)
+
+    def measure(self, q_true: np.ndarray, sun_unit: np.ndarray, illumination: np.ndarray,
+                rng: np.random.Generator) -> VectorReadings:
+        """Readings of the Sun direction ``sun_unit`` (``(N, 3)``, reference
+        frame); one 3-vector of noise drawn per scheduled step, in time order,
+        whether or not the Sun is seen (so the noise does not depend on the field of view)."""
+        scheduled = self.scheduled(len(q_true))
+        steps = np.flatnonzero(scheduled)
+        s = to_body(q_true[steps], sun_unit[steps])
+        delta = self.sigma_rad * rng.standard_normal((len(steps), 3))
+        delta -= np.sum(delta * s, axis=1, keepdims=True) * s
+        seen = (s @ self.boresight >= math.cos(math.radians(self.fov_deg))) & \
+            (illumination[steps] >= FULL_SUN)
+        body = np.zeros((len(q_true), 3))
+        body[steps] = Rotation.from_rotvec(delta).apply(s)
+        available = np.zeros(len(q_true), dtype=bool)
+        available[steps[seen]] = True
+        return self.readings(body, sun_unit, available, self.sigma_rad ** 2)
+
+
+class CoarseSunSensors(VectorSensor):
+    """A set of coarse sun sensors on the body's faces (module docstring).
+
+    Parameters
+    ----------
+    sigma : float
+        Current noise σ_c, a fraction of the full-sun current (> 0).
+    interval_s, dt : float
+    normals : (N, 3)
+        The faces' outward normals, body frame (normalised); the cube's six by default.
+    """
+
+    name = "coarse_sun_sensors"
+    dof = 3
+
+    def __init__(self, sigma: float, interval_s: float, dt: float, *, normals=CUBE_FACES):
+        super().__init__(interval_s, dt)
+        self.sigma = standard_deviation("coarse_sun_sensors.sigma", sigma,
+                                        strictly_positive=True)
+        faces = float_array("coarse_sun_sensors.normals", normals,
+                            "must be a list of 3-vectors (the faces' outward normals)")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) < 3 or \
+                not np.all(np.isfinite(faces)) or np.any(np.linalg.norm(faces, axis=1) == 0):
+            raise InvalidParameterError("coarse_sun_sensors.normals", np.asarray(normals).tolist(),
+                                        "must be at least three finite 3-vectors of non-zero "
+                                        "length (the faces' outward normals)")
+        if np.linalg.matrix_rank(faces) < 3:
+            raise InvalidParameterError("coarse_sun_sensors.normals", faces.tolist(),
+                                        "must span three dimensions")
+        self.normals = faces / np.linalg.norm(faces, axis=1, keepdims=True)
+
+    def _sun_vector(self, currents: np.ndarray):
+        """The least-squares Sun vector of one set of currents and its mean
+        variance per axis, or None: the faces above the threshold (at least
+        the three brightest) give a first solution, then the faces it lights (``n_i · b > 0``) the final
+        one (a face in the dark reads its noise, so the set is refined from
+        the solution rather than from the currents alone)."""
+        lit = currents > LIT_THRESHOLD_SIGMA * self.sigma
+        if lit.sum() < 3:          # the Sun near a face's normal: start from the three brightest
+            lit[np.argsort(currents)[-3:]] = True
+        solution = None
+        for _ in range(2):
+            faces = self.normals[lit]
+            if len(faces) < 3:
+                return None
+            normal_matrix = faces.T @ faces
+            if np.linalg.cond(normal_matrix) > MAX_CONDITION:
+                return None
+            covariance = np.linalg.inv(normal_matrix)
+            solution = covariance @ faces.T @ currents[lit]
+            lit = self.normals @ solution > 0.0
+        return solution, self.sigma ** 2 * np.trace(covariance) / 3.0
+
+    def measure(self, q_true: np.ndarray, sun_unit: np.ndarray, illumination: np.ndarray,
+                rng: np.random.Generator) -> VectorReadings:
+        """Least-squares Sun vectors from the faces' currents at every
+        scheduled step in full Sun; one current noise per face drawn per
+        scheduled step, in time order."""
+        scheduled = self.scheduled(len(q_true))
+        steps = np.flatnonzero(scheduled)
+        s = to_body(q_true[steps], sun_unit[steps])
+        lit_fraction = np.where(illumination[steps] >= FULL_SUN, 1.0, 0.0)
+        currents = np.maximum(0.0, s @ self.normals.T) * lit_fraction[:, None] + \
+            self.sigma * rng.standard_normal((len(steps), len(self.normals)))
+        body = np.zeros((len(q_true), 3))
+        variance = np.zeros(len(q_true))
+        available = np.zeros(len(q_true), dtype=bool)
+        for row, k in enumerate(steps):
+            solved = self._sun_vector(currents[row]) if lit_fraction[row] else None
+            if solved is not None:
+                body[k], variance[k] = solved
+                available[k] = True
+        return VectorReadings(sensor=self.name, body=body, reference=sun_unit,
+                              available=available, variance=variance, dof=self.dof, unit="")

@@ -1,0 +1,127 @@
+r"""Vector observations: what a magnetometer, a sun sensor or an accelerometer
+gives an estimator.
+
+A vector sensor measures, in the body frame, a vector whose direction in the
+reference frame is known from a model (the geomagnetic field, the Sun's
+ephemeris, gravity: :mod:`dynamics.environment`):
+
+.. math:: b = A(q)^\mathsf{T} r + v, \qquad v \sim \mathcal N(0, \sigma^2 I_3),
+
+with :math:`A(q)` the body-to-reference rotation of the truth (this
+toolkit's convention, :mod:`dynamics`). One reading of one sensor is a
+:class:`VectorObservation`: the measured ``body`` vector, the model's
+``reference`` vector, the noise variance :math:`\sigma^2` per axis (in the
+vector's unit squared) and the degrees of freedom of its innovation: 3 for a
+full vector (the magnetometer's nT), 2 for a unit vector, whose error lies
+across it (a sun sensor's direction; Shuster's QUEST measurement model,
+Markley & Crassidis 2014, §5.2.1, where :math:`\sigma^2 I_3` in place of
+:math:`\sigma^2 (I_3 - b b^\mathsf{T})` changes no update to first order).
+
+Over a record, each sensor's readings are one :class:`VectorReadings` on the
+gyro's grid (each sensor on its own rate, a whole multiple of ``dt``), with
+``available`` flags where a reading was taken (none in eclipse for a sun
+sensor, none outside its field of view).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynamics.quaternion import rotation_matrix
+from sensors.star_tracker import steps_between_readings
+
+
+@dataclass(frozen=True)
+class VectorObservation:
+    """One reading of one vector sensor, as an estimator's step takes it.
+
+    Attributes
+    ----------
+    body : (3,) the measured vector, body frame
+    reference : (3,) the same vector in the reference frame (the model's)
+    variance : float, σ² per axis of ``body``'s noise (the vector's unit squared)
+    sensor : str, the sensor's name (``"magnetometer"``, ``"sun_sensor"``, …)
+    dof : int, the degrees of freedom of its innovation (3, or 2 for a unit vector)
+    """
+
+    body: np.ndarray
+    reference: np.ndarray
+    variance: float
+    sensor: str
+    dof: int = 3
+
+    @property
+    def direction_sigma_rad(self) -> float:
+        """σ of the vector's direction, rad: σ over the reference's length
+        (what a static solver weighs it by)."""
+        return float(np.sqrt(self.variance) / np.linalg.norm(self.reference))
+
+
+@dataclass(frozen=True)
+class VectorReadings:
+    """One vector sensor's readings over a record of ``N`` gyro steps.
+
+    Attributes
+    ----------
+    sensor : str
+    body : (N, 3) measured vectors (zeros where none was taken)
+    reference : (N, 3) the model's reference vectors at every step
+    available : (N,) bool, True where a reading was taken
+    variance : (N,) σ² per axis of each reading
+    dof : int
+    unit : str, the vectors' unit ("nT", "m/s^2", or "" for unit vectors)
+    """
+
+    sensor: str
+    body: np.ndarray
+    reference: np.ndarray
+    available: np.ndarray
+    variance: np.ndarray
+    dof: int = 3
+    unit: str = ""
+
+    def observation(self, k: int) -> VectorObservation:
+        """Step ``k``'s reading (``available[k]`` must be True)."""
+        return VectorObservation(self.body[k], self.reference[k], float(self.variance[k]),
+                                 self.sensor, self.dof)
+
+
+def to_body(q_true: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``(N, 3)``: :math:`A(q_k)^\\mathsf{T} r_k`, each reference vector in the body frame."""
+    return np.einsum("nji,nj->ni", rotation_matrix(q_true), reference)
+
+
+class VectorSensor:
+    """What the vector sensors share: a name, a rate on the gyro's grid.
+
+    Parameters
+    ----------
+    interval_s : float
+        Seconds between readings: a whole multiple of ``dt``.
+    dt : float
+        The gyro's step, seconds.
+    """
+
+    name = "vector"
+    unit = ""
+    dof = 3
+
+    def __init__(self, interval_s: float, dt: float):
+        self.interval_s = float(interval_s)
+        self.dt = float(dt)
+        self.steps_between = steps_between_readings(interval_s, dt)
+
+    def scheduled(self, n_steps: int) -> np.ndarray:
+        """``(N,)`` bool: the steps at which the sensor reads (every ``m`` steps)."""
+        flags = np.zeros(n_steps, dtype=bool)
+        flags[::self.steps_between] = True
+        return flags
+
+    def readings(self, body, reference, available, variance) -> VectorReadings:
+        body = np.where(available[:, None], body, 0.0)
+        return VectorReadings(sensor=self.name, body=body, reference=reference,
+                              available=available,
+                              variance=np.broadcast_to(np.asarray(variance, dtype=float),
+                                                       available.shape).copy(),
+                              dof=self.dof, unit=self.unit)
