@@ -194,7 +194,11 @@ def posterior_crb(scenario) -> AttitudeBound:
 def _vector_information(scenario, truth) -> dict | None:
     r"""Step → the vector readings' information about the attitude at that
     step, :math:`\sum_i \sigma_i^{-2}(|b_i|^2 I_3 - b_i b_i^\mathsf{T})` along
-    the truth (noise-free readings of the scenario's sensors), or None."""
+    the truth, at the steps each sensor reads, or None. The schedule is that
+    of seed 0's readings: for every sensor but the coarse sun sensors it
+    depends on the truth alone (rate, eclipse, field of view); theirs, and
+    their variance, on which faces read lit, which noise changes only for a
+    face at the terminator."""
     if not scenario.has_vector_sensors:
         return None
     from benchmarks.simulation import scenario_references, vector_readings

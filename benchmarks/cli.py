@@ -824,9 +824,10 @@ VECTOR_DEFAULTS = ("dead-reckoning", "triad", "quest", "ekf", "mekf", "usque")
 
 
 def default_estimators(command: str, scenario) -> tuple:
-    """``--estimators`` when not given: the workshop's three for ``compare``
-    and ``montecarlo`` (the filters and the static solvers with vector
-    sensors), every star tracker estimator for ``consistency``."""
+    """``--estimators`` when not given: with vector sensors, the filters and
+    two static solvers (:data:`VECTOR_DEFAULTS`) for every command; else the
+    workshop's three for ``compare`` and ``montecarlo``, and every star
+    tracker estimator for ``consistency``."""
     if scenario is not None and scenario.has_vector_sensors:
         return VECTOR_DEFAULTS
     return STAR_TRACKER_DEFAULTS if command == "consistency" else tuple(WORKSHOP_ESTIMATORS)

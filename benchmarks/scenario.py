@@ -67,9 +67,9 @@ from dynamics.validation import (
     process_exponent,
     standard_deviation,
 )
-from estimators import ESTIMATORS, resolve_estimator
 from dynamics.environment import FIELD_MODELS, SHADOW_MODELS
-from dynamics.orbit import epoch_datetime, make_orbit
+from dynamics.orbit import DEFAULT_EPOCH, TLEOrbit, epoch_datetime, make_orbit, tle_lines
+from estimators import ESTIMATORS, resolve_estimator
 from sensors.accelerometer import Accelerometer
 from sensors.gyro import Gyro
 from sensors.magnetometer import Magnetometer
@@ -182,9 +182,10 @@ class Scenario:
         Rotation model: report ``q`` as it comes, or with ``w >= 0`` ("raw").
     star_tracker_to_body_quat : (4,) array
         Rotation model: sensor-to-body rotation ([1, 0, 0, 0]).
-    epoch : str
-        ISO 8601 UTC time of t = 0 ("2026-03-20T12:00:00+00:00"): the Sun's and
-        the field's epoch.
+    epoch : str or None
+        ISO 8601 UTC time of t = 0: the Sun's and the field's epoch. None:
+        the element set's epoch with an ``orbit_tle``, else
+        :data:`dynamics.orbit.DEFAULT_EPOCH` (the March equinox of 2026).
     magnetic_field_model, shadow_model : str
         "igrf" or "dipole"; "conical" or "cylindrical" (:mod:`dynamics.environment`).
     orbit_altitude_km : float or None
@@ -234,7 +235,7 @@ class Scenario:
     star_tracker_outages_s: tuple = ()
     star_tracker_sign: str = "raw"
     star_tracker_to_body_quat: np.ndarray = _vector(1.0, 0.0, 0.0, 0.0)
-    epoch: str = "2026-03-20T12:00:00+00:00"
+    epoch: str | None = None
     magnetic_field_model: str = "igrf"
     shadow_model: str = "conical"
     orbit_altitude_km: float | None = None
@@ -371,15 +372,23 @@ class Scenario:
         """The orbit, the site and the vector sensors: each built once (its
         class checks its settings), and each sensor where it can read."""
         set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
-        set_("epoch", epoch_datetime("environment.epoch", self.epoch).isoformat())
+        if self.epoch is not None:
+            set_("epoch", epoch_datetime("environment.epoch", self.epoch).isoformat())
         one_of("environment.magnetic_field_model", self.magnetic_field_model, FIELD_MODELS)
         one_of("environment.shadow_model", self.shadow_model, SHADOW_MODELS)
-        set_("orbit_tle", tuple(str(line) for line in self.orbit_tle))
+        set_("orbit_tle", tle_lines("orbit.tle", self.orbit_tle))
         orbit, site = self.build_orbit(), self.site
         if orbit is not None and site is not None:
             raise InvalidParameterError("site.latitude_deg", self.site_latitude_deg,
                                         "cannot be set with an [orbit]: a scenario is in orbit "
                                         "or on the ground")
+        if site is not None and self.magnetic_field_model == "dipole":
+            raise InvalidParameterError("environment.magnetic_field_model", "dipole",
+                                        "is for orbits; a [site] on the ground takes IGRF")
+        self._check_sensor_places(orbit, site)
+
+    def _check_sensor_places(self, orbit, site) -> None:
+        """Each vector sensor where it can read; and some attitude sensor."""
         sensors = self.build_vector_sensors()
         for sensor in sensors:
             where = {"accelerometer": site, "sun_sensor": orbit,
@@ -403,22 +412,36 @@ class Scenario:
     @property
     def orbit_settings(self) -> dict:
         """The keywords of :func:`dynamics.orbit.make_orbit` (hashable values)."""
-        return {"epoch": epoch_datetime("environment.epoch", self.epoch),
+        return {"epoch": self.epoch_moment,
                 "tle": tuple(self.orbit_tle), "altitude_km": self.orbit_altitude_km,
                 "inclination_deg": self.orbit_inclination_deg, "raan_deg": self.orbit_raan_deg,
                 "argument_of_latitude_deg": self.orbit_argument_of_latitude_deg}
+
+    @property
+    def epoch_moment(self):
+        """Time zero as a UTC datetime: the given epoch, or the element set's,
+        or :data:`dynamics.orbit.DEFAULT_EPOCH`."""
+        if self.epoch is not None:
+            return epoch_datetime("environment.epoch", self.epoch)
+        if self.orbit_tle:
+            return TLEOrbit(self.orbit_tle).element_epoch
+        return epoch_datetime("environment.epoch", DEFAULT_EPOCH)
 
     @property
     def site(self) -> tuple | None:
         """``(latitude_deg, longitude_deg, altitude_km)`` of a ground IMU, or None."""
         if self.site_latitude_deg is None:
             return None
-        latitude = finite_number("site.latitude_deg", self.site_latitude_deg)
-        if abs(latitude) > 90.0:
-            raise InvalidParameterError("site.latitude_deg", latitude,
-                                        "must be within -90 and 90 degrees")
-        return (latitude, finite_number("site.longitude_deg", self.site_longitude_deg),
-                finite_number("site.altitude_km", self.site_altitude_km))
+        values = []
+        for name, value, low, high in (("latitude_deg", self.site_latitude_deg, -90.0, 90.0),
+                                       ("longitude_deg", self.site_longitude_deg, -360.0, 360.0),
+                                       ("altitude_km", self.site_altitude_km, -1.0, 100.0)):
+            number = finite_number(f"site.{name}", value)
+            if not low <= number <= high:
+                raise InvalidParameterError(f"site.{name}", value,
+                                            f"must be within {low:g} and {high:g}")
+            values.append(number)
+        return tuple(values)
 
     def build_vector_sensors(self) -> list:
         """The vector sensors this scenario has, in a fixed order

@@ -189,16 +189,8 @@ def simulate_sensors(scenario: Scenario, truth: RigidBodyTruth, seed: int) -> Se
 def vector_readings(scenario: Scenario, q_true: np.ndarray, references, seed: int) -> tuple:
     """Each vector sensor's readings of ``q_true`` for ``seed`` (its own stream)."""
     sensors = scenario.build_vector_sensors()
-    readings = []
-    for sensor, rng in zip(sensors, vector_generators(seed, len(sensors))):
-        if sensor.name == "magnetometer":
-            readings.append(sensor.measure(q_true, references.magnetic_field_nT, rng))
-        elif sensor.name == "accelerometer":
-            readings.append(sensor.measure(q_true, rng))
-        else:
-            readings.append(sensor.measure(q_true, references.sun_unit, references.illumination,
-                                           rng))
-    return tuple(readings)
+    return tuple(sensor.measure(q_true, references, rng)
+                 for sensor, rng in zip(sensors, vector_generators(seed, len(sensors))))
 
 
 def scenario_references(scenario: Scenario):
@@ -218,9 +210,14 @@ def _references_cached(orbit_settings, site, field_model, shadow_model, dt, n_st
     from dynamics.orbit import make_orbit
     settings = dict(orbit_settings)
     if site is not None:
-        return site_references(*site, settings["epoch"], n_steps)
-    return orbit_references(make_orbit(**settings), settings["epoch"],
-                            np.arange(n_steps) * dt, field_model, shadow_model)
+        references = site_references(*site, settings["epoch"], n_steps)
+    else:
+        references = orbit_references(make_orbit(**settings), settings["epoch"],
+                                      np.arange(n_steps) * dt, field_model, shadow_model)
+    for array in vars(references).values():     # shared by every run: never to be changed
+        if isinstance(array, np.ndarray):
+            array.setflags(write=False)
+    return references
 
 
 def _truth_at_readings(scenario: Scenario, star_tracker) -> np.ndarray | None:

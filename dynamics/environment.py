@@ -31,8 +31,8 @@ Gill, *Satellite Orbits*, 2000, §3.4.2):
   overlap of the discs' areas between (the penumbra).
 
 **The geomagnetic field** (:func:`geomagnetic_field_nT`): the International
-Geomagnetic Reference Field (IGRF-14, Alken et al. 2021 for IGRF-13, its
-coefficients shipped with ``ppigrf``) evaluated in geocentric spherical
+Geomagnetic Reference Field (IGRF-14, the 2024 generation of the model Alken
+et al. 2021 describe for IGRF-13; its coefficients ship with ``ppigrf``) evaluated in geocentric spherical
 coordinates (``ppigrf.igrf_gc``) and rotated back to TEME; or, as a fast
 option, the tilted dipole of its first three coefficients
 (:math:`g_1^0, g_1^1, h_1^1`):

@@ -46,6 +46,11 @@ J2 = 1.08262668e-3
 JD_J2000 = 2451545.0
 #: Lowest altitude accepted, km: below it the orbit decays within hours.
 MIN_ALTITUDE_KM = 100.0
+#: Farthest a scenario's epoch may be from its element set's, days: SGP4's
+#: error grows by kilometres a day away from the elements' epoch.
+MAX_TLE_AGE_DAYS = 30.0
+#: Time zero of a scenario that names neither an epoch nor an element set.
+DEFAULT_EPOCH = "2026-03-20T12:00:00+00:00"
 
 
 def epoch_datetime(name: str, value) -> datetime:
@@ -158,6 +163,17 @@ class CircularOrbit:
                                           su * math.sin(i)], axis=-1)
 
 
+def tle_lines(name: str, value) -> tuple[str, ...]:
+    """An element set as its lines: a text of several lines (as pasted into
+    a TOML string), or a list of texts; anything else is refused by name."""
+    if isinstance(value, str):
+        return tuple(line for line in value.splitlines() if line.strip())
+    if isinstance(value, (list, tuple)) and all(isinstance(line, str) for line in value):
+        return tuple(value)
+    raise InvalidParameterError(name, value, "must be a two-line element set: its lines as "
+                                "a list of texts, or one text of several lines")
+
+
 class TLEOrbit:
     """An orbit from a two-line element set, propagated with SGP4.
 
@@ -166,12 +182,13 @@ class TLEOrbit:
     lines : (str, str)
         The element set's two lines (a title line may come first).
     epoch : datetime (UTC), optional
-        Time zero of the scenario; the element set's own epoch if None.
+        Time zero of the scenario, within :data:`MAX_TLE_AGE_DAYS` of the
+        element set's own epoch; that epoch if None.
     """
 
     def __init__(self, lines, epoch: datetime | None = None):
         from sgp4.api import WGS72, Satrec
-        lines = [str(line).rstrip() for line in lines]
+        lines = [line.rstrip() for line in tle_lines("orbit.tle", lines)]
         lines = [line for line in lines if line[:2] in ("1 ", "2 ")]
         if len(lines) != 2 or not (lines[0].startswith("1 ") and lines[1].startswith("2 ")):
             raise InvalidParameterError("orbit.tle", lines, "must be a two-line element set: "
@@ -183,6 +200,17 @@ class TLEOrbit:
         self.lines = tuple(lines)
         element_epoch = self.satellite.jdsatepoch + self.satellite.jdsatepochF
         self.epoch_jd = element_epoch if epoch is None else julian_date(epoch)
+        if abs(self.epoch_jd - element_epoch) > MAX_TLE_AGE_DAYS:
+            raise InvalidParameterError(
+                "environment.epoch", epoch.isoformat(), f"is {self.epoch_jd - element_epoch:+.1f} "
+                f"days from the element set's epoch; at most {MAX_TLE_AGE_DAYS:g} days (SGP4 "
+                "drifts by kilometres a day): leave the epoch out to start at the elements'")
+
+    @property
+    def element_epoch(self) -> datetime:
+        """The element set's own epoch (UTC)."""
+        from sgp4.conveniences import sat_epoch_datetime
+        return sat_epoch_datetime(self.satellite)
 
     def positions_km(self, time_s: np.ndarray) -> np.ndarray:
         """``(N, 3)`` TEME positions at ``time_s`` seconds after the epoch, km;

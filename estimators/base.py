@@ -189,6 +189,8 @@ class AttitudeEstimator:
     @property
     def innovation_dof(self) -> int:
         """Degrees of freedom of :attr:`innovation_nis` (the reading's dimension)."""
+        if getattr(self, "_tracker_innovation", None) is not None:
+            return int(np.size(self._tracker_innovation[0]))
         return int(np.size(getattr(getattr(self, "filter", self), "y", ())))
 
     #: Whether :meth:`_step_at` applies a reading at its own time (a reading
@@ -401,17 +403,19 @@ class AttitudeEstimator:
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
-        nis = None
+        nis, nis_dof = None, None
         with _quiet_overflow():
             for k in range(n):
-                skipped = self.skipped["reading"]
+                skipped, rejections = self.skipped["reading"], len(self.rejections)
                 quat[k] = self.step(omega[k], star[k] if available[k] else None, offsets[k],
                                     observations_at(vectors, k))
-                used = available[k] and self.skipped["reading"] == skipped
+                used = (available[k] and self.skipped["reading"] == skipped
+                        and ("star_tracker" not in (sensor for _, sensor in
+                                                    self.rejections[rejections:])))
                 innovation = self.innovation_nis if used and self.diverged_step is None else None
                 if innovation is not None:
                     if nis is None:
-                        nis = np.full(n, np.nan)
+                        nis, nis_dof = np.full(n, np.nan), self.innovation_dof
                     nis[k] = innovation
                 self._collect(columns, k, n)
                 if nis is not None and self.diverged_step is not None:
@@ -419,8 +423,7 @@ class AttitudeEstimator:
         rejected = {}
         for k, sensor in self.rejections:
             rejected.setdefault(sensor, []).append(k)
-        return EstimateTrace(quat=quat, **columns, nis=nis,
-                             nis_dof=None if nis is None else self.innovation_dof,
+        return EstimateTrace(quat=quat, **columns, nis=nis, nis_dof=nis_dof,
                              rejected={sensor: np.array(steps) for sensor, steps in
                                        rejected.items()})
 

@@ -157,7 +157,6 @@ class TRIAD(StaticAttitude):
 
     name = "triad"
     label = "TRIAD"
-    solver = staticmethod(wahba.triad)
 
     def solution(self, body, reference, weights) -> np.ndarray:
         return wahba.triad(body, reference, weights, self.min_sine)

@@ -44,7 +44,10 @@ I_3 - S\bigr) - z z^\mathsf{T}`, the largest cross product of two of its
 rows, :math:`e`; then :math:`q \propto [(\lambda - \sigma) e;\ z^\mathsf{T} e]`.
 
 **FOAM** (Markley 1993; §5.3.4): :math:`\lambda_\text{max}` by Newton's method on
-:math:`(\lambda^2 - \lVert B\rVert_F^2)^2 - 8\lambda \det B - 4\lVert\operatorname{adj} B\rVert_F^2 = 0`,
+
+.. math:: (\lambda^2 - \lVert B\rVert_F^2)^2 - 8\lambda \det B
+          - 4\lVert\operatorname{adj} B\rVert_F^2 = 0,
+
 then the matrix itself,
 
 .. math:: A = \frac{(\kappa + \lVert B\rVert_F^2) B + \lambda \operatorname{adj}(B^\mathsf{T})
@@ -82,7 +85,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dynamics.quaternion import from_rotation
+from dynamics.quaternion import from_rotation, quat_multiply, rotation_matrix
 
 #: Newton iterations on λ_max: QUEST and FOAM converge quadratically from
 #: Σ a_i, to machine precision in two or three; five keeps a margin.
@@ -152,26 +155,14 @@ def _adjugate(M: np.ndarray) -> np.ndarray:
 
 
 def quest(body, reference, weights) -> np.ndarray:
-    r"""QUEST (module docstring), with sequential rotations near 180°: where
-    :math:`|\gamma|` (the scalar part before normalisation) falls below
-    :data:`QUEST_ROTATE_BELOW` of :math:`|[x;\ \gamma]|` (or of
-    :math:`10^{-6}\lambda^3`, where both vanish, as at exactly 180°), the
-    frame of the largest :math:`|\gamma|` among the half turns about x, y, z
-    is used."""
-    best = None
-    for axis in (None, 0, 1, 2):
-        turned = reference if axis is None else _turned(reference, axis)
-        q_book, gamma, lam = _quest_in_frame(body, turned, weights)
-        if best is None or abs(gamma) > abs(best[1]):
-            best = (q_book, gamma, axis)
-        size = float(np.sqrt(q_book @ q_book))
-        if axis is None and abs(gamma) >= QUEST_ROTATE_BELOW * max(size, 1e-6 * lam ** 3):
-            break
-    return _untuned(_from_book(best[0]), best[2])
+    r"""QUEST (module docstring), with sequential rotations near 180°
+    (:func:`_in_the_best_frame`; :math:`\gamma` vanishes there)."""
+    return _in_the_best_frame(_quest_in_frame, body, reference, weights,
+                              lambda q_book, lam: abs(q_book[3]), 3)
 
 
-def _quest_in_frame(body, reference, weights) -> tuple[np.ndarray, float, float]:
-    """QUEST's unnormalised ``[x; γ]`` (the book's order), ``γ`` and ``λ_max``."""
+def _quest_in_frame(body, reference, weights) -> tuple[np.ndarray, float]:
+    """QUEST's unnormalised ``[x; γ]`` (the book's order) and ``λ_max``."""
     S, sigma, z = _davenport_parts(profile_matrix(body, reference, weights))
     lam = _lambda_max(S, sigma, z, float(np.sum(weights)))
     kappa = float(np.trace(_adjugate(S)))
@@ -179,47 +170,15 @@ def _quest_in_frame(body, reference, weights) -> tuple[np.ndarray, float, float]
     beta = lam - sigma
     gamma = (lam + sigma) * alpha - float(np.linalg.det(S))
     x = (alpha * np.eye(3) + beta * S + S @ S) @ z
-    return np.append(x, gamma), gamma, lam
-
-
-def _turned(reference: np.ndarray, axis: int) -> np.ndarray:
-    """The reference vectors in a frame turned by 180° about ``axis``
-    (the sign of the other two components changes)."""
-    turned = -reference.copy()
-    turned[:, axis] *= -1.0
-    return turned
-
-
-def _untuned(q: np.ndarray, axis) -> np.ndarray:
-    """Undo :func:`_turned`: ``A = R_axis(180°)ᵀ A_turned``, a product with the
-    quaternion of that half turn."""
-    if axis is None:
-        return q
-    half_turn = np.zeros(4)
-    half_turn[1 + axis] = 1.0
-    w, x, y, z = q
-    hw, hx, hy, hz = half_turn
-    product = np.array([hw * w - hx * x - hy * y - hz * z, hw * x + hx * w + hy * z - hz * y,
-                        hw * y - hx * z + hy * w + hz * x, hw * z + hx * y - hy * x + hz * w])
-    return product if product[0] >= 0 else -product
+    return np.append(x, gamma), lam
 
 
 def esoq2(body, reference, weights) -> np.ndarray:
-    """ESOQ2 (module docstring): the null vector of :math:`M` by cross products.
-    The axis is undefined for a rotation near zero (where :math:`M` vanishes),
-    so there the frame is turned by a half turn about the axis that makes the
-    largest unnormalised :math:`q` (of order :math:`\\lambda^5` for rotations
-    far from zero), as QUEST's sequential rotations do."""
-    best = None
-    for axis in (None, 0, 1, 2):
-        turned = reference if axis is None else _turned(reference, axis)
-        q_book, lam = _esoq2_in_frame(body, turned, weights)
-        size = float(np.sqrt(q_book @ q_book))
-        if best is None or size > best[1]:
-            best = (q_book, size, axis)
-        if axis is None and size >= QUEST_ROTATE_BELOW * lam ** 5:
-            break
-    return _untuned(_from_book(best[0]), best[2])
+    r"""ESOQ2 (module docstring): the null vector of :math:`M` by cross
+    products. Its axis is undefined for a rotation near zero, where :math:`M`
+    vanishes: there the frame is turned (:func:`_in_the_best_frame`)."""
+    return _in_the_best_frame(_esoq2_in_frame, body, reference, weights,
+                              lambda q_book, lam: float(np.sqrt(q_book @ q_book)), 5)
 
 
 def _esoq2_in_frame(body, reference, weights) -> tuple[np.ndarray, float]:
@@ -230,6 +189,46 @@ def _esoq2_in_frame(body, reference, weights) -> tuple[np.ndarray, float]:
     crosses = (np.cross(M[0], M[1]), np.cross(M[1], M[2]), np.cross(M[2], M[0]))
     e = max(crosses, key=lambda v: v @ v)
     return np.append((lam - sigma) * e, z @ e), lam
+
+
+def _in_the_best_frame(solve_in_frame, body, reference, weights, measure, power: int
+                       ) -> np.ndarray:
+    r"""The method of sequential rotations (Shuster & Natanson 1993; M&C §5.3):
+    ``solve_in_frame`` in the reference frame, and where its ``measure`` of
+    the unnormalised quaternion falls below :data:`QUEST_ROTATE_BELOW` of its
+    size (or of :math:`10^{-6}\lambda^{\text{power}}`, where both vanish) in
+    the frames turned by a half turn about x, y and z too, keeping the one
+    of the largest measure; the solution is turned back."""
+    best = None
+    for axis in (None, 0, 1, 2):
+        turned = reference if axis is None else _turned(reference, axis)
+        q_book, lam = solve_in_frame(body, turned, weights)
+        value = measure(q_book, lam)
+        if best is None or value > best[1]:
+            best = (q_book, value, axis)
+        size = float(np.sqrt(q_book @ q_book))
+        if axis is None and value >= QUEST_ROTATE_BELOW * max(size, 1e-6 * lam ** power):
+            break
+    return _unturned(_from_book(best[0]), best[2])
+
+
+def _turned(reference: np.ndarray, axis: int) -> np.ndarray:
+    """The reference vectors in a frame turned by 180° about ``axis``
+    (the sign of the other two components changes)."""
+    turned = -reference.copy()
+    turned[:, axis] *= -1.0
+    return turned
+
+
+def _unturned(q: np.ndarray, axis) -> np.ndarray:
+    """Undo :func:`_turned`: ``A = R_axis(180°) A_turned``, the product with
+    the half turn's quaternion."""
+    if axis is None:
+        return q
+    half_turn = np.zeros(4)
+    half_turn[1 + axis] = 1.0
+    product = quat_multiply(half_turn, q)
+    return product if product[0] >= 0 else -product
 
 
 def foam(body, reference, weights) -> np.ndarray:
@@ -321,11 +320,5 @@ SOLVERS = {"triad": triad, "q-method": davenport_q, "quest": quest, "esoq2": eso
 
 def loss(q: np.ndarray, body, reference, weights) -> float:
     """Wahba's loss :math:`L(A)` of the quaternion ``q`` (body to reference)."""
-    from dynamics.quaternion import rotation_matrix
     residual = reference - body @ rotation_matrix(q).T
     return 0.5 * float(np.sum(weights * np.sum(residual * residual, axis=1)))
-
-
-def angle_between_deg(u: np.ndarray, v: np.ndarray) -> float:
-    """The angle between two vectors, degrees (for the separation check)."""
-    return math.degrees(math.atan2(np.linalg.norm(np.cross(u, v)), float(u @ v)))

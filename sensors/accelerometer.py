@@ -52,9 +52,11 @@ class Accelerometer(VectorSensor):
                                              strictly_positive=True)
         self.bias_mps2 = finite_vector("accelerometer.bias_mps2", bias_mps2, 3)
 
-    def measure(self, q_true: np.ndarray, rng: np.random.Generator) -> VectorReadings:
+    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
+                ) -> VectorReadings:
         """Readings of the gravity reaction at every scheduled step; one
-        3-vector of noise per reading, in time order."""
+        3-vector of noise per reading, in time order (``references`` is not
+        read: gravity's reference is the local vertical)."""
         n = len(q_true)
         reference = np.broadcast_to(GRAVITY_REACTION_ENU_MPS2, (n, 3)).copy()
         available = self.scheduled(n)

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynamics.validation import InvalidParameterError, finite_vector, standard_deviation
+from dynamics.validation import (InvalidParameterError, finite_vector, float_array,
+                                 standard_deviation)
 from sensors.vector import VectorReadings, VectorSensor, to_body
 
 
@@ -48,17 +49,19 @@ class Magnetometer(VectorSensor):
         self.sigma_nT = standard_deviation("magnetometer.sigma_nT", sigma_nT,
                                            strictly_positive=True)
         self.bias_nT = finite_vector("magnetometer.bias_nT", bias_nT, 3)
-        matrix = np.asarray(soft_iron, dtype=float)
+        rule = "must be a finite, invertible 3x3 matrix"
+        matrix = float_array("magnetometer.soft_iron", soft_iron, rule)
         if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)) or \
                 abs(np.linalg.det(matrix)) < 1e-6:
-            raise InvalidParameterError("magnetometer.soft_iron", matrix.tolist(),
-                                        "must be a finite, invertible 3x3 matrix")
+            raise InvalidParameterError("magnetometer.soft_iron", matrix.tolist(), rule)
         self.soft_iron = matrix
 
-    def measure(self, q_true: np.ndarray, field_nT: np.ndarray,
-                rng: np.random.Generator) -> VectorReadings:
-        """Readings of the field ``field_nT`` (``(N, 3)``, reference frame) at
-        every scheduled step; one 3-vector of noise drawn per reading, in time order."""
+    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
+                ) -> VectorReadings:
+        """Readings of the field ``references.magnetic_field_nT`` (``(N, 3)``,
+        reference frame; :class:`dynamics.environment.References`) at every
+        scheduled step; one 3-vector of noise drawn per reading, in time order."""
+        field_nT = references.magnetic_field_nT
         available = self.scheduled(len(q_true))
         body = np.zeros((len(q_true), 3))
         steps = np.flatnonzero(available)

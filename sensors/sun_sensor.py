@@ -25,13 +25,13 @@ give currents, as fractions of the full-sun, normal-incidence current,
 .. math:: c_i = \max(0,\ n_i \cdot s) + v_i, \qquad v_i \sim \mathcal N(0, \sigma_c^2)
 
 (the cosine law; a face in the dark reads its noise). The faces reading
-above :data:`LIT_THRESHOLD_SIGMA` σ_c give a first solution, the faces it
-lights the final one: the least-squares solution
+above :data:`LIT_THRESHOLD_SIGMA` σ_c, with at least the three brightest
+faces whose normals span space (no two opposite), give a first solution, the
+faces it lights the final one: the least-squares solution
 :math:`b = (N_L^\mathsf{T} N_L)^{-1} N_L^\mathsf{T} c_L`, a full 3-vector with
 covariance :math:`\sigma_c^2 (N_L^\mathsf{T} N_L)^{-1}` (:math:`\sigma_c^2
 I_3` for the cube's three orthogonal lit faces), reported as its mean
-variance per axis; fewer than three lit faces of independent normals give no
-reading.
+variance per axis; faces whose normals do not span space give no reading.
 """
 from __future__ import annotations
 
@@ -48,6 +48,8 @@ from sensors.vector import VectorReadings, VectorSensor, to_body
 FULL_SUN = 0.99
 #: A coarse sensor's face counts as lit when it reads above this many σ_c.
 LIT_THRESHOLD_SIGMA = 3.0
+#: Two faces whose normals' cosine is below minus this are opposite.
+OPPOSITE_COSINE = 0.99
 #: The lit faces' normal matrix must be better conditioned than this.
 MAX_CONDITION = 1e6
 #: The six faces of a cube, outward normals in the body frame.
@@ -91,11 +93,13 @@ class FineSunSensor(VectorSensor):
         self.fov_deg = fov
         self.boresight = _unit_vector("sun_sensor.boresight", boresight)
 
-    def measure(self, q_true: np.ndarray, sun_unit: np.ndarray, illumination: np.ndarray,
-                rng: np.random.Generator) -> VectorReadings:
-        """Readings of the Sun direction ``sun_unit`` (``(N, 3)``, reference
-        frame); one 3-vector of noise drawn per scheduled step, in time order,
-        whether or not the Sun is seen (so the noise does not depend on the field of view)."""
+    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
+                ) -> VectorReadings:
+        """Readings of the Sun direction ``references.sun_unit`` (``(N, 3)``,
+        reference frame; :class:`dynamics.environment.References`); one
+        3-vector of noise drawn per scheduled step, in time order, whether or
+        not the Sun is seen (so the noise does not depend on the field of view)."""
+        sun_unit, illumination = references.sun_unit, references.illumination
         scheduled = self.scheduled(len(q_true))
         steps = np.flatnonzero(scheduled)
         s = to_body(q_true[steps], sun_unit[steps])
@@ -143,13 +147,11 @@ class CoarseSunSensors(VectorSensor):
 
     def _sun_vector(self, currents: np.ndarray):
         """The least-squares Sun vector of one set of currents and its mean
-        variance per axis, or None: the faces above the threshold (at least
-        the three brightest) give a first solution, then the faces it lights (``n_i · b > 0``) the final
+        variance per axis, or None: the faces of :meth:`_first_faces` give a
+        first solution, then the faces it lights (``n_i · b > 0``) the final
         one (a face in the dark reads its noise, so the set is refined from
         the solution rather than from the currents alone)."""
-        lit = currents > LIT_THRESHOLD_SIGMA * self.sigma
-        if lit.sum() < 3:          # the Sun near a face's normal: start from the three brightest
-            lit[np.argsort(currents)[-3:]] = True
+        lit = self._first_faces(currents)
         solution = None
         for _ in range(2):
             faces = self.normals[lit]
@@ -163,11 +165,33 @@ class CoarseSunSensors(VectorSensor):
             lit = self.normals @ solution > 0.0
         return solution, self.sigma ** 2 * np.trace(covariance) / 3.0
 
-    def measure(self, q_true: np.ndarray, sun_unit: np.ndarray, illumination: np.ndarray,
-                rng: np.random.Generator) -> VectorReadings:
+    def _first_faces(self, currents: np.ndarray) -> np.ndarray:
+        """The faces reading above :data:`LIT_THRESHOLD_SIGMA` σ_c, and at
+        least the three brightest whose normals span space, brightest first,
+        leaving out a face opposite one already taken (the two cannot both
+        be lit). With the Sun on a face's normal or in its plane, a face in
+        the dark stands in: it reads its noise about zero, the cosine law's
+        reading of a normal at 90° (its choice, the brighter of two noisy
+        zeros, biases that axis by about 0.56 σ_c)."""
+        chosen = np.zeros(len(currents), dtype=bool)
+        threshold = LIT_THRESHOLD_SIGMA * self.sigma
+        for face in np.argsort(-currents, kind="stable"):
+            if chosen.sum() >= 3 and currents[face] <= threshold:
+                break
+            if np.any(self.normals[chosen] @ self.normals[face] < -OPPOSITE_COSINE):
+                continue
+            trial = chosen.copy()
+            trial[face] = True
+            if chosen.sum() >= 3 or np.linalg.matrix_rank(self.normals[trial]) == trial.sum():
+                chosen = trial
+        return chosen
+
+    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
+                ) -> VectorReadings:
         """Least-squares Sun vectors from the faces' currents at every
         scheduled step in full Sun; one current noise per face drawn per
         scheduled step, in time order."""
+        sun_unit, illumination = references.sun_unit, references.illumination
         scheduled = self.scheduled(len(q_true))
         steps = np.flatnonzero(scheduled)
         s = to_body(q_true[steps], sun_unit[steps])
@@ -182,5 +206,4 @@ class CoarseSunSensors(VectorSensor):
             if solved is not None:
                 body[k], variance[k] = solved
                 available[k] = True
-        return VectorReadings(sensor=self.name, body=body, reference=sun_unit,
-                              available=available, variance=variance, dof=self.dof, unit="")
+        return self.readings(body, sun_unit, available, variance)

@@ -51,12 +51,6 @@ class VectorObservation:
     sensor: str
     dof: int = 3
 
-    @property
-    def direction_sigma_rad(self) -> float:
-        """σ of the vector's direction, rad: σ over the reference's length
-        (what a static solver weighs it by)."""
-        return float(np.sqrt(self.variance) / np.linalg.norm(self.reference))
-
 
 @dataclass(frozen=True)
 class VectorReadings:

@@ -47,9 +47,9 @@ def test_the_ekf_vector_jacobian_matches_finite_differences(rng):
         reference = rng.standard_normal(3)
         H = vector_jacobian(x, reference)
         step = 1e-6
-        numeric = np.column_stack([
-            (vector_prediction(x + step * e, reference) - vector_prediction(x - step * e, reference))
-            / (2 * step) for e in np.eye(4)])
+        numeric = np.column_stack([(vector_prediction(x + step * e, reference)
+                                    - vector_prediction(x - step * e, reference)) / (2 * step)
+                                   for e in np.eye(4)])
         assert np.allclose(H, numeric, atol=1e-8)
 
 
@@ -201,3 +201,24 @@ def test_the_engine_runs_vector_scenarios_on_the_per_run_path():
     result = simulate(scenario, ["mekf"], seed=1)
     assert batch.statistics["mekf"]["rms_deg"][1] == pytest.approx(
         np.sqrt(np.mean(result.error_deg["mekf"] ** 2)), rel=1e-12)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_a_rejected_star_tracker_reading_has_no_nis_and_breaks_nothing(name):
+    # A reading 90° off at the first reading and at the third: gated out,
+    # counted, and left out of the NIS (not a stale copy of the last one).
+    scenario = Scenario.from_toml(CUBESAT.parent / "smallsat.toml").replace(tstop=10.0)
+    sensors = simulate_sensors(scenario, simulate_truth(scenario), seed=1)
+    star = sensors.star_tracker_quat.copy()
+    steps = np.flatnonzero(sensors.available)
+    for k in (steps[0], steps[2]):
+        star[k] = quat_multiply(star[k], quat_from_rotvec(np.array([math.pi / 2, 0.0, 0.0])))
+    # Started on the truth with a prior of 0.01 rad, so the first reading can be gated too.
+    prior = ({"initial_covariance": 0.005 ** 2} if name == "ekf"
+             else {"initial_attitude_sigma_rad": 0.01})
+    estimator = ESTIMATORS[name].from_scenario(scenario, gate_probability=0.9999, **prior)
+    trace = estimator.track(sensors.omega_meas_radps, star, sensors.available)
+    assert estimator.rejected["star_tracker"] == 2
+    assert np.isnan(trace.nis[steps[0]]) and np.isnan(trace.nis[steps[2]])
+    assert np.isfinite(trace.nis[steps[1]])
+    assert trace.nis_dof == (4 if name == "ekf" else 3)

@@ -52,7 +52,7 @@ def starts(scenario, angles_deg) -> dict:
     chosen[f"{own:.0f}° (the scenario's)"] = scenario.initial_state
     for angle in angles_deg:
         turned = truth * Rotation.from_rotvec(math.radians(angle) * ERROR_AXIS)
-        chosen[f"{angle:.0f}°"] = turned.as_quat(scalar_first=True)
+        chosen[f"{angle:g}°"] = turned.as_quat(scalar_first=True)
     return chosen
 
 
