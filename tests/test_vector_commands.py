@@ -57,8 +57,9 @@ def test_sweep_varies_a_vector_sensor_setting(tmp_path):
 def test_the_wahba_table_has_every_case_and_solver_and_the_optimal_ones_agree():
     table = solver_table(trials=20, timing_calls=3)
     assert len(table) == len(CASES) * 6
-    equal = table[table["case"].isin([1, 3, 5, 7])]
-    # Equal accuracies: every optimal solver is the q-method's optimum to 1 µrad.
+    equal = table[table["case"].isin([1, 3, 5])]
+    # Equal accuracies, well-separated directions: every optimal solver is the
+    # q-method's optimum to 1 µrad (case 7, nearly parallel, is ill-posed).
     optimal = equal[equal["solver"].isin(["quest", "esoq2", "foam", "svd"])]
     assert (optimal["max_excess_urad"] < 1.0).all()
     assert (table["time_us"] > 0).all()

@@ -5,6 +5,7 @@ pyplot), so plotting never touches a global backend or opens a window.
 """
 from __future__ import annotations
 
+import math
 import textwrap
 
 import numpy as np
@@ -208,6 +209,7 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
     envelopes = {name: None if sigma is None else upper_envelope(3 * sigma * scale,
                                                                    envelope_steps)
                  for name, sigma in sigmas_deg.items()}
+    styles = layered(styles, scaled)
     for axis in range(3):
         _error_panel(axes[axis, 0], time_s, scaled, envelopes, axis, styles, under, labels)
         _events(axes[axis, 0], time_s, scaled, axis, styles, labels, eclipse, rejected or {})
@@ -238,17 +240,37 @@ def _error_panel(ax, time_s, scaled: dict, envelopes: dict, axis: int, styles: d
         style = styles[name]
         ax.plot(time_s, error[:, axis], color=style["color"], linestyle=style["linestyle"],
                 linewidth=style.get("linewidth", 0.9), label=labels[name],
-                zorder=style.get("zorder", 2))
+                zorder=style.get("zorder", 2), alpha=style.get("alpha", 1.0))
         envelope = envelopes.get(name)
         if envelope is None or name in under:
             continue
         envelope = envelope[:, axis]
         ax.fill_between(time_s, -envelope, envelope, color=style["color"], alpha=0.10,
-                        linewidth=0)
-        ax.plot(time_s, envelope, color=style["color"], linestyle=style["linestyle"],
-                linewidth=1.6, alpha=0.9, label=f"{labels[name]} ±3σ")
-        ax.plot(time_s, -envelope, color=style["color"], linestyle=style["linestyle"],
-                linewidth=1.6, alpha=0.9)
+                        linewidth=0, zorder=style.get("zorder", 2) - 0.5)
+        for sign, label in ((1, f"{labels[name]} ±3σ"), (-1, None)):
+            ax.plot(time_s, sign * envelope, color=style["color"],
+                    linestyle=style["linestyle"], linewidth=1.6, alpha=0.9, label=label,
+                    zorder=style.get("zorder", 2) + 0.1)
+
+
+#: An estimator whose typical error exceeds the best one's this many times is
+#: drawn faint and beneath the others, so that it does not hide them.
+FAINT_ABOVE = 5.0
+
+
+def layered(styles: dict, scaled: dict) -> dict:
+    """``styles`` with the curves stacked by their typical error, the
+    smallest on top, and those :data:`FAINT_ABOVE` times the best drawn
+    faint and thin (static solutions beside filters, dead reckoning's drift)."""
+    typical = {name: float(np.nanmedian(np.linalg.norm(error, axis=1)))
+               if np.isfinite(error).any() else math.inf for name, error in scaled.items()}
+    best = min(typical.values())
+    styles = {name: dict(style) for name, style in styles.items()}
+    for rank, name in enumerate(sorted(typical, key=typical.get, reverse=True)):
+        styles[name].setdefault("zorder", 2 + rank)
+        if typical[name] > FAINT_ABOVE * best:
+            styles[name].update(alpha=0.45, linewidth=0.6)
+    return styles
 
 
 def _events(ax, time_s, scaled: dict, axis: int, styles: dict, labels: dict, eclipse,
