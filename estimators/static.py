@@ -105,18 +105,16 @@ class StaticAttitude(AttitudeEstimator):
     def solve(self, vectors) -> tuple[np.ndarray, np.ndarray] | None:
         """The solution and its covariance from one step's vector readings,
         or None without two separated directions."""
+        vectors = [v for v in vectors if np.any(np.asarray(v.body, dtype=float))]
+        if len(vectors) < 2:
+            return None
         body = np.array([np.asarray(v.body, dtype=float) for v in vectors])
         reference = np.array([np.asarray(v.reference, dtype=float) for v in vectors])
-        body_norm = np.linalg.norm(body, axis=1)
-        if np.any(body_norm == 0):
-            keep = body_norm > 0
-            body, reference, vectors = body[keep], reference[keep], \
-                [v for v, k in zip(vectors, keep) if k]
-            body_norm = body_norm[keep]
-        body = body / body_norm[:, None]
-        reference = reference / np.linalg.norm(reference, axis=1, keepdims=True)
-        sigmas = np.array([math.sqrt(v.variance) / np.linalg.norm(v.reference) for v in vectors])
-        if len(body) < 2 or not _separated(body, reference, self.min_sine):
+        reference_norm = np.linalg.norm(reference, axis=1)
+        body = body / np.linalg.norm(body, axis=1, keepdims=True)
+        reference = reference / reference_norm[:, None]
+        sigmas = np.sqrt([v.variance for v in vectors]) / reference_norm
+        if not _separated(body, reference, self.min_sine):
             return None
         weights = 1.0 / sigmas ** 2
         return self.solution(body, reference, weights), self.covariance(body, reference, sigmas)
