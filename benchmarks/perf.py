@@ -13,7 +13,10 @@ From one run on this machine:
 3. the wall time of a 73-value × 100-seed loss landscape (its computation);
 4. the peak resident memory and wall time of a 10,000-run statistics-only
    campaign of the default scenario, run as a separate ``attitude-bench
-   montecarlo`` process and read from the operating system's accounting.
+   montecarlo`` process and read from the operating system's accounting;
+5. the vector sensors: the MEKF and USQUE on the CubeSat scenario (6000 s,
+   magnetometer, fine and coarse sun sensors, gating), one run on the
+   per-run path against 1024 on the engine (``--vectors``: this part only).
 
 The kernel is compiled (or loaded from numba's cache) before timing starts;
 that one-off time is printed too.
@@ -92,13 +95,33 @@ def campaign_peak_memory(runs: int) -> tuple[float, float]:
     return peak_kib / 1024.0, wall
 
 
+def vector_section(repeats: int) -> None:
+    """Part 5: the CubeSat's filters, per run and at batch 1024 on the engine."""
+    from benchmarks.engine import make_runs, run_batch
+    from benchmarks.simulation import simulate
+    cubesat = Scenario.from_toml(shipped_file("scenarios/cubesat.toml"))
+    run_batch(cubesat.replace(tstop=10.0), make_runs(cubesat, [0]), ("mekf", "usque"))
+    print(f"\nvector sensors, {cubesat.tstop:g} s of the CubeSat ({cubesat.n_steps} steps):")
+    for name in ("mekf", "usque"):
+        one = _median_seconds(lambda: simulate(cubesat, [name], seed=0), 1)
+        batch = _median_seconds(lambda: run_batch(cubesat, make_runs(cubesat, np.arange(1024)),
+                                                  (name,)), repeats)
+        print(f"  {name:<6} per run {one:6.2f} s   engine, 1024 runs {batch:6.1f} s "
+              f"({batch / 1024 * 1000:.1f} ms a run, {one * 1024 / batch:,.0f}x)")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf",
                                      description="Speed and memory benchmark (prints only).")
     parser.add_argument("--repeats", type=int, default=3, help="repeats per timing (median)")
     parser.add_argument("--campaign-runs", type=int, default=10_000,
                         help="runs of the memory campaign (default 10000)")
+    parser.add_argument("--vectors", action="store_true",
+                        help="only the vector sensors' part (the CubeSat's MEKF and USQUE)")
     args = parser.parse_args(argv)
+    if args.vectors:
+        vector_section(args.repeats)
+        return 0
     scenario = Scenario()
     steps = scenario.n_steps
 
@@ -133,6 +156,7 @@ def main(argv=None) -> int:
     peak_mib, wall = campaign_peak_memory(args.campaign_runs)
     print(f"campaign, {args.campaign_runs:,} runs x 3 estimators, statistics only: "
           f"peak {peak_mib:,.0f} MiB, {wall:.1f} s wall (whole process)")
+    vector_section(args.repeats)
     return 0
 
 

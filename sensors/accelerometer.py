@@ -23,7 +23,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import finite_vector, standard_deviation
-from sensors.vector import VectorReadings, VectorSensor, to_body
+from sensors.vector import VectorReadings, VectorSensor, normals, to_body
 
 #: The specific force at rest in the east-north-up frame, m/s².
 GRAVITY_REACTION_ENU_MPS2 = np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
@@ -52,16 +52,16 @@ class Accelerometer(VectorSensor):
                                              strictly_positive=True)
         self.bias_mps2 = finite_vector("accelerometer.bias_mps2", bias_mps2, 3)
 
-    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
-                ) -> VectorReadings:
+    def measure_runs(self, q_true: np.ndarray, references, rngs,
+                     first_step: int = 0) -> VectorReadings:
         """Readings of the gravity reaction at every scheduled step; one
         3-vector of noise per reading, in time order (``references`` is not
         read: gravity's reference is the local vertical)."""
         n = len(q_true)
         reference = np.broadcast_to(GRAVITY_REACTION_ENU_MPS2, (n, 3)).copy()
-        available = self.scheduled(n)
+        available = self.scheduled(n, first_step)
         steps = np.flatnonzero(available)
-        body = np.zeros((n, 3))
-        body[steps] = to_body(q_true[steps], reference[steps]) + self.bias_mps2 + \
-            self.sigma_mps2 * rng.standard_normal((len(steps), 3))
+        body = np.zeros((len(rngs), n, 3))
+        body[:, steps] = to_body(q_true[steps], reference[steps]) + self.bias_mps2 + \
+            self.sigma_mps2 * normals(rngs, (len(steps), 3))
         return self.readings(body, reference, available, self.sigma_mps2 ** 2)

@@ -21,7 +21,7 @@ import numpy as np
 
 from dynamics.validation import (InvalidParameterError, finite_vector, float_array,
                                  standard_deviation)
-from sensors.vector import VectorReadings, VectorSensor, to_body
+from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
 
 
 class Magnetometer(VectorSensor):
@@ -56,16 +56,16 @@ class Magnetometer(VectorSensor):
             raise InvalidParameterError("magnetometer.soft_iron", matrix.tolist(), rule)
         self.soft_iron = matrix
 
-    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
-                ) -> VectorReadings:
+    def measure_runs(self, q_true: np.ndarray, references, rngs,
+                     first_step: int = 0) -> VectorReadings:
         """Readings of the field ``references.magnetic_field_nT`` (``(N, 3)``,
-        reference frame; :class:`dynamics.environment.References`) at every
-        scheduled step; one 3-vector of noise drawn per reading, in time order."""
+        reference frame) at every scheduled step; one 3-vector of noise drawn
+        per reading, in time order."""
         field_nT = references.magnetic_field_nT
-        available = self.scheduled(len(q_true))
-        body = np.zeros((len(q_true), 3))
+        available = self.scheduled(len(q_true), first_step)
         steps = np.flatnonzero(available)
-        truth = to_body(q_true[steps], field_nT[steps])
-        body[steps] = truth @ self.soft_iron.T + self.bias_nT + \
-            self.sigma_nT * rng.standard_normal((len(steps), 3))
+        truth = times_matrix(to_body(q_true[steps], field_nT[steps]), self.soft_iron) + \
+            self.bias_nT
+        body = np.zeros((len(rngs), len(q_true), 3))
+        body[:, steps] = truth + self.sigma_nT * normals(rngs, (len(steps), 3))
         return self.readings(body, field_nT, available, self.sigma_nT ** 2)

@@ -38,11 +38,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from dynamics.validation import InvalidParameterError, finite_number, float_array, \
     standard_deviation
-from sensors.vector import VectorReadings, VectorSensor, to_body
+from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
 
 #: Illumination below which a sun sensor gives no reading (1: full Sun).
 FULL_SUN = 0.99
@@ -50,11 +49,42 @@ FULL_SUN = 0.99
 LIT_THRESHOLD_SIGMA = 3.0
 #: Two faces whose normals' cosine is below minus this are opposite.
 OPPOSITE_COSINE = 0.99
+#: Normals span a plane when their cross product, and space when their
+#: triple product, is larger than this (they are unit vectors).
+SPAN_TOLERANCE = 1e-9
 #: The lit faces' normal matrix must be better conditioned than this.
 MAX_CONDITION = 1e6
 #: The six faces of a cube, outward normals in the body frame.
 CUBE_FACES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0),
               (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+
+
+def _rotated(vectors: np.ndarray, rotvecs: np.ndarray) -> np.ndarray:
+    r"""Each of ``vectors`` ``(..., 3)`` rotated by its rotation vector θ
+    (Rodrigues: :math:`v\cos\theta + (\hat k\times v)\sin\theta + \hat k(\hat k\cdot
+    v)(1-\cos\theta)`), element by element. scipy's ``Rotation.apply`` gives
+    a row a last-bit result that depends on its place in the stack, and a
+    reading must not depend on how a run is cut into blocks."""
+    angle = np.sqrt(np.sum(rotvecs * rotvecs, axis=-1, keepdims=True))
+    safe = np.where(angle > 0.0, angle, 1.0)
+    axis = rotvecs / safe
+    x, y, z = axis[..., 0:1], axis[..., 1:2], axis[..., 2:3]
+    a, b, c = vectors[..., 0:1], vectors[..., 1:2], vectors[..., 2:3]
+    cross = np.concatenate([y * c - z * b, z * a - x * c, x * b - y * a], axis=-1)
+    along = x * a + y * b + z * c
+    cos, sin = np.cos(angle), np.sin(angle)
+    return vectors * cos + cross * sin + axis * (along * (1.0 - cos))
+
+
+def _distinct_rows(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of a boolean ``(M, N)`` array and each row's index
+    among them (``np.unique(axis=0)``, which sorts the rows as bytes, is ten
+    times slower than sorting each row's bits read as a number)."""
+    if flags.shape[1] > 62:
+        return np.unique(flags, axis=0, return_inverse=True)
+    codes = flags.astype(np.int64) @ (np.int64(1) << np.arange(flags.shape[1], dtype=np.int64))
+    distinct, which = np.unique(codes, return_inverse=True)
+    return (distinct[:, None] >> np.arange(flags.shape[1]) & 1).astype(bool), which
 
 
 def _unit_vector(name: str, value) -> np.ndarray:
@@ -93,22 +123,22 @@ class FineSunSensor(VectorSensor):
         self.fov_deg = fov
         self.boresight = _unit_vector("sun_sensor.boresight", boresight)
 
-    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
-                ) -> VectorReadings:
+    def measure_runs(self, q_true: np.ndarray, references, rngs,
+                     first_step: int = 0) -> VectorReadings:
         """Readings of the Sun direction ``references.sun_unit`` (``(N, 3)``,
         reference frame; :class:`dynamics.environment.References`); one
         3-vector of noise drawn per scheduled step, in time order, whether or
         not the Sun is seen (so the noise does not depend on the field of view)."""
         sun_unit, illumination = references.sun_unit, references.illumination
-        scheduled = self.scheduled(len(q_true))
+        scheduled = self.scheduled(len(q_true), first_step)
         steps = np.flatnonzero(scheduled)
         s = to_body(q_true[steps], sun_unit[steps])
-        delta = self.sigma_rad * rng.standard_normal((len(steps), 3))
-        delta -= np.sum(delta * s, axis=1, keepdims=True) * s
-        seen = (s @ self.boresight >= math.cos(math.radians(self.fov_deg))) & \
+        delta = self.sigma_rad * normals(rngs, (len(steps), 3))
+        delta -= np.sum(delta * s, axis=-1, keepdims=True) * s
+        seen = (times_matrix(s, self.boresight[None])[:, 0] >= math.cos(math.radians(self.fov_deg))) & \
             (illumination[steps] >= FULL_SUN)
-        body = np.zeros((len(q_true), 3))
-        body[steps] = Rotation.from_rotvec(delta).apply(s)
+        body = np.zeros((len(rngs), len(q_true), 3))
+        body[:, steps] = _rotated(np.broadcast_to(s, delta.shape), delta)
         available = np.zeros(len(q_true), dtype=bool)
         available[steps[seen]] = True
         return self.readings(body, sun_unit, available, self.sigma_rad ** 2)
@@ -145,65 +175,93 @@ class CoarseSunSensors(VectorSensor):
                                         "must span three dimensions")
         self.normals = faces / np.linalg.norm(faces, axis=1, keepdims=True)
 
-    def _sun_vector(self, currents: np.ndarray):
-        """The least-squares Sun vector of one set of currents and its mean
-        variance per axis, or None: the faces of :meth:`_first_faces` give a
-        first solution, then the faces it lights (``n_i · b > 0``) the final
-        one (a face in the dark reads its noise, so the set is refined from
-        the solution rather than from the currents alone)."""
+    def _sun_vectors(self, currents: np.ndarray):
+        """The least-squares Sun vectors of ``(M, N)`` sets of currents and
+        their mean variances per axis, NaN where there is none: the faces of
+        :meth:`_first_faces` give a first solution, then the faces it lights
+        (``n_i · b > 0``) the final one (a face in the dark reads its noise,
+        so the set is refined from the solution rather than from the
+        currents alone). Solved once per distinct set of faces: there are
+        few, and one reading's arithmetic is that of a single solve."""
         lit = self._first_faces(currents)
-        solution = None
+        solution = np.full((len(currents), 3), np.nan)
+        variance = np.full(len(currents), np.nan)
+        solvable = np.ones(len(currents), dtype=bool)
         for _ in range(2):
-            faces = self.normals[lit]
-            if len(faces) < 3:
-                return None
-            normal_matrix = faces.T @ faces
-            if np.linalg.cond(normal_matrix) > MAX_CONDITION:
-                return None
-            covariance = np.linalg.inv(normal_matrix)
-            solution = covariance @ faces.T @ currents[lit]
-            lit = self.normals @ solution > 0.0
-        return solution, self.sigma ** 2 * np.trace(covariance) / 3.0
+            sets, which = _distinct_rows(lit)
+            for index, faces_lit in enumerate(sets):
+                rows = np.flatnonzero(solvable & (which == index))
+                if not len(rows):
+                    continue
+                faces = self.normals[faces_lit]
+                normal_matrix = faces.T @ faces
+                if len(faces) < 3 or np.linalg.cond(normal_matrix) > MAX_CONDITION:
+                    solvable[rows] = False
+                    continue
+                covariance = np.linalg.inv(normal_matrix)
+                gain = covariance @ faces.T
+                solution[rows] = 0.0
+                for column, face in enumerate(np.flatnonzero(faces_lit)):
+                    solution[rows] += currents[rows, face:face + 1] * gain[:, column]
+                variance[rows] = self.sigma ** 2 * np.trace(covariance) / 3.0
+            lit = times_matrix(solution, self.normals) > 0.0
+        solution[~solvable], variance[~solvable] = np.nan, np.nan
+        return solution, variance
 
     def _first_faces(self, currents: np.ndarray) -> np.ndarray:
-        """The faces reading above :data:`LIT_THRESHOLD_SIGMA` σ_c, and at
-        least the three brightest whose normals span space, brightest first,
-        leaving out a face opposite one already taken (the two cannot both
-        be lit). With the Sun on a face's normal or in its plane, a face in
-        the dark stands in: it reads its noise about zero, the cosine law's
-        reading of a normal at 90° (its choice, the brighter of two noisy
-        zeros, biases that axis by about 0.56 σ_c)."""
-        chosen = np.zeros(len(currents), dtype=bool)
+        """``(M, N)`` bool: per set of currents, the faces reading above
+        :data:`LIT_THRESHOLD_SIGMA` σ_c, and at least the three brightest
+        whose normals span space, brightest first, leaving out a face
+        opposite one already taken (the two cannot both be lit). With the
+        Sun on a face's normal or in its plane, a face in the dark stands
+        in: it reads its noise about zero, the cosine law's reading of a
+        normal at 90° (its choice, the brighter of two noisy zeros, biases
+        that axis by about 0.56 σ_c). Taken face by face in order of
+        brightness, every set at once."""
+        rows = np.arange(len(currents))
+        chosen = np.zeros(currents.shape, dtype=bool)
+        picked = np.zeros((len(currents), 2, 3))     # the first two faces' normals
         threshold = LIT_THRESHOLD_SIGMA * self.sigma
-        for face in np.argsort(-currents, kind="stable"):
-            if chosen.sum() >= 3 and currents[face] <= threshold:
-                break
-            if np.any(self.normals[chosen] @ self.normals[face] < -OPPOSITE_COSINE):
-                continue
-            trial = chosen.copy()
-            trial[face] = True
-            if chosen.sum() >= 3 or np.linalg.matrix_rank(self.normals[trial]) == trial.sum():
-                chosen = trial
+        opposite = self.normals @ self.normals.T < -OPPOSITE_COSINE
+        for face in np.argsort(-currents, axis=1, kind="stable").T:
+            count = chosen.sum(axis=1)
+            normal = self.normals[face]
+            take = ~((count >= 3) & (currents[rows, face] <= threshold)) & \
+                ~np.any(chosen & opposite[face], axis=1)
+            # Fewer than three so far: the face must add a dimension.
+            across = np.cross(picked[:, 0], normal)
+            spans = np.select([count == 0, count == 1, count == 2],
+                              [np.ones(len(rows), dtype=bool),
+                               np.linalg.norm(across, axis=1) > SPAN_TOLERANCE,
+                               np.abs(np.sum(across * picked[:, 1], axis=1)) > SPAN_TOLERANCE],
+                              default=True)
+            take &= spans
+            for few in (0, 1):
+                first = take & (count == few)
+                picked[first, few] = normal[first]
+            chosen[rows[take], face[take]] = True
         return chosen
 
-    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator
-                ) -> VectorReadings:
+    def measure_runs(self, q_true: np.ndarray, references, rngs,
+                     first_step: int = 0) -> VectorReadings:
         """Least-squares Sun vectors from the faces' currents at every
         scheduled step in full Sun; one current noise per face drawn per
         scheduled step, in time order."""
         sun_unit, illumination = references.sun_unit, references.illumination
-        scheduled = self.scheduled(len(q_true))
+        scheduled = self.scheduled(len(q_true), first_step)
         steps = np.flatnonzero(scheduled)
         s = to_body(q_true[steps], sun_unit[steps])
         lit_fraction = np.where(illumination[steps] >= FULL_SUN, 1.0, 0.0)
-        currents = np.maximum(0.0, s @ self.normals.T) * lit_fraction[:, None] + \
-            self.sigma * rng.standard_normal((len(steps), len(self.normals)))
-        body = np.zeros((len(q_true), 3))
-        variance = np.zeros(len(q_true))
-        available = np.zeros(len(q_true), dtype=bool)
-        for row, k in enumerate(steps):
-            solved = self._sun_vector(currents[row]) if lit_fraction[row] else None
-            if solved is not None:
-                body[k], variance[k] = solved
-                available[k] = True
+        currents = np.maximum(0.0, times_matrix(s, self.normals)) * lit_fraction[:, None] + \
+            self.sigma * normals(rngs, (len(steps), len(self.normals)))
+        in_sun = np.flatnonzero(lit_fraction > 0)
+        solution, solved_variance = self._sun_vectors(
+            currents[:, in_sun].reshape(-1, len(self.normals)))
+        body = np.zeros((len(rngs), len(q_true), 3))
+        variance = np.zeros((len(rngs), len(q_true)))
+        available = np.zeros((len(rngs), len(q_true)), dtype=bool)
+        body[:, steps[in_sun]] = solution.reshape(len(rngs), len(in_sun), 3)
+        variance[:, steps[in_sun]] = solved_variance.reshape(len(rngs), len(in_sun))
+        available[:, steps[in_sun]] = np.isfinite(variance[:, steps[in_sun]])
+        variance[~available] = 0.0
         return self.readings(body, sun_unit, available, variance)

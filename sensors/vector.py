@@ -80,10 +80,34 @@ class VectorReadings:
         return VectorObservation(self.body[k], self.reference[k], float(self.variance[k]),
                                  self.sensor, self.dof)
 
+    def run(self, index: int) -> "VectorReadings":
+        """One run's readings of readings made for several
+        (:meth:`VectorSensor.measure_runs`: ``body`` ``(R, N, 3)``,
+        ``available`` and ``variance`` ``(R, N)``)."""
+        return VectorReadings(sensor=self.sensor, body=self.body[index],
+                              reference=self.reference, available=self.available[index],
+                              variance=self.variance[index], dof=self.dof, unit=self.unit)
+
 
 def to_body(q_true: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """``(N, 3)``: :math:`A(q_k)^\\mathsf{T} r_k`, each reference vector in the body frame."""
     return np.einsum("nji,nj->ni", rotation_matrix(q_true), reference)
+
+
+def times_matrix(vectors: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """``vectors @ matrix.T`` for ``(..., 3)`` vectors, written element by
+    element: a row's result is then the same bits wherever it sits in the
+    stack (a block of a run, or the whole run), which BLAS does not promise."""
+    return (vectors[..., 0:1] * matrix[:, 0] + vectors[..., 1:2] * matrix[:, 1]
+            + vectors[..., 2:3] * matrix[:, 2])
+
+
+def normals(rngs, shape: tuple) -> np.ndarray:
+    """``(R,) + shape`` standard normals, each run's from its own generator."""
+    out = np.empty((len(rngs),) + shape)
+    for row, rng in zip(out, rngs):
+        rng.standard_normal(out=row)
+    return out
 
 
 class VectorSensor:
@@ -106,14 +130,37 @@ class VectorSensor:
         self.dt = float(dt)
         self.steps_between = steps_between_readings(interval_s, dt)
 
-    def scheduled(self, n_steps: int) -> np.ndarray:
-        """``(N,)`` bool: the steps at which the sensor reads (every ``m`` steps)."""
+    def scheduled(self, n_steps: int, first_step: int = 0) -> np.ndarray:
+        """``(N,)`` bool: the steps at which the sensor reads, every ``m``
+        steps from step 0, over ``N`` steps from ``first_step`` (a block of a
+        longer run: the engine measures block by block, drawing the same
+        numbers in the same order as one call over the whole run)."""
         flags = np.zeros(n_steps, dtype=bool)
-        flags[::self.steps_between] = True
+        flags[-first_step % self.steps_between::self.steps_between] = True
         return flags
 
+    def measure(self, q_true: np.ndarray, references, rng: np.random.Generator,
+                first_step: int = 0) -> VectorReadings:
+        """The readings of true attitudes ``q_true`` ``(N, 4)`` with the
+        reference vectors ``references`` (:class:`dynamics.environment.References`)
+        over ``N`` steps from ``first_step``, the noise drawn from ``rng`` in
+        time order (a block's call draws what one call over the run draws
+        for those steps)."""
+        return self.measure_runs(q_true, references, [rng], first_step).run(0)
+
+    def measure_runs(self, q_true: np.ndarray, references, rngs,
+                     first_step: int = 0) -> VectorReadings:
+        """:meth:`measure` for several runs of the same truth at once, one
+        generator each (the engine's batches): readings with a leading axis
+        of runs. A run's readings are the same bits as :meth:`measure`'s."""
+        raise NotImplementedError
+
     def readings(self, body, reference, available, variance) -> VectorReadings:
-        body = np.where(available[:, None], body, 0.0)
+        """Readings of ``R`` runs: ``body`` ``(R, N, 3)`` (zeroed where none
+        was taken), ``available`` ``(N,)`` or ``(R, N)``, ``variance`` a
+        number or ``(R, N)``."""
+        available = np.broadcast_to(available, body.shape[:2])
+        body = np.where(available[..., None], body, 0.0)
         return VectorReadings(sensor=self.name, body=body, reference=reference,
                               available=available,
                               variance=np.broadcast_to(np.asarray(variance, dtype=float),

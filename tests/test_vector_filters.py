@@ -191,18 +191,6 @@ def test_a_bad_vector_reading_is_refused_or_skipped():
     assert skipping.skipped["vector"] == 1
 
 
-def test_the_engine_runs_vector_scenarios_on_the_per_run_path():
-    from benchmarks.engine.batch import engine_limitation, make_runs
-    from benchmarks.engine.runner import run_many
-    scenario = Scenario.from_toml(CUBESAT).replace(tstop=30.0)
-    assert "vector sensors" in engine_limitation(scenario)
-    with pytest.warns(UserWarning, match="per-run path"):
-        batch = run_many(scenario, make_runs(scenario, [0, 1]), ["mekf"])
-    result = simulate(scenario, ["mekf"], seed=1)
-    assert batch.statistics["mekf"]["rms_deg"][1] == pytest.approx(
-        np.sqrt(np.mean(result.error_deg["mekf"] ** 2)), rel=1e-12)
-
-
 @pytest.mark.parametrize("name", FILTERS)
 def test_a_rejected_star_tracker_reading_has_no_nis_and_breaks_nothing(name):
     # A reading 90° off at the first reading and at the third: gated out,

@@ -26,6 +26,7 @@ import pandas as pd
 
 from benchmarks.engine.kernels import KERNELS, kernel
 from benchmarks.engine.kernels.sensors import bias_model
+from benchmarks.engine.vectors import VectorStreams, max_block_steps, vector_block, vector_streams
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
@@ -103,19 +104,26 @@ def checked_estimators(estimators) -> tuple:
     return tuple(name for name in KERNELS if name in names)
 
 
-def engine_limitation(scenario: Scenario, runs: RunTable | None = None) -> str | None:
+def engine_limitation(scenario: Scenario, runs: RunTable | None = None,
+                      name: str | None = None) -> str | None:
     """Why the engine cannot run ``scenario`` (with the intervals of ``runs``,
-    if given): a sensor model its kernels do not draw, or None. Those
-    scenarios run on the per-run path (:func:`benchmarks.engine.runner.run_many`
-    falls back, saying so)."""
-    if scenario.has_vector_sensors:
-        return "vector sensors (magnetometer, sun sensors, accelerometer)"
-    if scenario.star_tracker_model == "none":
-        return "a scenario without a star tracker"
+    if given), for estimator ``name`` if given, or None: a sensor or setting
+    its kernels do not model. Those run on the per-run path
+    (:func:`benchmarks.engine.runner.run_many` falls back, saying so)."""
     intervals = ([scenario.time_between_measurements] if runs is None
                  else np.unique(runs.time_between_measurements))
-    if not all(on_gyro_grid(float(t), scenario.dt) for t in intervals):
+    if scenario.star_tracker_model != "none" and \
+            not all(on_gyro_grid(float(t), scenario.dt) for t in intervals):
         return "star tracker readings off the gyro's time grid ([star_tracker] interval_s)"
+    if name is None or name not in KERNELS:
+        return None
+    module = kernel(name)
+    if scenario.has_vector_sensors and ESTIMATORS[name].uses_vector_readings and \
+            not getattr(module, "VECTOR_READINGS", False):
+        return f"vector sensors (magnetometer, sun sensors, accelerometer) for {name}"
+    if not getattr(module, "GATING", False) and \
+            getattr(ESTIMATORS[name].from_scenario(scenario), "gate_probability", None) is not None:
+        return f"innovation gating (gate_probability) for {name}"
     return None
 
 
@@ -306,6 +314,7 @@ class _Sensors:
     generators: list
     block_steps: int
     threads: int
+    vectors: VectorStreams       # the vector sensors' (none, if no kernel applies them)
 
     def state(self):
         """A fresh :class:`~benchmarks.engine.kernels.sensors.SensorState`
@@ -315,10 +324,13 @@ class _Sensors:
                            bias_last=self.initial_bias[:, :3] + self.initial_bias[:, 3:])
 
 
-def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int) -> _Sensors:
+def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int,
+             vectors: bool) -> _Sensors:
     """The per-run path's arithmetic, value by value: √(p/dt + σ_u²dt/12) and the
-    tracker's σ, its readings' interval, and the generators of each run's seed."""
+    tracker's σ, its readings' interval, and the generators of each run's seed
+    (and, if ``vectors``, of its vector sensors: :mod:`benchmarks.engine.vectors`)."""
     n_runs, dt = len(runs), scenario.dt
+    streams = vector_streams(scenario if vectors else None, runs.seeds)
     gyro = scenario.build_gyro()
     tracker = scenario.build_star_tracker()
     rotation = tracker.model == "rotation"
@@ -326,7 +338,8 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
                               for t in runs.time_between_measurements], dtype=np.int64)
     # Keep the gyro buffer's size whatever its columns (3, and 3 more each for a
     # bias walk and a Gauss–Markov part).
-    block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps))
+    block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps,
+                             max_block_steps(n_runs, len(streams.sensors)) or scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
     dropout = float(tracker.dropout_probability)
     generators = [sensor_generators(int(seed)) for seed in runs.seeds]
@@ -355,7 +368,7 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int)
         dropout_uniforms=np.empty((n_runs, readings if dropout > 0 else 0)))
     return _Sensors(settings=settings, tracker=tracker,
                     initial_bias=initial_bias, generators=generators,
-                    block_steps=block_steps, threads=threads)
+                    block_steps=block_steps, threads=threads, vectors=streams)
 
 
 def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
@@ -375,13 +388,16 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
     # (-1) // m = -1, so the reading at k = 0 is counted too.
     steps_between = settings["steps_between"]
     counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
+    if sensors.tracker.model == "none":
+        counts = np.zeros_like(counts)      # an outage throughout: nothing drawn
     _fill_normals(sensors.generators, normals, settings["star_normals"], counts,
                   settings["dropout_uniforms"], sensors.threads)
     outage = sensors.tracker.in_outage(truth.time_s)
     return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
                  q_true=np.ascontiguousarray(truth.q_true),
                  omega_true=np.ascontiguousarray(rates), outage=outage,
-                 **settings)
+                 **settings, **vector_block(sensors.vectors, len(sensors.generators), k0,
+                                            np.ascontiguousarray(truth.q_true)))
 
 
 def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
@@ -474,11 +490,13 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     # trust shapes and lengths, so a bad table would read or write out of bounds.
     runs = checked_runs(scenario, runs)
     names = checked_estimators(estimators)
-    limitation = engine_limitation(scenario, runs)
-    if limitation is not None:
-        raise InvalidParameterError("scenario", limitation, "is not modelled by the engine's "
-                                    "kernels; run it through benchmarks.engine.runner.run_many, "
-                                    "which takes the per-run path")
+    for name in names:
+        limitation = engine_limitation(scenario, runs, name)
+        if limitation is not None:
+            raise InvalidParameterError("scenario", limitation, "is not modelled by the "
+                                        "engine's kernels; run it through "
+                                        "benchmarks.engine.runner.run_many, which takes the "
+                                        "per-run path")
     block_steps, nees_every, cache_steps, error_every, settle_steps = (
         whole_number("block_steps", block_steps, 1), whole_number("nees_every", nees_every, 1),
         whole_number("cache_steps", cache_steps, 0), whole_number("error_every", error_every, 0),
@@ -489,8 +507,10 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     states = {name: kernels[name].initial_state(objects[name]) for name in names}
     record = _record(names, len(runs), scenario.n_steps, keep_traces, consistency, nees_every,
                      settle_steps, health, error_every)
-    readings = _advance(scenario, _sensors(scenario, runs, block_steps, threads), kernels,
-                        states, record, cache_steps, progress_bar)
+    vectors = scenario.has_vector_sensors and any(
+        getattr(module, "VECTOR_READINGS", False) for module in kernels.values())
+    readings = _advance(scenario, _sensors(scenario, runs, block_steps, threads, vectors),
+                        kernels, states, record, cache_steps, progress_bar)
     return _result(scenario, runs, kernels, objects, states, record,
                    next(iter(readings.values())))
 
@@ -565,7 +585,8 @@ def _consistency(record, row: int, n_steps: int, dt: float, nis_dof: int) -> dic
                                       np.where(lost, -(-diverged // every), -1)),
             "nees_time_average": np.where(lost, np.nan,
                                           record.nees_sum[row] / (n_steps - record.settle)),
-            "nis_mean": np.where(lost, np.nan,
+            # No reading applied (no star tracker, or every reading gated): no NIS.
+            "nis_mean": np.where(lost | (record.nis_count[row] == 0), np.nan,
                                  record.nis_sum[row] / np.maximum(record.nis_count[row], 1)),
             "nis_dof": nis_dof}
 

@@ -58,11 +58,16 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
     kept = {"consistency": consistency, "nees_every": nees_every,
             "settle_steps": settle_steps, "keep_traces": keep_traces,
             "error_every": whole_number("error_every", error_every, 0)}
-    limitation = engine_limitation(scenario, runs)
-    engine = [name for name in estimators if name in ENGINE_ESTIMATORS and limitation is None]
-    if limitation is not None:
-        warnings.warn(f"the engine does not model {limitation}; its estimators take the "
-                      "per-run path on every run (slower, the same numbers)", stacklevel=2)
+    engine = []
+    for name in estimators:
+        if name not in ENGINE_ESTIMATORS:
+            continue
+        limitation = engine_limitation(scenario, runs, name)
+        if limitation is None:
+            engine.append(name)
+        else:
+            warnings.warn(f"the engine does not model {limitation}; {name} takes the "
+                          "per-run path on every run (slower, the same numbers)", stacklevel=2)
     results = {}
     if engine:
         results.update(_on_the_engine(scenario, runs, engine, kept, threads, chunk_runs,

@@ -23,7 +23,13 @@ What a kernel module declares (``dead_reckoning.py`` is the shortest):
   (:func:`~benchmarks.engine.kernels.common.record_error`);
 * optionally ``REPORTS_COVARIANCE = True`` with ``nis_dof(estimators)`` (it
   streams NEES and NIS), and ``final(state, estimators)`` (what it reports
-  at the last step besides the statistics).
+  at the last step besides the statistics);
+* optionally ``VECTOR_READINGS = True`` (it applies the block's vector
+  readings, ``Block.vector_*``, made on the host by
+  :mod:`benchmarks.engine.vectors`) and ``GATING = True`` (it gates readings
+  as its per-run class does). Without them, a scenario with vector sensors
+  or an estimator with a ``gate_probability`` runs on the per-run path
+  (:func:`benchmarks.engine.batch.engine_limitation`).
 
 :data:`KERNELS` maps a name to its module, in the engine's order. Adding an
 estimator to the engine is its kernel module plus one line here. Each

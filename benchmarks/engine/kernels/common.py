@@ -77,6 +77,15 @@ class Block(NamedTuple):
     outage: np.ndarray           # (T,) bool
     dropout_probability: float
     dropout_uniforms: np.ndarray  # (B, readings in this block)
+    # The vector sensors (sensors.vector), S of them in the scenario's order,
+    # measured on the host by the per-run path's classes (engine.vectors):
+    # each run's readings at each step of the block, the shared reference
+    # vectors, and each sensor's degrees of freedom (for its gate).
+    vector_body: np.ndarray       # (B, T, S, 3)
+    vector_reference: np.ndarray  # (T, S, 3)
+    vector_variance: np.ndarray   # (B, T, S) σ² per axis
+    vector_available: np.ndarray  # (B, T, S) bool
+    vector_dof: np.ndarray        # (S,) int64
 
 
 #: Per-run streaming accumulators: Welford mean and M2, max, final value.
@@ -319,6 +328,18 @@ def quat_times_normalized(q, d, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def to_body_frame(q, v):
+    """A(q)ᵀ v for a unit quaternion ``q`` (dynamics.quaternion.to_body_frame,
+    the same operations in the same order)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    a, b, c = v[0], v[1], v[2]
+    tx, ty, tz = y * c - z * b, z * a - x * c, x * b - y * a
+    return (a - 2.0 * w * tx + 2.0 * (y * tz - z * ty),
+            b - 2.0 * w * ty + 2.0 * (z * tx - x * tz),
+            c - 2.0 * w * tz + 2.0 * (x * ty - y * tx))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def log_error(q, p, norm):
     """The rotation vector of ``(q⁻¹ ⊗ p) / norm``, aligned to ``w >= 0``
     (dynamics.quaternion.rotvec_from_quat): the body-frame error from ``q`` to ``p``."""
@@ -405,6 +426,20 @@ def fold_nees(run, k, value, every, settle, samples, nees_sum):
         nees_sum[run] += value
     if k % every == 0 and k // every < samples.shape[1]:
         samples[run, k // every] = value
+
+
+def gate_thresholds(estimators) -> dict:
+    """Each run's innovation gate, read off its per-run filter: ``gating``
+    ``(B,)`` bool, and ``gate`` ``(B, 4)``, the χ² threshold of a reading of
+    1, 2 or 3 degrees of freedom at its ``gate_probability``
+    (:func:`estimators.base.gate_threshold`; infinite where it does not gate)."""
+    from estimators.base import gate_threshold
+    gate = np.full((len(estimators), 4), math.inf)
+    for run, estimator in enumerate(estimators):
+        if estimator.gate_probability is not None:
+            gate[run, 1:] = [gate_threshold(estimator.gate_probability, dof) for dof in (1, 2, 3)]
+    return {"gating": np.array([e.gate_probability is not None for e in estimators]),
+            "gate": gate}
 
 
 #: Health counters per estimator and run (``run_batch(health=True)``): the

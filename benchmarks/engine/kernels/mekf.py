@@ -1,6 +1,8 @@
 """The multiplicative EKF in the engine: :class:`estimators.MultiplicativeEKF`
 — :func:`estimators.mekf.discrete_error_model`, filterpy's Joseph update with
-``H = [I 0]``, the reset, and the exact quaternion step."""
+``H = [I 0]`` for a star tracker reading and ``H = [[b̂×] 0]`` for each vector
+reading after it (sequential updates, gated as the per-run class gates
+them), the reset after each, and the exact quaternion step."""
 from __future__ import annotations
 
 import math
@@ -10,17 +12,20 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              gauss_jordan, keep_output,
+                                              gate_thresholds, gauss_jordan, keep_output,
                                               log_error, mark_diverged, nees_arrays,
                                               quadratic_form, quat_exp, quat_times_normalized,
-                                              record_error)
+                                              record_error, to_body_frame)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
-                                               star_arrays, star_step)
+                                               star_arrays, star_step, vector_arrays)
 from estimators.mekf import transition_coefficients
 
 NAME = "mekf"
 #: It reports a covariance: its kernel streams NEES and NIS.
 REPORTS_COVARIANCE = True
+#: It applies vector readings and gates readings as the per-run class does.
+VECTOR_READINGS = True
+GATING = True
 
 
 class State(NamedTuple):
@@ -33,6 +38,8 @@ class State(NamedTuple):
     beta_last: np.ndarray        # (B, 3) the output bias at the last step
     P_last: np.ndarray           # (B, 6, 6) and its covariance
     posterior: bool
+    gating: np.ndarray           # (B,) bool: the filter gates its readings
+    gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
 
 
 def initial_state(estimators) -> State:
@@ -45,7 +52,8 @@ def initial_state(estimators) -> State:
                  bias_rw=np.array([e.gyro_bias_random_walk for e in estimators], dtype=float),
                  R=np.array([e.filter.R for e in estimators]).reshape(-1, 3, 3),
                  beta_last=beta.copy(), P_last=P.copy(),
-                 posterior=estimators[0].output == "posterior")
+                 posterior=estimators[0].output == "posterior",
+                 **gate_thresholds(estimators))
 
 
 def nis_dof(estimators) -> int:
@@ -119,32 +127,35 @@ def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
 
 
 @njit(cache=True, error_model="numpy")
-def _mekf_update(q, beta, P, z, R, scratch, dq):
-    """filterpy's Joseph update with H = [I 0] on y = log(q̂⁻¹ ⊗ z), then the reset."""
-    # The reading aligned in sign with q̂ is what the alignment inside the log does.
-    y0, y1, y2 = log_error(q, z, 1.0)
-    S = scratch[0]
-    inverse = scratch[1]
-    K = scratch[2]
-    IK = scratch[3]
-    T = scratch[4]
-    KR = scratch[5]
+def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq):
+    """filterpy's update with innovation ``y`` and Jacobian ``H`` (3x6, zero
+    in its bias columns), ``K = P Hᵀ S⁻¹`` and Joseph's form, then the reset;
+    not applied if gating rejects it. Returns the NIS and whether it was applied."""
+    PHT, S, inverse, K, IK, T, KR = (scratch[0], scratch[1], scratch[2], scratch[3],
+                                     scratch[4], scratch[5], scratch[6])
+    for i in range(6):
+        for j in range(3):
+            PHT[i, j] = P[i, 0] * H[j, 0] + P[i, 1] * H[j, 1] + P[i, 2] * H[j, 2]
     for i in range(3):
         for j in range(3):
-            S[i, j] = P[i, j] + R[i, j]
+            S[i, j] = (H[i, 0] * PHT[0, j] + H[i, 1] * PHT[1, j] + H[i, 2] * PHT[2, j]) \
+                + R[i, j]
     gauss_jordan(S, inverse, 3)
     nis = quadratic_form((y0, y1, y2), inverse, 3)
-    # K = P Hᵀ S⁻¹ (6x3): P's first three columns times S⁻¹.
+    if gating and not nis <= threshold:
+        return nis, False
     for i in range(6):
         for j in range(3):
-            K[i, j] = P[i, 0] * inverse[0, j] + P[i, 1] * inverse[1, j] + P[i, 2] * inverse[2, j]
-    dx = scratch[6, 0]
+            K[i, j] = PHT[i, 0] * inverse[0, j] + PHT[i, 1] * inverse[1, j] \
+                + PHT[i, 2] * inverse[2, j]
+    dx = scratch[7, 0]
     for i in range(6):
         dx[i] = K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2
-    # I - K H: the identity less K in the first three columns.
+    # I - K H: H's bias columns are zero.
     for i in range(6):
         for j in range(6):
-            IK[i, j] = (1.0 if i == j else 0.0) - (K[i, j] if j < 3 else 0.0)
+            IK[i, j] = (1.0 if i == j else 0.0) - (
+                K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j] if j < 3 else 0.0)
     for i in range(6):
         for j in range(6):
             total = 0.0
@@ -164,8 +175,43 @@ def _mekf_update(q, beta, P, z, R, scratch, dq):
     beta[0] += dx[3]
     beta[1] += dx[4]
     beta[2] += dx[5]
-    return nis
+    return nis, True
 
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _identity_jacobian(H):
+    """H = [I 0], a full-attitude reading's."""
+    for i in range(3):
+        for j in range(6):
+            H[i, j] = 1.0 if i == j else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _mekf_update(q, beta, P, z, R, gating, threshold, scratch, dq):
+    """MultiplicativeEKF.correct: y = log(q̂⁻¹ ⊗ z), H = [I 0]."""
+    # The reading aligned in sign with q̂ is what the alignment inside the log does.
+    y0, y1, y2 = log_error(q, z, 1.0)
+    H = scratch[8]
+    _identity_jacobian(H)
+    return _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq)
+
+
+@njit(cache=True, error_model="numpy")
+def _mekf_vector_update(q, beta, P, body, reference, variance, gating, threshold, scratch, dq):
+    """MultiplicativeEKF.correct_vector: y = b − A(q̂)ᵀ r, H = [[A(q̂)ᵀ r ×] 0], R = σ² I."""
+    p0, p1, p2 = to_body_frame(q, reference)
+    H = scratch[8]
+    R = scratch[9]
+    for i in range(3):
+        for j in range(6):
+            H[i, j] = 0.0
+        for j in range(3):
+            R[i, j] = variance if i == j else 0.0
+    H[0, 1], H[0, 2] = -p2, p1
+    H[1, 0], H[1, 2] = p2, -p0
+    H[2, 0], H[2, 1] = -p1, p0
+    return _joseph_update(q, beta, P, body[0] - p0, body[1] - p1, body[2] - p2, H, R,
+                          gating, threshold, scratch, dq)[1]
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
@@ -177,16 +223,18 @@ def advance(block, sensors, state, record, row):
      bias_last) = gyro_arrays(block, sensors)
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
+    (vector_body, vector_reference, vector_variance, vector_available,
+     vector_dof) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances) = nees_arrays(record, row)
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
-    beta_last, P_last = state.beta_last, state.P_last
+    beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
-        scratch6 = np.empty((7, 6, 6))
+        scratch6 = np.empty((10, 6, 6))
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
         factor = np.empty((6, 6))
@@ -207,12 +255,20 @@ def advance(block, sensors, state, record, row):
                             variances, keep_traces, streaming, nees_every, settle,
                             nees_samples, nees_sum, scratch6)
             if available:
-                nis = _mekf_update(q, beta, P, z, R_all[run], scratch6, dq)
+                nis, applied = _mekf_update(q, beta, P, z, R_all[run], gating[run],
+                                            gate[run, 3], scratch6, dq)
                 if check:
                     check_health(q, True, P, 6, health[run], factor)
-                if streaming:
+                if streaming and applied:
                     nis_sum[run] += nis
                     nis_count[run] += 1
+            for s in range(vector_dof.shape[0]):
+                if vector_available[run, j, s]:
+                    _mekf_vector_update(q, beta, P, vector_body[run, j, s], vector_reference[j, s],
+                                        vector_variance[run, j, s], gating[run],
+                                        gate[run, vector_dof[s]], scratch6, dq)
+                    if check:
+                        check_health(q, True, P, 6, health[run], factor)
             if posterior:
                 for i in range(4):
                     out[i] = q[i]

@@ -135,7 +135,10 @@ def star_step(z, dq, run, j, countdown, reading, q_true, rotation_model, std, st
 def star_reading(z, dq, run, t, r, q_true, rotation_model, std, normals, sigma, mount,
                  canonical, outage, dropout_probability, uniforms):
     """The tracker's reading ``r`` of the block, at its index ``t``, into ``z``;
-    returns whether it is available (outages and dropouts)."""
+    returns whether it is available (outages and dropouts; ``model =
+    "none"`` is an outage throughout, with no normals drawn)."""
+    if outage[t]:
+        return False
     if rotation_model:
         t0 = sigma[0] * normals[run, r, 0]
         t1 = sigma[1] * normals[run, r, 1]
@@ -147,13 +150,18 @@ def star_reading(z, dq, run, t, r, q_true, rotation_model, std, normals, sigma, 
         if canonical and z[0] < 0:
             for i in range(4):
                 z[i] = -z[i]
-        available = not outage[t]
-        if dropout_probability > 0.0 and uniforms[run, r] < dropout_probability:
-            available = False
-        return available
+        return not (dropout_probability > 0.0 and uniforms[run, r] < dropout_probability)
     for i in range(4):
         z[i] = q_true[t, i] + std[run] * normals[run, r, i]
     norm = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2] + z[3] * z[3])
     for i in range(4):
         z[i] = z[i] / norm
     return True
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def vector_arrays(block):
+    """The vector sensors' readings of the block (see :class:`Block`), taken
+    out of its tuple like :func:`star_arrays`."""
+    return (block.vector_body, block.vector_reference, block.vector_variance,
+            block.vector_available, block.vector_dof)

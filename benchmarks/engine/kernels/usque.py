@@ -8,8 +8,12 @@ A step, as the per-run class makes it:
 1. *Update* with a reading (filterpy 2.0's ``update``): the sigma points
    drawn after the last prediction, ``h(χ) = δp``, the unscented mean and
    covariance of ``h`` plus ``R``, the cross covariance, ``K = P_xz S⁻¹``,
-   ``x += K (y − ẑ)``, ``P −= K S Kᵀ``, on ``y = GRP(q̂⁻¹ ⊗ z)``.
-2. *Reset*: the mean's δp folded into ``q̂`` (eq. 45), with or without a reading.
+   ``x += K (y − ẑ)``, ``P −= K S Kᵀ``, on ``y = GRP(q̂⁻¹ ⊗ z)``; then each
+   vector reading in turn, with ``h(χ) = A(q̂ ⊗ δq(δp))ᵀ r`` on sigma points
+   redrawn about the current ``(x, P)`` for every update after the first.
+   Each is gated as the per-run class gates it.
+2. *Reset*: the mean's δp folded into ``q̂`` (eq. 45) after each update, or
+   once without any reading.
 3. *Propagate* (``predict``): sigma points from the Cholesky factor of
    ``(n + λ) P``, each through the exact kinematics with its own bias and
    back to GRPs about the propagated mean (eqs. 33–36), their unscented mean
@@ -29,11 +33,11 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              gauss_jordan, keep_output,
+                                              gate_thresholds, gauss_jordan, keep_output,
                                               mark_diverged, nees_arrays, quadratic_form,
-                                              quat_exp, record_error)
+                                              quat_exp, record_error, to_body_frame)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
-                                               star_arrays, star_step)
+                                               star_arrays, star_step, vector_arrays)
 from dynamics.quaternion import GRP_A, GRP_F
 from estimators.mekf import transition_coefficients
 from estimators.usque import STATE_SIZE
@@ -41,6 +45,9 @@ from estimators.usque import STATE_SIZE
 NAME = "usque"
 #: It reports a covariance: its kernel streams NEES and NIS.
 REPORTS_COVARIANCE = True
+#: It applies vector readings and gates readings as the per-run class does.
+VECTOR_READINGS = True
+GATING = True
 #: 2n + 1 sigma points.
 N_SIGMAS = 2 * STATE_SIZE + 1
 
@@ -59,6 +66,8 @@ class State(NamedTuple):
     beta_last: np.ndarray        # (B, 3) the output bias at the last step
     P_last: np.ndarray           # (B, 6, 6) and its covariance
     posterior: bool
+    gating: np.ndarray           # (B,) bool: the filter gates its readings
+    gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
 
 
 def _spread(points) -> float:
@@ -85,7 +94,8 @@ def initial_state(estimators) -> State:
                  Wm=stack((f.Wm for f in filters), (N_SIGMAS,)),
                  Wc=stack((f.Wc for f in filters), (N_SIGMAS,)),
                  beta_last=x[:, 3:].copy(), P_last=P.copy(),
-                 posterior=estimators[0].output == "posterior")
+                 posterior=estimators[0].output == "posterior",
+                 **gate_thresholds(estimators))
 
 
 def nis_dof(estimators) -> int:
@@ -251,33 +261,62 @@ def _predict(q, x, P, sigmas, w_meas, dt, noise, bias_rw, spread, Wm, Wc, L, Q, 
 
 
 @njit(cache=True, error_model="numpy")
-def _update(q, x, P, sigmas, z, R, Wm, Wc, scratch):
-    """USQUE.correct: filterpy's unscented ``update`` with y = GRP(q̂⁻¹ ⊗ z),
-    ``z`` aligned in sign with q̂ first; returns the NIS yᵀ S⁻¹ y."""
+def _update(q, x, P, sigmas, z, R, Wm, Wc, gating, threshold, scratch):
+    """USQUE.correct: the update with ``h(χ) = δp`` and y = GRP(q̂⁻¹ ⊗ z),
+    ``z`` aligned in sign with q̂ first; returns the NIS and whether it was applied."""
     if q[0] * z[0] + q[1] * z[1] + q[2] * z[2] + q[3] * z[3] < 0:
         z0, z1, z2, z3 = -z[0], -z[1], -z[2], -z[3]
     else:
         z0, z1, z2, z3 = z[0], z[1], z[2], z[3]
     y0, y1, y2 = _grp_from_quat(_product(q[0], -q[1], -q[2], -q[3], z0, z1, z2, z3))
+    return _unscented_update(x, P, sigmas, sigmas, y0, y1, y2, R, Wm, Wc, gating, threshold,
+                             scratch)
+
+
+@njit(cache=True, error_model="numpy")
+def _vector_update(q, x, P, sigmas, body, reference, variance, Wm, Wc, gating, threshold,
+                   scratch, predicted, R):
+    """USQUE.correct_vector: the update with ``h(χ) = A(q̂ ⊗ δq(δp))ᵀ r`` on
+    each sigma point (``USQUE._hx_vector``) and ``R = σ² I``."""
+    for i in range(N_SIGMAS):
+        g0, g1, g2, g3 = _quat_from_grp(sigmas[i, 0], sigmas[i, 1], sigmas[i, 2])
+        a = _unit(_product(q[0], q[1], q[2], q[3], g0, g1, g2, g3))
+        predicted[i, 0], predicted[i, 1], predicted[i, 2] = to_body_frame(a, reference)
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = variance if a == b else 0.0
+    return _unscented_update(x, P, sigmas, predicted, body[0], body[1], body[2], R, Wm, Wc,
+                             gating, threshold, scratch)[1]
+
+
+@njit(cache=True, error_model="numpy")
+def _unscented_update(x, P, sigmas, predicted, y0, y1, y2, R, Wm, Wc, gating, threshold,
+                      scratch):
+    """filterpy's unscented ``update`` with the sigma points' predicted
+    measurements ``predicted`` (their first three columns) and the
+    measurement ``y``; not applied if gating rejects it. Returns the NIS
+    and whether it was applied."""
     S, inverse, Pxz, K, KS = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     zp, kept = scratch[5, 0], scratch[5, 1:4]
-    _unscented_mean(sigmas, Wm, 3, zp)
+    _unscented_mean(predicted, Wm, 3, zp)
     for a in range(3):
         for b in range(3):
             total = 0.0
             for i in range(N_SIGMAS):
-                total += Wc[i] * (sigmas[i, a] - zp[a]) * (sigmas[i, b] - zp[b])
+                total += Wc[i] * (predicted[i, a] - zp[a]) * (predicted[i, b] - zp[b])
             S[a, b] = total + R[a, b]
             kept[a, b] = S[a, b]          # gauss_jordan works in place
     for a in range(STATE_SIZE):
         for b in range(3):
             total = 0.0
             for i in range(N_SIGMAS):
-                total += Wc[i] * (sigmas[i, a] - x[a]) * (sigmas[i, b] - zp[b])
+                total += Wc[i] * (sigmas[i, a] - x[a]) * (predicted[i, b] - zp[b])
             Pxz[a, b] = total
     gauss_jordan(S, inverse, 3)
     r0, r1, r2 = y0 - zp[0], y1 - zp[1], y2 - zp[2]
     nis = quadratic_form((r0, r1, r2), inverse, 3)
+    if gating and not nis <= threshold:
+        return nis, False
     for a in range(STATE_SIZE):
         for b in range(3):
             K[a, b] = Pxz[a, 0] * inverse[0, b] + Pxz[a, 1] * inverse[1, b] \
@@ -289,7 +328,45 @@ def _update(q, x, P, sigmas, z, R, Wm, Wc, scratch):
     for a in range(STATE_SIZE):
         for b in range(STATE_SIZE):
             P[a, b] -= KS[a, 0] * K[b, 0] + KS[a, 1] * K[b, 1] + KS[a, 2] * K[b, 2]
-    return nis
+    return nis, True
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _any_reading(available, run, j):
+    """Whether any vector sensor reads at the block's step ``j``."""
+    for s in range(available.shape[2]):
+        if available[run, j, s]:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, gate,
+             vector_body, vector_reference, vector_variance, vector_available, vector_dof,
+             scratch, predicted, R_vector, nis_out):
+    """The step's updates, as ``USQUE._estimate_at_step`` makes them: the
+    tracker's, then each vector reading's, each followed by the reset (or the
+    reset alone without any reading). Returns whether the sigma points of every
+    update existed (``False``: the per-run class's Cholesky factor fails) and
+    whether the tracker's reading was applied (its NIS in ``nis_out[0]``)."""
+    updated, applied = False, False
+    if available:
+        nis_out[0], applied = _update(q, x, P, sigmas, z, R, Wm, Wc, gating, gate[3], scratch)
+        _fold_reference(q, x)
+        updated = True
+    elif not _any_reading(vector_available, run, j):
+        _fold_reference(q, x)
+    for s in range(vector_dof.shape[0]):
+        if vector_available[run, j, s]:
+            # Sigma points about the current (x, P) for a second update within a step.
+            if updated and not _sigma_points(x, P, spread, sigmas, scratch[0]):
+                return False, applied
+            _vector_update(q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
+                           vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]],
+                           scratch, predicted, R_vector)
+            _fold_reference(q, x)
+            updated = True
+    return True, applied
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
@@ -302,6 +379,8 @@ def advance(block, sensors, state, record, row):
      bias_last) = gyro_arrays(block, sensors)
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
+    (vector_body, vector_reference, vector_variance, vector_available,
+     vector_dof) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -310,10 +389,12 @@ def advance(block, sensors, state, record, row):
     noise, bias_rw, spread, Wm_all, Wc_all = (state.noise, state.bias_rw, state.spread,
                                               state.Wm, state.Wc)
     beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
+    gating, gate = state.gating, state.gate
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
         scratch = np.empty((6, 6, 6))
         propagated = np.empty((N_SIGMAS, STATE_SIZE))
+        R_vector, nis = np.empty((3, 3)), np.empty(1)
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
@@ -335,13 +416,17 @@ def advance(block, sensors, state, record, row):
                 keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
                             variances, keep_traces, streaming, nees_every, settle,
                             nees_samples, nees_sum, scratch)
-            if available:
-                nis = _update(q, x, P, sigmas, z, R_all[run], Wm, Wc, scratch)
-                if streaming:
-                    nis_sum[run] += nis
-                    nis_count[run] += 1
-            _fold_reference(q, x)
-            if check and available:
+            factored, applied = _correct(
+                q, x, P, sigmas, available, z, run, j, R_all[run], Wm, Wc, spread[run],
+                gating[run], gate[run], vector_body, vector_reference, vector_variance,
+                vector_available, vector_dof, scratch, propagated, R_vector, nis)
+            if not factored:
+                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+                continue
+            if streaming and applied:
+                nis_sum[run] += nis[0]
+                nis_count[run] += 1
+            if check and (available or _any_reading(vector_available, run, j)):
                 check_health(q, True, P, 6, health[run], scratch[0])
             if posterior:
                 _output(q, x, out)

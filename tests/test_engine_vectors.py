@@ -1,0 +1,144 @@
+"""The engine's MEKF and USQUE with vector readings and innovation gating,
+held to the per-run filters at 1e-9 at every step; the vector sensors
+measured block by block, drawing what one call over the run draws."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from benchmarks import Scenario
+from benchmarks.engine.batch import engine_limitation, make_runs, run_batch
+from benchmarks.engine.runner import run_many
+from benchmarks.metrics import nees
+from benchmarks.simulation import (scenario_references, simulate, simulate_truth,
+                                   vector_generators)
+from dynamics.quaternion import attitude_error_vector_rad
+from dynamics.validation import InvalidParameterError
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+VECTOR_FILTERS = ("mekf", "usque")
+#: The CubeSat into the Earth's shadow (from 449 s on, where neither sun
+#: sensor reads), with a magnetometer bias the filters do not know: at the
+#: scenario's 99.99 % gate, the biased field readings are rejected now and then.
+CUBESAT = Scenario.from_toml(SCENARIOS / "cubesat.toml").replace(
+    tstop=900.0, orbit_argument_of_latitude_deg=82.0, magnetometer_bias_nT=[900.0, -700.0, 500.0])
+
+
+def per_run(scenario, name, seed):
+    return simulate(scenario, [name], seed=seed, traces=True)
+
+
+@pytest.fixture(scope="module")
+def cubesat_batch():
+    runs = make_runs(CUBESAT, [0, 3])
+    return runs, run_batch(CUBESAT, runs, VECTOR_FILTERS, keep_traces=True, consistency=True,
+                           block_steps=128)
+
+
+@pytest.mark.parametrize("name", VECTOR_FILTERS)
+def test_vector_kernels_equal_the_per_run_filters_at_every_step(cubesat_batch, name):
+    runs, batch = cubesat_batch
+    for i, seed in enumerate(runs.seeds):
+        reference = per_run(CUBESAT, name, int(seed))
+        trace = reference.traces[name]
+        assert trace.rejected.get("magnetometer") is not None      # the gate bites
+        assert np.abs(batch.estimates[name][i] - reference.estimates[name]).max() < 1e-9
+        assert np.allclose(batch.attitude_variances[name][i],
+                           np.diagonal(trace.attitude_covariance, axis1=1, axis2=2),
+                           rtol=1e-7, atol=0)
+        expected = nees(attitude_error_vector_rad(reference.truth.q_true, trace.quat),
+                        trace.attitude_covariance)
+        assert batch.consistency[name]["nees_time_average"][i] == pytest.approx(
+            expected.mean(), rel=1e-6)
+
+
+def test_no_star_tracker_means_no_nis_rather_than_zero(cubesat_batch):
+    _, batch = cubesat_batch
+    for name in VECTOR_FILTERS:
+        assert np.all(np.isnan(batch.consistency[name]["nis_mean"]))
+
+
+def test_a_vector_run_is_bit_identical_whatever_its_batch_and_blocks(cubesat_batch):
+    runs, batch = cubesat_batch
+    alone = run_batch(CUBESAT, runs.take([1]), VECTOR_FILTERS, keep_traces=True,
+                      block_steps=1000)
+    for name in VECTOR_FILTERS:
+        assert np.array_equal(alone.estimates[name][0], batch.estimates[name][1])
+
+
+def test_vector_and_workshop_batches_share_one_compiled_kernel(cubesat_batch):
+    # The vector arrays have the same types with sensors and without (S = 0):
+    # a vector scenario costs no second compile (about 40 s, cold).
+    from benchmarks.engine.kernels import kernel
+    run_batch(Scenario(tstop=1.0), make_runs(Scenario(), [0]), VECTOR_FILTERS)
+    for name in VECTOR_FILTERS:
+        assert len(kernel(name).advance.signatures) == 1
+
+
+@pytest.mark.parametrize("name", VECTOR_FILTERS)
+def test_from_a_large_initial_error_the_kernels_follow_the_per_run_filters(name):
+    # Magnetometer only, 176° off: the filters' first hours are far from
+    # linear, where any difference would grow. It does not here.
+    scenario = Scenario.from_toml(SCENARIOS / "magnetometer_only.toml").replace(tstop=7200.0)
+    batch = run_batch(scenario, make_runs(scenario, [1]), [name], keep_traces=True)
+    reference = per_run(scenario, name, 1)
+    assert np.abs(batch.estimates[name][0] - reference.estimates[name]).max() < 1e-9
+
+
+@pytest.mark.parametrize("name", VECTOR_FILTERS)
+def test_gated_star_tracker_readings_are_rejected_as_the_per_run_class_rejects_them(name):
+    # A 50 % gate rejects most of the readings here, and applies some: the
+    # two paths must agree on every one of them.
+    scenario = Scenario.from_toml(SCENARIOS / "smallsat.toml").replace(
+        tstop=120.0, estimator_options={name: {"gate_probability": 0.5}})
+    batch = run_batch(scenario, make_runs(scenario, [2]), [name], keep_traces=True,
+                      consistency=True)
+    reference = per_run(scenario, name, 2)
+    trace = reference.traces[name]
+    readings = reference.sensors.available.sum()
+    assert 0 < len(trace.rejected["star_tracker"]) < readings
+    assert np.abs(batch.estimates[name][0] - reference.estimates[name]).max() < 1e-9
+    assert batch.consistency[name]["nis_mean"][0] == pytest.approx(np.nanmean(trace.nis),
+                                                                   rel=1e-6)
+
+
+def test_the_ekf_takes_the_per_run_path_beside_the_engines_mekf():
+    scenario = CUBESAT.replace(tstop=60.0)
+    assert engine_limitation(scenario, name="mekf") is None
+    assert engine_limitation(scenario, name="dead-reckoning") is None
+    assert "vector sensors" in engine_limitation(scenario, name="ekf")
+    gated = Scenario().replace(estimator_options={"ekf": {"gate_probability": 0.99}})
+    assert "gating" in engine_limitation(gated, name="ekf")
+    with pytest.raises(InvalidParameterError, match="vector sensors"):
+        run_batch(scenario, make_runs(scenario, [0]), ["ekf"])
+    with pytest.warns(UserWarning, match="ekf takes the per-run path") as caught:
+        batch = run_many(scenario, make_runs(scenario, [0, 1]), ["ekf", "mekf"])
+    assert not any("mekf takes" in str(w.message) for w in caught)
+    for name in ("ekf", "mekf"):
+        result = simulate(scenario, [name], seed=1)
+        assert batch.statistics[name]["rms_deg"][1] == pytest.approx(
+            np.sqrt(np.mean(result.error_deg[name] ** 2)), rel=1e-9)
+
+
+@settings(max_examples=25, deadline=None)
+@given(cuts=st.lists(st.integers(1, 299), max_size=4, unique=True), seed=st.integers(0, 2**31))
+def test_block_by_block_vector_readings_are_the_whole_runs(cuts, seed):
+    """For any split of a run into blocks, each sensor's readings block by
+    block (``first_step``) are its readings of the whole run, bit for bit."""
+    scenario = CUBESAT.replace(tstop=299.0, magnetometer_interval_s=3.0,
+                               coarse_sun_interval_s=2.0)
+    q_true = simulate_truth(scenario).q_true
+    references = scenario_references(scenario)
+    from benchmarks.engine.vectors import references_between
+    sensors = scenario.build_vector_sensors()
+    whole = [sensor.measure(q_true, references, rng)
+             for sensor, rng in zip(sensors, vector_generators(seed, len(sensors)))]
+    edges = [0, *sorted(cuts), len(q_true)]
+    streams = vector_generators(seed, len(sensors))
+    for start, stop in zip(edges, edges[1:]):
+        part = references_between(references, start, stop)
+        for sensor, rng, full in zip(sensors, streams, whole):
+            block = sensor.measure(q_true[start:stop], part, rng, first_step=start)
+            for field in ("body", "reference", "available", "variance"):
+                assert np.array_equal(getattr(block, field), getattr(full, field)[start:stop])
