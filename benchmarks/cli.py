@@ -15,7 +15,7 @@ from typing import Callable, NamedTuple
 from benchmarks import experiments
 from benchmarks.experiments import SWEEP_PARAMETERS
 from benchmarks.metrics import STAT_COLUMNS
-from benchmarks.output import check_output_folder
+from benchmarks.output import check_output_folder, write_figure, write_text
 from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.seeds import format_seeds, parse_seeds
 from benchmarks.divergence import EXIT_DIVERGED, DivergenceReport, report_of
@@ -125,6 +125,28 @@ def _seed_list(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
+def _delay(text: str):
+    return "auto" if text == "auto" else _number(text)
+
+
+def _name_list(text: str) -> list[str]:
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be names, comma-separated")
+    return names
+
+
+def _parameter_range(text: str) -> tuple[str, tuple[float, float]]:
+    """``NAME=LO:HI`` as ``(name, (lo, hi))``."""
+    name, _, bounds = text.partition("=")
+    low, _, high = bounds.partition(":")
+    try:
+        return name.strip(), (float(low), float(high))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be NAME=LO:HI, e.g. "
+                                         "gyro_noise=1e-8:1e-4") from None
+
+
 def _add_scenario_options(parser: argparse.ArgumentParser, defaults: Scenario) -> None:
     group = parser.add_argument_group("scenario (defaults: the workshop's, or --scenario FILE)")
     group.add_argument("--scenario", metavar="FILE", type=Path, action="append",
@@ -224,6 +246,13 @@ def _parse_compare(commands) -> None:
                          help=f"any of {', '.join(ESTIMATORS)} or package.module:ClassName "
                          "(default: the workshop's three; with vector sensors, "
                          f"{','.join(VECTOR_DEFAULTS)})")
+    compare.add_argument("--tuned", metavar="OBJ",
+                         help="first tune every estimator with tunable settings on "
+                         "--train-seeds for objective OBJ (see tune), then compare them all "
+                         "tuned; scores default and tuned on both sets, writes tuned.toml")
+    compare.add_argument("--train-seeds", type=_seed_list, metavar="SPEC",
+                         help="the training seeds of --tuned (default 100-104; --seed, the "
+                         "test seed, must not be among them)")
     _add_common(compare)
 
 
@@ -267,7 +296,26 @@ def _parse_tune(commands) -> None:
     tune.add_argument("--xtol", type=_number, default=0.01, metavar="X",
                       help="x tolerance (default 0.01)")
     tune.add_argument("--seeds", type=_seed_list, default=(0,), metavar="SPEC",
-                      help="seeds: 0, 0-19 or 1,5,9 (default 0)")
+                      help="training seeds: 0, 0-19 or 1,5,9 (default 0)")
+    group = tune.add_argument_group(
+        "any estimator (without --estimator: the EKF's pc_exponent, as the workshop tunes it)")
+    _estimator_option(group, required=False)
+    group.add_argument("--parameters", type=_name_list, metavar="A,B",
+                       help="its tunable settings to tune (default: those with a default; "
+                       "see the README's tuning section)")
+    group.add_argument("--objective", default="std", metavar="OBJ",
+                       help="rms, mean, std, max (with the truth), anees (consistency), nis or "
+                       "likelihood (no truth needed); default std")
+    group.add_argument("--range", type=_parameter_range, action="append", default=[],
+                       metavar="NAME=LO:HI", dest="ranges",
+                       help="search range of one setting, in its units (repeatable)")
+    group.add_argument("--dataset", action="append", metavar="NAME_OR_PATH", dest="datasets",
+                       help="train on this recording (repeatable; broad-02, broad-07 or an "
+                       ".npz) instead of simulated seeds")
+    group.add_argument("--test-seeds", type=_seed_list, metavar="SPEC",
+                       help="score the default and the tuned settings on these seeds too")
+    group.add_argument("--test-dataset", action="append", metavar="NAME_OR_PATH",
+                       dest="test_datasets", help="score them on this recording too (repeatable)")
     _add_common(tune, seed=False)
 
 
@@ -366,6 +414,10 @@ def _parse_replay(commands) -> None:
                         "(default 0.1)")
     replay.add_argument("--seed", type=_whole("seed", 0), default=0,
                         help="seed of the pseudo star tracker's noise (default 0)")
+    replay.add_argument("--gyro-delay", type=_delay, default=0.0, metavar="SECONDS|auto",
+                        help="how late the gyro's samples are against the reference "
+                        "(default 0); auto: the delay under which the MEKF's innovations are "
+                        "likeliest (no reference used)")
     replay.add_argument("--scenario", metavar="FILE", type=Path,
                         help="a TOML file of [estimators.NAME] sections overriding the "
                         "settings derived from the recording")
@@ -569,10 +621,33 @@ def command_run(args, scenario):
 
 
 def command_compare(args, scenario):
+    if args.train_seeds and not args.tuned:
+        raise UsageError("--train-seeds needs --tuned OBJ")
+    if args.tuned:
+        scenario = _tuned_for_comparison(args, scenario)
     _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
     return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
+
+
+def _tuned_for_comparison(args, scenario):
+    """``compare --tuned``: every estimator tuned on the training seeds and
+    scored on the test seed; the scenario with the tuned settings."""
+    from benchmarks.experiments import tuning
+    from benchmarks.experiments.objectives import checked_objective, seed_cases
+    objective = checked_objective(args.tuned)
+    training = seed_cases(scenario, args.train_seeds or tuning.DEFAULT_TRAINING_SEEDS)
+    fair = tuning.tune_all(args.estimators, objective, training,
+                           seed_cases(scenario, [args.seed]), quiet=args.quiet)
+    print(f"tuned for {objective} on seeds {format_seeds([c.seed for c in training])}, "
+          f"tested on seed {args.seed} (default -> tuned):")
+    print(tuning.format_fair_comparison(fair))
+    write_text(args.out / "tuned.toml", fair.toml())
+    experiments.write_json(args.out / "tuned.json", {"objective": objective,
+                                                     "rows": fair.rows})
+    print(f"wrote {args.out / 'tuned.toml'} and {args.out / 'tuned.json'}\n")
+    return fair.scenario(scenario)
 
 
 def command_sweep(args, scenario):
@@ -588,6 +663,15 @@ def command_sweep(args, scenario):
 
 
 def command_tune(args, scenario):
+    if args.estimator is not None:
+        return command_tune_estimator(args, scenario)
+    for flag, given in (("--parameters", args.parameters), ("--range", args.ranges),
+                        ("--dataset", args.datasets), ("--test-seeds", args.test_seeds),
+                        ("--test-dataset", args.test_datasets),
+                        ("--objective", args.objective != "std")):
+        if given:
+            raise UsageError(f"{flag} needs --estimator NAME (without it, tune finds the "
+                             "EKF's pc_exponent as the workshop does)")
     from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
     # tune_pc_exponent checks bounds and xtol before its first evaluation.
     result = tune_pc_exponent(scenario, args.seeds, args.bounds, args.xtol, quiet=args.quiet)
@@ -610,6 +694,52 @@ def command_tune(args, scenario):
                                    summary_name=None)
     print(f"wrote {args.out / 'tune.json'} and {args.out / 'tune.png'}")
     return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
+
+
+def command_tune_estimator(args, scenario):
+    """``tune --estimator NAME``: its declared settings, on seeds or recordings."""
+    from benchmarks.experiments import tuning
+    from benchmarks.experiments.objectives import checked_objective
+    objective = checked_objective(args.objective)
+    training = tuning.cases_of(scenario, args.seeds, args.datasets)
+    test = (tuning.cases_of(scenario, args.test_seeds, args.test_datasets, "test")
+            if args.test_seeds or args.test_datasets else [])
+    tuning.disjoint(training, test)
+    result = tuning.tune_estimator(args.estimator, training, objective, args.parameters,
+                                   dict(args.ranges), xatol=args.xtol, quiet=args.quiet)
+    print(tuning.format_tuning_table(result))
+    print(f"\n{result.message}")
+    print(f"\n{args.estimator}, {objective} on {', '.join(result.cases)} ({result.method}, "
+          f"{len(result.evaluations)} evaluations, {result.seconds:.1f} s):")
+    for name in result.parameters:
+        default = result.default[name]
+        bound = " (at an end of its range: widen it with --range)" \
+            if name in result.at_bound else ""
+        print(f"  {name}: {'none' if default is None else f'{default:.6g}'} -> "
+              f"{result.tuned[name]:.6g}{bound}")
+    tuned = tuning.tuned_settings(result, training[0].scenario)
+    rows = {"training": (training, {}, tuned)}
+    if test:
+        rows["test"] = (test, {}, tuned)
+    report = {}
+    for label, (cases, default_settings, tuned_settings) in rows.items():
+        before = tuning.scores(args.estimator, objective, cases, default_settings)
+        after = tuning.scores(args.estimator, objective, cases, tuned_settings)
+        report[label] = {"default": before, "tuned": after, "cases": [c.label for c in cases]}
+        print(f"  {label}: " + ", ".join(f"{key} {before[key]:.6g} -> {after[key]:.6g}"
+                                         for key in before))
+    data = {**result.as_json(), "scores": report, "tuned_settings": tuning.plain(tuned)}
+    figure_case = (test or training)[0]
+    curves = {}
+    for label, chosen in (("default", {}), ("tuned", tuned)):
+        curves[f"{args.estimator} ({label})"] = tuning.case_error(args.estimator, figure_case,
+                                                                 chosen)
+    experiments.write_json(args.out / "tune.json", data)
+    write_text(args.out / "tuned.toml", tuning.settings_toml(args.estimator, tuned))
+    write_figure(args.out / "tune.png",
+                 tuning.tuning_figure(result, figure_case.time_s, curves))
+    print(f"wrote {args.out / 'tune.json'}, {args.out / 'tuned.toml'} and {args.out / 'tune.png'}")
+    return None
 
 
 def command_landscape(args, scenario):
@@ -716,9 +846,18 @@ def command_consistency(args, scenario):
 def command_replay(args, _scenario):
     from benchmarks.experiments.replay import load_replay, run_replay, write_replay
     from benchmarks.resources import check_memory, per_run_bytes
+    from benchmarks.experiments.replay import likeliest_gyro_delay
     # The recording, the settings and the memory are checked before any write.
+    delay = args.gyro_delay
+    if delay == "auto":
+        delay, log = likeliest_gyro_delay(args.dataset, "mekf", args.star_tracker_interval,
+                                          args.star_tracker_noise_deg, args.seed,
+                                          args.scenario, allowed_imports(args), args.quiet)
+        print(f"gyro delay {delay * 1000:.3f} ms: the MEKF's innovations likeliest "
+              f"({log.evaluations} evaluations, no reference used)")
     data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
-                       args.seed, settings=args.scenario, allow_imports=allowed_imports(args))
+                       args.seed, settings=args.scenario, allow_imports=allowed_imports(args),
+                       gyro_delay_s=delay)
     check_memory(data.scenario, per_run_bytes(data.recording.n_samples, len(args.estimators),
                                               traced=True))
     result = run_replay(data, args.estimators, args.seed, quiet=args.quiet)
@@ -787,7 +926,8 @@ COMMAND_TABLE = (
             _per_run_memory(True)),
     Command("sweep", _parse_sweep, command_sweep, ("sweep.png", "sweep.csv"),
             _per_run_memory(False)),
-    Command("tune", _parse_tune, command_tune, ("tune.json", "tune.png"), _engine_memory),
+    Command("tune", _parse_tune, command_tune, ("tune.json", "tune.png", "tuned.toml"),
+            _engine_memory),
     Command("landscape", _parse_landscape, command_landscape,
             ("landscape.csv", "landscape.png", "landscape.gif"), _landscape_memory),
     Command("animate", _parse_animate, command_animate, (), _per_run_memory(False)),

@@ -249,7 +249,7 @@ def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
     return resolve_estimator(name).from_scenario(scenario)
 
 
-def _vectors_for(estimator, key: str, vectors: tuple):
+def vectors_for(estimator, key: str, vectors: tuple):
     """The vector readings for ``estimator``: all of them if it takes them;
     None (and a warning, for an estimator that does not say) if not."""
     if not vectors:
@@ -298,7 +298,7 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         if len(record) == 4 and not estimator.applies_reading_times:
             warnings.warn(f"{key} applies each star tracker reading at its gyro step, not at "
                           "its own time (it does not override _step_at)", stacklevel=2)
-        vectors = _vectors_for(estimator, key, sensors.vectors)
+        vectors = vectors_for(estimator, key, sensors.vectors)
         if traces:
             kept[key] = estimator.track(*record, vectors=vectors)
             q_est = kept[key].quat

@@ -43,6 +43,8 @@ from dynamics.validation import (
     nonzero_quaternion,
     one_of,
 )
+from estimators.tunable import (GATE_PROBABILITY, GYRO_BIAS_RANDOM_WALK, GYRO_NOISE,
+                                MEASUREMENT_SCALE)
 
 #: What an estimator does with a measurement that cannot be used (a
 #: non-finite rate, a non-finite or zero reading).
@@ -83,6 +85,9 @@ class AttitudeEstimator:
     #: None (undeclared, as a user's class is until it says) means it does
     #: not, and :func:`benchmarks.simulation.simulate` warns that it ignores them.
     uses_vector_readings: bool | None = None
+    #: The settings a tuner may vary (:class:`estimators.tunable.Tunable`, one
+    #: per constructor keyword): none for an estimator without noise settings.
+    tunable: tuple = ()
 
     def __init__(self, *, dt: float, initial_attitude, on_invalid: str = "raise"):
         self.dt = finite_number("dt", dt, strictly_positive=True)
@@ -605,6 +610,37 @@ class KalmanEstimator(AttitudeEstimator):
 
     #: The star tracker update's (y, S) on a step whose vector updates followed it.
     _tracker_innovation = None
+    #: Set True before a run to sum each applied update's innovation terms
+    #: in :attr:`innovation_sums` (the tuner's likelihood objective).
+    log_innovations = False
+
+    def _restart_count(self) -> None:
+        super()._restart_count()
+        #: With :attr:`log_innovations`: the updates applied since the run
+        #: began (star tracker and vector readings alike), the sum of their
+        #: NIS yᵀ S⁻¹ y and of their ln det S. The innovations' negative
+        #: log-likelihood is half the two sums plus a constant.
+        self.innovation_sums = {"updates": 0, "nis": 0.0, "log_det": 0.0}
+
+    def _log_innovation(self, rejections: int) -> None:
+        """Fold the update just made into :attr:`innovation_sums`, unless
+        gating rejected it (``rejections``: their count before it)."""
+        if len(self.rejections) != rejections:
+            return
+        kept = getattr(self, "filter", self)
+        y, S = np.ravel(kept.y), np.atleast_2d(kept.S)
+        sign, log_det = np.linalg.slogdet(S)
+        sums = self.innovation_sums
+        sums["updates"] += 1
+        sums["nis"] += float(y @ np.linalg.solve(S, y)) if sign > 0 else math.inf
+        sums["log_det"] += float(log_det) if sign > 0 else math.inf
+
+    def _correct_logged(self, star_tracker_quat) -> None:
+        """:meth:`correct`, its innovation logged if asked."""
+        rejections = len(self.rejections)
+        self.correct(star_tracker_quat)
+        if self.log_innovations:
+            self._log_innovation(rejections)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
         self._tracker_innovation = None
@@ -618,7 +654,7 @@ class KalmanEstimator(AttitudeEstimator):
         if self.output == "prior":
             self._record()
         if star_tracker_quat is not None:
-            self.correct(star_tracker_quat)
+            self._correct_logged(star_tracker_quat)
             if vectors:
                 kept = getattr(self, "filter", self)
                 self._tracker_innovation = (np.copy(getattr(kept, "y", None)),
@@ -626,7 +662,10 @@ class KalmanEstimator(AttitudeEstimator):
         elif not vectors:
             self._without_reading()
         for observation in vectors:
+            rejections = len(self.rejections)
             self.correct_vector(observation)
+            if self.log_innovations:
+                self._log_innovation(rejections)
         if self.output == "posterior":
             self._record()
         return self._output[0].copy()
@@ -645,7 +684,7 @@ class KalmanEstimator(AttitudeEstimator):
             return self._step(omega_meas_radps, star_tracker_quat, vectors)
         estimate = self._estimate_at_step(None, vectors)
         self.propagate(omega_meas_radps, offset_s)
-        self.correct(star_tracker_quat)
+        self._correct_logged(star_tracker_quat)
         self.propagate(omega_meas_radps, self.dt - offset_s)
         return estimate
 
@@ -662,6 +701,9 @@ class AttitudeAndBiasEstimator(KalmanEstimator):
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise",
                          "gyro_bias_random_walk": "gyro_filter_bias_random_walk",
                          "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
+    #: The gyro's σ_v² and σ_u the filter assumes, a factor on the tracker's
+    #: R, and the gate (tuned only when named: it is off by default).
+    tunable = (GYRO_NOISE, GYRO_BIAS_RANDOM_WALK, MEASUREMENT_SCALE, GATE_PROBABILITY)
 
     @classmethod
     def settings_from_scenario(cls, scenario) -> dict:

@@ -83,6 +83,7 @@ from dynamics.validation import (
 from estimators.base import (OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state,
                              gate_probability_setting)
 from estimators.model import propagate_with_jacobian
+from estimators.tunable import GATE_PROBABILITY, MEASUREMENT_SCALE, Tunable
 
 _IDENTITY_4 = np.eye(4)
 
@@ -174,6 +175,11 @@ class QuaternionEKF(KalmanEstimator):
                          "measurement_covariance": "measurement_covariance",
                          "initial_covariance": "initial_covariance"}
     owned_fields = ("pc_exponent", "measurement_covariance", "initial_covariance")
+    #: Q's exponent (``pc_exponent``: Q = e^pc I₄, searched ±8 about its
+    #: default), a factor on R, and the gate.
+    tunable = (Tunable("pc_exponent", "linear", (-700.0, 700.0), span=8.0,
+                       description="ln of Q's variance per quaternion component"),
+               MEASUREMENT_SCALE, GATE_PROBABILITY)
 
     #: The MEKF's default attitude prior, 0.1 rad per axis, in quaternion
     #: units ((σ/2)² per component): the derived P₀.

@@ -207,7 +207,9 @@ class BatchResult:
     final: dict | None = None
     #: With ``consistency=True``: per estimator, ``time_s`` (S,) of the NEES
     #: samples, ``nees_samples`` (B, S), ``nees_time_average`` (B,),
-    #: ``nis_mean`` (B,) and ``nis_dof``.
+    #: ``nis_mean`` (B,) and ``nis_dof``; on the engine also
+    #: ``likelihood_sum`` (B,), Σ (ln det S + yᵀ S⁻¹ y) over every applied
+    #: update (tracker and vectors), and ``updates`` (B,), their number.
     consistency: dict | None = None
     #: With ``health=True``: per estimator, a dict of ``(B,)`` arrays named as
     #: :data:`HEALTH_COLUMNS` (see :func:`benchmarks.engine.kernels.common.check_health`).
@@ -421,6 +423,7 @@ def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bo
         settle=min(settle_steps, n_steps - 1),
         nees_samples=np.zeros((rows, n_runs, n_samples)), nees_sum=np.zeros((rows, n_runs)),
         nis_sum=np.zeros((rows, n_runs)), nis_count=np.zeros((rows, n_runs)),
+        likelihood=np.zeros((rows, n_runs, 2)),
         check_health=bool(health), health=np.zeros((rows, n_runs if health else 0, N_HEALTH)))
 
 
@@ -468,8 +471,9 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     consistency : bool
         Stream the attitude NEES of the estimators whose kernels report a
         covariance (sampled every ``nees_every`` steps, and its per-run
-        average from ``settle_steps`` on) and their star-tracker NIS
-        (per-run average); see ``BatchResult.consistency``. No traces are needed.
+        average from ``settle_steps`` on), their star-tracker NIS
+        (per-run average) and their innovations' likelihood sums (every
+        applied update); see ``BatchResult.consistency``. No traces are needed.
     cache_steps : int
         Longest run whose truth is taken whole from the cache; longer runs
         integrate it block by block (the same numbers), so memory stays flat.
@@ -588,7 +592,10 @@ def _consistency(record, row: int, n_steps: int, dt: float, nis_dof: int) -> dic
             # No reading applied (no star tracker, or every reading gated): no NIS.
             "nis_mean": np.where(lost | (record.nis_count[row] == 0), np.nan,
                                  record.nis_sum[row] / np.maximum(record.nis_count[row], 1)),
-            "nis_dof": nis_dof}
+            "nis_dof": nis_dof,
+            # Over every applied update: Σ (ln det S + yᵀ S⁻¹ y), and their number.
+            "likelihood_sum": np.where(lost, np.nan, record.likelihood[row][:, 0]),
+            "updates": record.likelihood[row][:, 1].copy()}
 
 
 #: Runs per kernel batch in campaigns: large enough to keep both cores busy,

@@ -93,7 +93,8 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
 
 #: What a run's record joins over chunks or runs, besides its statistics.
 _PER_RUN_ARRAYS = ("diverged_step", "estimates", "variances", "error_samples")
-_CONSISTENCY_ARRAYS = ("nees_samples", "nees_time_average", "nis_mean")
+_CONSISTENCY_ARRAYS = ("nees_samples", "nees_time_average", "nis_mean", "likelihood_sum",
+                       "updates")
 
 
 def _on_the_engine(scenario, runs, names, kept: dict, threads, chunk_runs,

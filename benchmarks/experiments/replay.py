@@ -215,12 +215,19 @@ class ReplayData:
 
 def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
                 noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0,
-                settings=None, allow_imports=()) -> ReplayData:
+                settings=None, allow_imports=(), gyro_delay_s: float = 0.0) -> ReplayData:
     """``dataset`` (see :func:`open_dataset`) made ready for any estimator;
     ``settings``, a TOML file of ``[estimators.NAME]`` sections, overrides
     what :func:`replay_scenario` derives (importing only the users' modules
-    named in ``allow_imports``, see :meth:`Scenario.from_toml`)."""
+    named in ``allow_imports``, see :meth:`Scenario.from_toml`);
+    ``gyro_delay_s`` is how late the gyro's samples are against the
+    reference (:func:`delayed_gyro`)."""
     recording, attribution = open_dataset(dataset)
+    delay = finite_number("gyro_delay", gyro_delay_s)
+    if abs(delay) > MAX_GYRO_DELAY_SAMPLES * recording.dt:
+        raise InvalidParameterError("gyro_delay", gyro_delay_s, f"must be within "
+                                    f"±{MAX_GYRO_DELAY_SAMPLES} samples "
+                                    f"(±{MAX_GYRO_DELAY_SAMPLES * recording.dt:g} s)")
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
     start = int(np.argmax(recording.has_reference))
@@ -229,12 +236,32 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     if settings is not None:
         scenario = scenario.with_estimator_settings(settings, allow_imports=allow_imports)
     readings = pseudo_star_tracker(recording, scenario, seed)
-    sensors = SensorData(omega_meas_radps=recording.gyro_radps,
+    sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=readings.quat, available=readings.available)
     truth = RigidBodyTruth(time_s=recording.time_s, q_true=recording.reference_quat,
                            omega_true_radps=np.full((recording.n_samples, 3), np.nan))
     return ReplayData(scenario=scenario, truth=truth, sensors=sensors, recording=recording,
                       start_sample=start, rest_bias_radps=rest_bias, attribution=attribution)
+
+
+#: The largest gyro delay :func:`load_replay` takes, in samples.
+MAX_GYRO_DELAY_SAMPLES = 50
+
+
+def delayed_gyro(recording: Recording, delay_s: float) -> np.ndarray:
+    r"""The gyro as the estimators take it when its samples come ``delay_s``
+    late against the reference: the rate applied over the step from
+    :math:`t_k` is the recording's at :math:`t_k + \text{delay}`, linearly
+    interpolated (the first and last samples held at the ends). An IMU's
+    internal low-pass filters and its clock against the motion capture's
+    delay its rate by a few milliseconds; the estimators integrate each
+    sample over the step after it, so a delay is an attitude error of the
+    rate times the delay (at 1,400 °/s, 7° per 5 ms)."""
+    if not delay_s:
+        return recording.gyro_radps
+    time_s = recording.time_s
+    return np.column_stack([np.interp(time_s + delay_s, time_s, recording.gyro_radps[:, axis])
+                            for axis in range(3)])
 
 
 def replay(dataset: str, estimators=DEFAULT_ESTIMATORS, interval_s: float = DEFAULT_INTERVAL_S,
@@ -280,3 +307,32 @@ def write_replay(result: Replay, out: Path) -> pd.DataFrame:
         write_text(out / "ATTRIBUTION.txt", "replay.png and summary.csv derive from:\n"
                    + result.attribution + "\n")
     return summary
+
+
+#: The gyro delays :func:`likeliest_gyro_delay` searches, in samples.
+DELAY_SEARCH_SAMPLES = (0.0, 4.0)
+
+
+def likeliest_gyro_delay(dataset: str, estimator: str = "mekf",
+                         interval_s: float = DEFAULT_INTERVAL_S,
+                         noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0,
+                         settings=None, allow_imports=(), quiet: bool = True):
+    """The gyro delay (seconds) under which ``estimator``'s innovations are
+    likeliest on ``dataset`` — the tuner's ``likelihood`` objective, which
+    reads no reference attitude — by the bounded Brent method over
+    :data:`DELAY_SEARCH_SAMPLES`; with the minimisation's log."""
+    from benchmarks.experiments.objectives import Objective, recording_case
+    from benchmarks.experiments.tuning import minimize_bounded
+    dt = open_dataset(dataset)[0].dt
+
+    def loss(samples: float) -> float:
+        data = load_replay(dataset, interval_s, noise_deg, seed, settings, allow_imports,
+                           gyro_delay_s=samples * dt)
+        return Objective(estimator, "likelihood", [recording_case(data, dataset)])({})
+
+    with progress(desc="gyro delay", unit="eval", quiet=quiet) as bar:
+        def counted(samples):
+            bar.update()
+            return loss(samples)
+        log = minimize_bounded(counted, DELAY_SEARCH_SAMPLES, xtol=0.02)
+    return log.x * dt, log

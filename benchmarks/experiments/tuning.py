@@ -20,6 +20,8 @@ import contextlib
 import io
 import math
 import re
+import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -171,3 +173,392 @@ def tune_pc_exponent(scenario: Scenario, seeds=(0,), bounds=DEFAULT_BOUNDS,
         result.single_seed_optima = {"seeds": list(seeds), "pc_exponent": optima,
                                      "p5": float(p5), "p50": float(p50), "p95": float(p95)}
     return result
+
+
+# --- Any estimator, any of its declared settings -----------------------------
+
+#: Nelder–Mead's stopping rule, in the scaled coordinates (decades, or the
+#: linear unit): the simplex within ``XATOL`` and its losses within ``FATOL``
+#: relative, or ``MAX_EVALUATIONS`` evaluations.
+XATOL = 0.01
+FATOL = 1e-4
+MAX_EVALUATIONS = 200
+
+
+@dataclass
+class EstimatorTuning:
+    """What :func:`tune_estimator` found, and every evaluation it made."""
+
+    estimator: str
+    objective: str
+    parameters: list             # names
+    scales: list                 # "log" or "linear", per parameter
+    ranges: list                 # (low, high) per parameter, in its units
+    default: dict                # name → value (None where it has none)
+    tuned: dict                  # name → value
+    loss_default: float | None
+    loss: float
+    method: str
+    evaluations: list            # {count, values: {name: value}, loss}
+    iterations: list             # {iteration, count, loss, values}
+    message: str
+    cases: list                  # the training cases' labels
+    seconds: float = 0.0
+
+    @property
+    def at_bound(self) -> list:
+        """The settings tuned to an end of their range: the optimum may lie
+        beyond it (widen the range with ``--range``)."""
+        return [name for name, (low, high) in zip(self.parameters, self.ranges)
+                if np.isclose(self.tuned[name], low, rtol=1e-6, atol=0)
+                or np.isclose(self.tuned[name], high, rtol=1e-6, atol=0)]
+
+    def as_json(self) -> dict:
+        def number(value):
+            return value if value is not None and math.isfinite(value) else None
+        data = {key: getattr(self, key) for key in
+                ("estimator", "objective", "parameters", "scales", "default", "tuned", "method",
+                 "message", "cases", "seconds", "at_bound")}
+        data.update(ranges=[list(r) for r in self.ranges], loss=number(self.loss),
+                    loss_default=number(self.loss_default),
+                    evaluations=[{**row, "loss": number(row["loss"])} for row in self.evaluations],
+                    iterations=[{**row, "loss": number(row["loss"])} for row in self.iterations])
+        return data
+
+
+def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None) -> list:
+    """``[(tunable, default, (low, high))]`` for the settings to tune:
+    ``parameters`` (names, default: every declared one with a default and
+    no fixed search range, and any given a range), each over its range in
+    ``ranges`` (name → (low, high)) or its default search range. Unknown names, reversed ranges and
+    ranges outside a setting's declared limits are refused, one line each."""
+    from estimators.tunable import tunables
+    declared = tunables(estimator_class)
+    if not declared:
+        raise InvalidParameterError("estimator", estimator_class.name,
+                                    "has no tunable settings (it declares none)")
+    ranges = dict(ranges or {})
+    for name in list(parameters or ()) + list(ranges):
+        if name not in declared:
+            raise InvalidParameterError("parameters", name, f"is not tunable for "
+                                        f"{estimator_class.name}; its tunable settings: "
+                                        f"{', '.join(declared)}")
+    if parameters is None:      # those with a default, and any given a range
+        parameters = [name for name, t in declared.items() if t.search is None
+                      and t.default(settings) not in (None, 0.0)] or list(declared)[:1]
+        parameters += [name for name in ranges if name not in parameters]
+    for name in ranges:
+        if name not in parameters:
+            raise InvalidParameterError(f"range of {name}", list(ranges[name]),
+                                        f"is for a setting not tuned here; add {name} to "
+                                        "--parameters, or leave the range out")
+    if len(set(parameters)) != len(parameters) or not parameters:
+        raise InvalidParameterError("parameters", list(parameters),
+                                    "must name at least one setting, each once")
+    plan = []
+    for name in parameters:
+        tunable = declared[name]
+        default = tunable.default(settings)
+        bounds = (tunable.checked_range(*ranges[name]) if name in ranges
+                  else tunable.search_range(default))
+        if tunable.scale == "log" and not bounds[0] > 0:
+            raise InvalidParameterError(f"range of {name}", list(bounds),
+                                        "must be above 0 on a log scale")
+        plan.append((tunable, default, bounds))
+    return plan
+
+
+def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=None, *,
+                   xatol: float = XATOL, max_evaluations: int = MAX_EVALUATIONS,
+                   quiet: bool = False) -> EstimatorTuning:
+    """Tune estimator ``name``'s declared settings to minimise ``objective``
+    over ``cases`` (:mod:`benchmarks.experiments.objectives`).
+
+    The search runs in scaled coordinates (log10 of a log-scale setting), so
+    one step means the same in every direction. One parameter: scipy's
+    bounded Brent method (``fminbnd``'s, as the workshop's tuning). Several:
+    Nelder–Mead with bounds — it needs no gradient (the losses of a max, or
+    of gated readings, are not smooth), and with common random numbers the
+    loss is a deterministic function of the settings, which it minimises
+    reliably in a few dimensions. It starts from the defaults (clipped into
+    the ranges) with a simplex a quarter of each range wide.
+    """
+    from scipy.optimize import minimize
+    from benchmarks.experiments.objectives import Objective
+    from estimators import resolve_estimator
+    cls = resolve_estimator(name)
+    scenario = cases[0].scenario
+    settings = {**cls.settings_from_scenario(scenario), **cls.scenario_section(scenario)}
+    plan = tuning_plan(cls, settings, parameters, ranges)
+    score = Objective(name, objective, cases)
+    low = np.array([t.coordinate(b[0]) for t, _, b in plan])
+    high = np.array([t.coordinate(b[1]) for t, _, b in plan])
+    start = np.array([t.coordinate(d) if d is not None and (t.scale != "log" or d > 0)
+                      else 0.5 * (lo + hi) for (t, d, _), lo, hi in zip(plan, low, high)])
+    start = np.clip(start, low, high)
+    evaluations = []
+
+    def values_at(u) -> dict:
+        return {t.name: t.value(float(c)) for (t, _, _), c in zip(plan, np.atleast_1d(u))}
+
+    def loss(u) -> float:
+        values = values_at(u)
+        overrides = {}
+        for tunable, _, _ in plan:
+            overrides.update(tunable.overrides(values[tunable.name], settings))
+        value = float(score(overrides))
+        evaluations.append({"count": len(evaluations) + 1, "values": values, "loss": value})
+        bar.update()
+        return value
+
+    began = time.perf_counter()
+    with progress(desc=f"tune {name}", unit="eval", quiet=quiet) as bar:
+        # The defaults' loss first (the start, unless a default lies outside its range).
+        at_default = all(d is not None and np.isclose(t.coordinate(d), c)
+                         for (t, d, _), c in zip(plan, start))
+        loss_default = loss(start) if at_default else None
+        if len(plan) == 1:
+            log = minimize_bounded(lambda x: loss(np.array([x])), (low[0], high[0]), xatol)
+            iterations = [{"iteration": row["count"], "count": row["count"] + 1,
+                           "loss": row["f"], "values": values_at([row["x"]]),
+                           "procedure": row["procedure"]} for row in log.iterations]
+            message, method = log.message, "bounded Brent"
+        else:
+            iterations = []
+            simplex = [start] + [_vertex(start, i, low, high) for i in range(len(start))]
+
+            def record(intermediate_result):
+                iterations.append({"iteration": len(iterations) + 1,
+                                   "count": len(evaluations), "loss": float(intermediate_result.fun),
+                                   "values": values_at(intermediate_result.x)})
+
+            result = minimize(loss, start, method="Nelder-Mead", bounds=list(zip(low, high)),
+                              callback=record,
+                              options={"initial_simplex": np.array(simplex), "xatol": xatol,
+                                       "fatol": FATOL, "maxfev": max_evaluations})
+            message, method = str(result.message), "Nelder-Mead"
+    best = min(evaluations, key=lambda row: row["loss"])
+    return EstimatorTuning(
+        estimator=name, objective=objective, parameters=[t.name for t, _, _ in plan],
+        scales=[t.scale for t, _, _ in plan], ranges=[b for _, _, b in plan],
+        default={t.name: d for t, d, _ in plan}, tuned=best["values"],
+        loss_default=loss_default, loss=best["loss"], method=method,
+        evaluations=evaluations, iterations=iterations, message=message,
+        cases=[case.label for case in cases], seconds=time.perf_counter() - began)
+
+
+def _vertex(start, axis: int, low, high) -> np.ndarray:
+    """A simplex vertex a quarter of the range from ``start`` along ``axis``,
+    toward the farther bound."""
+    vertex = start.copy()
+    step = 0.25 * (high[axis] - low[axis])
+    vertex[axis] += step if high[axis] - start[axis] >= start[axis] - low[axis] else -step
+    return vertex
+
+
+def format_tuning_table(tuning: EstimatorTuning) -> str:
+    """The iteration table: Brent's as ``fminbnd`` prints it; Nelder–Mead's
+    as one row per iteration with its best loss and settings."""
+    names = tuning.parameters
+    header = f" {'Iter':>4} {'Func-count':>10} {'f(x)':>13}  " + "  ".join(
+        f"{name:>22}" for name in names)
+    lines = [header]
+    for row in tuning.iterations:
+        values = "  ".join(f"{row['values'][name]:>22.6g}" for name in names)
+        extra = f"  {row['procedure']}" if "procedure" in row else ""
+        lines.append(f" {row['iteration']:>4} {row['count']:>10} {row['loss']:>13.6g}  "
+                     f"{values}{extra}")
+    return "\n".join(lines)
+
+
+def cases_of(scenario: Scenario, seeds=None, datasets=None, what: str = "training") -> list:
+    """The cases to tune (or score) on: recordings if ``datasets`` are
+    named, else simulated ``seeds`` of ``scenario``."""
+    from benchmarks.experiments.objectives import recording_case, seed_cases
+    from benchmarks.experiments.replay import load_replay
+    if datasets:
+        if len(set(datasets)) != len(datasets):
+            raise InvalidParameterError(f"{what} datasets", list(datasets), "must each be named once")
+        return [recording_case(load_replay(name), name) for name in datasets]
+    return seed_cases(scenario, seeds)
+
+
+def disjoint(training: list, test: list) -> None:
+    """Refuse a test set that shares a seed or a recording with the training set."""
+    shared = sorted({case.label for case in training} & {case.label for case in test})
+    if shared:
+        raise InvalidParameterError("test set", shared, "must share no seed or recording "
+                                    "with the training set (a score on tuned-on data is not a test)")
+
+
+def tuned_settings(tuning: EstimatorTuning, scenario: Scenario) -> dict:
+    """The constructor keywords the tuned values set (a scale as the
+    quantity it multiplies), as an ``[estimators.NAME]`` section holds them."""
+    from estimators import resolve_estimator
+    from estimators.tunable import tunables
+    cls = resolve_estimator(tuning.estimator)
+    settings = {**cls.settings_from_scenario(scenario), **cls.scenario_section(scenario)}
+    declared = tunables(cls)
+    overrides = {}
+    for name, value in tuning.tuned.items():
+        overrides.update(declared[name].overrides(value, settings))
+    return overrides
+
+
+def scores(name: str, objective: str, cases: list, settings: dict) -> dict:
+    """The objective, and the RMS error where there is a reference, of
+    ``settings`` on ``cases``."""
+    from benchmarks.experiments.objectives import Objective
+    found = {objective: Objective(name, objective, cases)(settings)}
+    if objective != "rms" and all(case.has_reference for case in cases):
+        found["rms"] = Objective(name, "rms", cases)(settings)
+    return found
+
+
+def settings_toml(name: str, settings: dict) -> str:
+    """``[estimators.NAME]`` with ``settings`` (numbers, or matrices as lists)."""
+    key = name if re.fullmatch(r"[A-Za-z0-9_-]+", name) else f'"{name}"'
+    lines = [f"[estimators.{key}]"]
+    for setting, value in settings.items():
+        lines.append(f"{setting} = {_toml_value(np.asarray(value, dtype=float))}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(array: np.ndarray) -> str:
+    if array.ndim == 0:
+        return repr(float(array))
+    return "[" + ", ".join(_toml_value(row) for row in array) + "]"
+
+
+def tuning_figure(tuning: EstimatorTuning, time_s, curves: dict):
+    """The loss at each evaluation (and the best so far), and the error of
+    the default and tuned settings over time on one case."""
+    from benchmarks.figures.plots import new_figure, plot_errors
+    figure, (left, right) = new_figure(ncols=2, width=6.5)
+    losses = np.array([row["loss"] for row in tuning.evaluations], dtype=float)
+    shown = np.where(np.isfinite(losses), losses, np.nan)
+    count = np.arange(1, len(losses) + 1)
+    left.plot(count, shown, "o", markersize=3, color="0.6", label="evaluation")
+    left.plot(count, np.fmin.accumulate(np.where(np.isnan(shown), np.inf, shown)),
+              color="black", label="best so far")
+    finite = shown[np.isfinite(shown)]
+    if finite.size:         # the first wild guesses would flatten the rest
+        low, high = finite.min(), np.percentile(finite, 80)
+        margin = 0.1 * (high - low) or 0.1 * abs(low) or 1.0
+        left.set_ylim(low - margin, high + margin)
+    left.set_xlabel("evaluation")
+    left.set_ylabel(f"{tuning.objective} loss")
+    left.set_title(f"Tuning {tuning.estimator} ({tuning.method})")
+    left.legend(loc="upper right")
+    plot_errors(right, time_s, curves, ekf_labels=())
+    right.set_title(f"{tuning.estimator}: default and tuned, {tuning.cases[0]}")
+    return figure
+
+
+def plain(settings: dict) -> dict:
+    """Settings as JSON values (matrices as lists)."""
+    return {key: np.asarray(value, dtype=float).tolist() for key, value in settings.items()}
+
+
+def case_error(name: str, case, settings: dict) -> np.ndarray:
+    """Estimator ``name``'s error (degrees) on ``case`` with ``settings``,
+    NaN where the case has no reference."""
+    from benchmarks.experiments.objectives import with_settings
+    from benchmarks.metrics import attitude_error_deg
+    from benchmarks.simulation import vectors_for
+    from estimators import resolve_estimator
+    estimator = resolve_estimator(name).from_scenario(with_settings(case.scenario, name, settings))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        vectors = vectors_for(estimator, name, case.sensors.vectors)
+    estimates = estimator.run(*case.sensors.record, vectors=vectors)
+    return attitude_error_deg(case.q_reference, estimates)
+
+
+#: ``compare --tuned``'s training seeds, unless given: away from the seeds a
+#: user compares on (0, 1, …).
+DEFAULT_TRAINING_SEEDS = tuple(range(100, 105))
+
+
+@dataclass
+class FairComparison:
+    """Every estimator tuned on the training cases and scored, default and
+    tuned, on the training and the test cases; the tuned settings per
+    estimator (constructor keywords; empty for one with nothing to tune)."""
+
+    objective: str
+    rows: list                   # {estimator, tuned: {name: value}, seconds, scores}
+    settings: dict               # estimator → {keyword: value}
+
+    def scenario(self, scenario: Scenario) -> Scenario:
+        """``scenario`` with every estimator's tuned settings."""
+        from benchmarks.experiments.objectives import with_settings
+        for name, settings in self.settings.items():
+            if settings:
+                scenario = with_settings(scenario, name, settings)
+        return scenario
+
+    def toml(self) -> str:
+        return "\n".join(settings_toml(name, settings)
+                         for name, settings in self.settings.items() if settings)
+
+
+def tune_all(estimators, objective: str, training: list, test: list,
+             quiet: bool = False) -> FairComparison:
+    """Tune each of ``estimators`` that declares tunable settings on
+    ``training`` (its default settings: :func:`tuning_plan`) and score every
+    one, with its default and its tuned settings, on ``training`` and on the
+    disjoint ``test``."""
+    from estimators import resolve_estimator
+    from estimators.tunable import tunables
+    disjoint(training, test)
+    rows, chosen = [], {}
+    for name in estimators:
+        row = {"estimator": name, "tuned": {}, "seconds": 0.0}
+        settings = {}
+        if tunables(resolve_estimator(name)):
+            tuning = tune_estimator(name, training, objective, quiet=quiet)
+            settings = tuned_settings(tuning, training[0].scenario)
+            row.update(tuned=tuning.tuned, seconds=tuning.seconds, at_bound=tuning.at_bound)
+        chosen[name] = settings
+        row["scores"] = {label: {"default": _scores_or_nan(name, objective, cases, {}),
+                                 "tuned": _scores_or_nan(name, objective, cases, settings)}
+                         for label, cases in (("training", training), ("test", test))}
+        rows.append(row)
+    return FairComparison(objective=objective, rows=rows, settings=chosen)
+
+
+def _scores_or_nan(name: str, objective: str, cases: list, settings: dict) -> dict:
+    """:func:`scores`, the objective NaN for an estimator it is not defined
+    for (no covariance, no innovations: dead reckoning's likelihood)."""
+    try:
+        return scores(name, objective, cases, settings)
+    except InvalidParameterError:
+        found = {objective: math.nan}
+        if objective != "rms" and all(case.has_reference for case in cases):
+            found["rms"] = scores(name, "rms", cases, settings)["rms"]
+        return found
+
+
+def format_fair_comparison(comparison: FairComparison) -> str:
+    """One row per estimator: its objective on the training and the test
+    cases, default → tuned, and the tuned values."""
+    objective = comparison.objective
+    width = max(len("estimator"), *(len(row["estimator"]) for row in comparison.rows))
+    columns = [("training", objective), ("test", objective)]
+    if objective != "rms" and "rms" in comparison.rows[0]["scores"]["test"]["default"]:
+        columns.append(("test", "rms"))
+    names = {"training": "train", "test": "test"}
+    lines = [f"{'estimator':<{width}}  " + "  ".join(
+        f"{key + ' ' + names[label]:>22}" for label, key in columns) + "  tuned settings"]
+    for row in comparison.rows:
+        cells = []
+        for label, key in columns:
+            score = row["scores"][label]
+            cells.append(f"{score['default'][key]:>10.4g} -> {score['tuned'][key]:<8.4g}")
+        values = ", ".join(f"{k} {v:.4g}" + (" (at its bound)" if k in row.get("at_bound", ())
+                                              else "")
+                           for k, v in row["tuned"].items()) or "(none to tune)"
+        lines.append(f"{row['estimator']:<{width}}  " + "  ".join(f"{c:>22}" for c in cells)
+                     + f"  {values}")
+    return "\n".join(lines)

@@ -39,6 +39,9 @@ class Record(NamedTuple):
     nees_sum: np.ndarray         # (rows, B)
     nis_sum: np.ndarray          # (rows, B)
     nis_count: np.ndarray        # (rows, B)
+    #: Per run, over every applied update (tracker and vectors): the sum of
+    #: ln det S + yᵀ S⁻¹ y and the number of updates (the likelihood objective).
+    likelihood: np.ndarray       # (rows, B, 2)
     check_health: bool
     health: np.ndarray           # (rows, B, N_HEALTH), or (rows, 0, N_HEALTH)
 
@@ -183,7 +186,7 @@ def nees_arrays(record, row):
     likewise (what a kernel that reports a covariance writes)."""
     return (record.consistency, record.nees_every, record.settle, record.nees_samples[row],
             record.nees_sum[row], record.nis_sum[row], record.nis_count[row],
-            record.variances[row])
+            record.variances[row], record.likelihood[row])
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -267,7 +270,9 @@ def matmul4(a, b, out):
 @njit(cache=True, inline="always", error_model="numpy")
 def gauss_jordan(S, inverse, n):
     """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
-    partial pivoting; S is positive definite."""
+    partial pivoting; S is positive definite. Returns det S (the pivots'
+    product, signed by the row swaps)."""
+    determinant = 1.0
     for i in range(n):
         for j in range(n):
             inverse[i, j] = 1.0 if i == j else 0.0
@@ -277,10 +282,12 @@ def gauss_jordan(S, inverse, n):
             if abs(S[row, col]) > abs(S[pivot, col]):
                 pivot = row
         if pivot != col:
+            determinant = -determinant
             for j in range(n):
                 S[col, j], S[pivot, j] = S[pivot, j], S[col, j]
                 inverse[col, j], inverse[pivot, j] = inverse[pivot, j], inverse[col, j]
         diagonal = S[col, col]
+        determinant *= diagonal
         for j in range(n):
             S[col, j] /= diagonal
             inverse[col, j] /= diagonal
@@ -290,6 +297,7 @@ def gauss_jordan(S, inverse, n):
                 for j in range(n):
                     S[row, j] -= factor * S[col, j]
                     inverse[row, j] -= factor * inverse[col, j]
+    return determinant
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -416,6 +424,14 @@ def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, va
     if streaming:
         fold_nees(run, k, nees(q_true_k, out, P, scratch), nees_every, settle, nees_samples,
                   nees_sum)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def fold_innovation(run, nis, determinant, likelihood):
+    """Add an applied update's ln det S + NIS to the run's likelihood sums
+    (a non-positive det S, a covariance gone bad, makes it infinite)."""
+    likelihood[run, 0] += (math.log(determinant) if determinant > 0.0 else math.inf) + nis
+    likelihood[run, 1] += 1.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -9,7 +9,8 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_nees, gauss_jordan, keep_variances,
+                                              fold_innovation, fold_nees, gauss_jordan,
+                                              keep_variances,
                                               mark_diverged, matmul4, nees, nees_arrays,
                                               projected_covariance, propagate, quadratic_form,
                                               record_error)
@@ -49,7 +50,7 @@ def nis_dof(estimators) -> int:
 @njit(cache=True, inline="always", error_model="numpy")
 def _ekf_update(x, P, z, R, scratch):
     """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
-    P = (I - K) P (I - K)ᵀ + K R Kᵀ."""
+    P = (I - K) P (I - K)ᵀ + K R Kᵀ. Returns the NIS and det S."""
     S = scratch[0]
     inverse = scratch[1]
     K = scratch[2]
@@ -58,7 +59,7 @@ def _ekf_update(x, P, z, R, scratch):
     for i in range(4):
         for j in range(4):
             S[i, j] = P[i, j] + R[i, j]
-    gauss_jordan(S, inverse, 4)
+    determinant = gauss_jordan(S, inverse, 4)
     matmul4(P, inverse, K)
     y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
     nis = quadratic_form((y0, y1, y2, y3), inverse, 4)
@@ -79,7 +80,7 @@ def _ekf_update(x, P, z, R, scratch):
                 first += T[i, m] * IK[j, m]
                 second += KR[i, m] * K[j, m]
             P[i, j] = first + second
-    return nis
+    return nis, determinant
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -114,7 +115,7 @@ def advance(block, sensors, state, record, row):
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances) = nees_arrays(record, row)
+     variances, likelihood) = nees_arrays(record, row)
     x_all, P_all, q_variance, R_all = state.x, state.P, state.q_variance, state.R
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
     for run in prange(x_all.shape[0]):
@@ -150,12 +151,13 @@ def advance(block, sensors, state, record, row):
                                        + x[3] * z[3]) < 0
                 for i in range(4):
                     aligned[i] = -z[i] if flip else z[i]
-                nis = _ekf_update(x, P, aligned, R_all[run], scratch)
+                nis, determinant = _ekf_update(x, P, aligned, R_all[run], scratch)
                 if check:   # the additive update leaves |x| off 1 by design
                     check_health(x, False, P, 4, health[run], factor)
                 if streaming:
                     nis_sum[run] += nis
                     nis_count[run] += 1
+                    fold_innovation(run, nis, determinant, likelihood)
             if posterior:
                 for i in range(4):
                     prior[i] = x[i]

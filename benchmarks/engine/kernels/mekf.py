@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
+                                              fold_innovation,
                                               gate_thresholds, gauss_jordan, keep_output,
                                               log_error, mark_diverged, nees_arrays,
                                               quadratic_form, quat_exp, quat_times_normalized,
@@ -130,7 +131,8 @@ def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
 def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq):
     """filterpy's update with innovation ``y`` and Jacobian ``H`` (3x6, zero
     in its bias columns), ``K = P Hᵀ S⁻¹`` and Joseph's form, then the reset;
-    not applied if gating rejects it. Returns the NIS and whether it was applied."""
+    not applied if gating rejects it. Returns the NIS, whether it was applied
+    and det S."""
     PHT, S, inverse, K, IK, T, KR = (scratch[0], scratch[1], scratch[2], scratch[3],
                                      scratch[4], scratch[5], scratch[6])
     for i in range(6):
@@ -140,10 +142,10 @@ def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq)
         for j in range(3):
             S[i, j] = (H[i, 0] * PHT[0, j] + H[i, 1] * PHT[1, j] + H[i, 2] * PHT[2, j]) \
                 + R[i, j]
-    gauss_jordan(S, inverse, 3)
+    determinant = gauss_jordan(S, inverse, 3)
     nis = quadratic_form((y0, y1, y2), inverse, 3)
     if gating and not nis <= threshold:
-        return nis, False
+        return nis, False, determinant
     for i in range(6):
         for j in range(3):
             K[i, j] = PHT[i, 0] * inverse[0, j] + PHT[i, 1] * inverse[1, j] \
@@ -175,7 +177,7 @@ def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq)
     beta[0] += dx[3]
     beta[1] += dx[4]
     beta[2] += dx[5]
-    return nis, True
+    return nis, True, determinant
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -211,7 +213,7 @@ def _mekf_vector_update(q, beta, P, body, reference, variance, gating, threshold
     H[1, 0], H[1, 2] = p2, -p0
     H[2, 0], H[2, 1] = -p1, p0
     return _joseph_update(q, beta, P, body[0] - p0, body[1] - p1, body[2] - p2, H, R,
-                          gating, threshold, scratch, dq)[1]
+                          gating, threshold, scratch, dq)
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
@@ -228,7 +230,7 @@ def advance(block, sensors, state, record, row):
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances) = nees_arrays(record, row)
+     variances, likelihood) = nees_arrays(record, row)
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
@@ -255,18 +257,22 @@ def advance(block, sensors, state, record, row):
                             variances, keep_traces, streaming, nees_every, settle,
                             nees_samples, nees_sum, scratch6)
             if available:
-                nis, applied = _mekf_update(q, beta, P, z, R_all[run], gating[run],
-                                            gate[run, 3], scratch6, dq)
+                nis, applied, determinant = _mekf_update(q, beta, P, z, R_all[run], gating[run],
+                                                         gate[run, 3], scratch6, dq)
                 if check:
                     check_health(q, True, P, 6, health[run], factor)
                 if streaming and applied:
                     nis_sum[run] += nis
                     nis_count[run] += 1
+                    fold_innovation(run, nis, determinant, likelihood)
             for s in range(vector_dof.shape[0]):
                 if vector_available[run, j, s]:
-                    _mekf_vector_update(q, beta, P, vector_body[run, j, s], vector_reference[j, s],
-                                        vector_variance[run, j, s], gating[run],
-                                        gate[run, vector_dof[s]], scratch6, dq)
+                    nis, applied, determinant = _mekf_vector_update(
+                        q, beta, P, vector_body[run, j, s], vector_reference[j, s],
+                        vector_variance[run, j, s], gating[run], gate[run, vector_dof[s]],
+                        scratch6, dq)
+                    if streaming and applied:
+                        fold_innovation(run, nis, determinant, likelihood)
                     if check:
                         check_health(q, True, P, 6, health[run], factor)
             if posterior:

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
+                                              fold_innovation,
                                               gate_thresholds, gauss_jordan, keep_output,
                                               mark_diverged, nees_arrays, quadratic_form,
                                               quat_exp, record_error, to_body_frame)
@@ -263,7 +264,7 @@ def _predict(q, x, P, sigmas, w_meas, dt, noise, bias_rw, spread, Wm, Wc, L, Q, 
 @njit(cache=True, error_model="numpy")
 def _update(q, x, P, sigmas, z, R, Wm, Wc, gating, threshold, scratch):
     """USQUE.correct: the update with ``h(χ) = δp`` and y = GRP(q̂⁻¹ ⊗ z),
-    ``z`` aligned in sign with q̂ first; returns the NIS and whether it was applied."""
+    ``z`` aligned in sign with q̂ first (returns as :func:`_unscented_update`)."""
     if q[0] * z[0] + q[1] * z[1] + q[2] * z[2] + q[3] * z[3] < 0:
         z0, z1, z2, z3 = -z[0], -z[1], -z[2], -z[3]
     else:
@@ -286,7 +287,7 @@ def _vector_update(q, x, P, sigmas, body, reference, variance, Wm, Wc, gating, t
         for b in range(3):
             R[a, b] = variance if a == b else 0.0
     return _unscented_update(x, P, sigmas, predicted, body[0], body[1], body[2], R, Wm, Wc,
-                             gating, threshold, scratch)[1]
+                             gating, threshold, scratch)
 
 
 @njit(cache=True, error_model="numpy")
@@ -294,8 +295,8 @@ def _unscented_update(x, P, sigmas, predicted, y0, y1, y2, R, Wm, Wc, gating, th
                       scratch):
     """filterpy's unscented ``update`` with the sigma points' predicted
     measurements ``predicted`` (their first three columns) and the
-    measurement ``y``; not applied if gating rejects it. Returns the NIS
-    and whether it was applied."""
+    measurement ``y``; not applied if gating rejects it. Returns the NIS,
+    whether it was applied and det S."""
     S, inverse, Pxz, K, KS = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     zp, kept = scratch[5, 0], scratch[5, 1:4]
     _unscented_mean(predicted, Wm, 3, zp)
@@ -312,11 +313,11 @@ def _unscented_update(x, P, sigmas, predicted, y0, y1, y2, R, Wm, Wc, gating, th
             for i in range(N_SIGMAS):
                 total += Wc[i] * (sigmas[i, a] - x[a]) * (predicted[i, b] - zp[b])
             Pxz[a, b] = total
-    gauss_jordan(S, inverse, 3)
+    determinant = gauss_jordan(S, inverse, 3)
     r0, r1, r2 = y0 - zp[0], y1 - zp[1], y2 - zp[2]
     nis = quadratic_form((r0, r1, r2), inverse, 3)
     if gating and not nis <= threshold:
-        return nis, False
+        return nis, False, determinant
     for a in range(STATE_SIZE):
         for b in range(3):
             K[a, b] = Pxz[a, 0] * inverse[0, b] + Pxz[a, 1] * inverse[1, b] \
@@ -328,7 +329,7 @@ def _unscented_update(x, P, sigmas, predicted, y0, y1, y2, R, Wm, Wc, gating, th
     for a in range(STATE_SIZE):
         for b in range(STATE_SIZE):
             P[a, b] -= KS[a, 0] * K[b, 0] + KS[a, 1] * K[b, 1] + KS[a, 2] * K[b, 2]
-    return nis, True
+    return nis, True, determinant
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -343,15 +344,20 @@ def _any_reading(available, run, j):
 @njit(cache=True, error_model="numpy")
 def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, gate,
              vector_body, vector_reference, vector_variance, vector_available, vector_dof,
-             scratch, predicted, R_vector, nis_out):
+             scratch, predicted, R_vector, nis_out, streaming, likelihood):
     """The step's updates, as ``USQUE._estimate_at_step`` makes them: the
     tracker's, then each vector reading's, each followed by the reset (or the
-    reset alone without any reading). Returns whether the sigma points of every
-    update existed (``False``: the per-run class's Cholesky factor fails) and
-    whether the tracker's reading was applied (its NIS in ``nis_out[0]``)."""
+    reset alone without any reading), each applied one folded into the
+    likelihood sums if ``streaming``. Returns whether the sigma points of
+    every update existed (``False``: the per-run class's Cholesky factor
+    fails) and whether the tracker's reading was applied (its NIS in
+    ``nis_out[0]``)."""
     updated, applied = False, False
     if available:
-        nis_out[0], applied = _update(q, x, P, sigmas, z, R, Wm, Wc, gating, gate[3], scratch)
+        nis_out[0], applied, determinant = _update(q, x, P, sigmas, z, R, Wm, Wc, gating,
+                                                   gate[3], scratch)
+        if streaming and applied:
+            fold_innovation(run, nis_out[0], determinant, likelihood)
         _fold_reference(q, x)
         updated = True
     elif not _any_reading(vector_available, run, j):
@@ -361,9 +367,12 @@ def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, g
             # Sigma points about the current (x, P) for a second update within a step.
             if updated and not _sigma_points(x, P, spread, sigmas, scratch[0]):
                 return False, applied
-            _vector_update(q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
-                           vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]],
-                           scratch, predicted, R_vector)
+            nis, used, determinant = _vector_update(
+                q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
+                vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]], scratch,
+                predicted, R_vector)
+            if streaming and used:
+                fold_innovation(run, nis, determinant, likelihood)
             _fold_reference(q, x)
             updated = True
     return True, applied
@@ -384,7 +393,7 @@ def advance(block, sensors, state, record, row):
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances) = nees_arrays(record, row)
+     variances, likelihood) = nees_arrays(record, row)
     q_all, x_all, P_all, sigmas_all, R_all = state.q, state.x, state.P, state.sigmas, state.R
     noise, bias_rw, spread, Wm_all, Wc_all = (state.noise, state.bias_rw, state.spread,
                                               state.Wm, state.Wc)
@@ -419,7 +428,8 @@ def advance(block, sensors, state, record, row):
             factored, applied = _correct(
                 q, x, P, sigmas, available, z, run, j, R_all[run], Wm, Wc, spread[run],
                 gating[run], gate[run], vector_body, vector_reference, vector_variance,
-                vector_available, vector_dof, scratch, propagated, R_vector, nis)
+                vector_available, vector_dof, scratch, propagated, R_vector, nis, streaming,
+                likelihood)
             if not factored:
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
