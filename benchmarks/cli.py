@@ -251,8 +251,10 @@ def _parse_compare(commands) -> None:
                          "--train-seeds for objective OBJ (see tune), then compare them all "
                          "tuned; scores default and tuned on both sets, writes tuned.toml")
     compare.add_argument("--train-seeds", type=_seed_list, metavar="SPEC",
-                         help="the training seeds of --tuned (default 100-104; --seed, the "
-                         "test seed, must not be among them)")
+                         help="the training seeds of --tuned (default 100-104)")
+    compare.add_argument("--test-seeds", type=_seed_list, metavar="SPEC",
+                         help="the test seeds of --tuned (default: --seed, the compared one); "
+                         "none may be a training seed")
     _add_common(compare)
 
 
@@ -621,8 +623,8 @@ def command_run(args, scenario):
 
 
 def command_compare(args, scenario):
-    if args.train_seeds and not args.tuned:
-        raise UsageError("--train-seeds needs --tuned OBJ")
+    if (args.train_seeds or args.test_seeds) and not args.tuned:
+        raise UsageError("--train-seeds and --test-seeds need --tuned OBJ")
     if args.tuned:
         scenario = _tuned_for_comparison(args, scenario)
     _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
@@ -638,10 +640,11 @@ def _tuned_for_comparison(args, scenario):
     from benchmarks.experiments.objectives import checked_objective, seed_cases
     objective = checked_objective(args.tuned)
     training = seed_cases(scenario, args.train_seeds or tuning.DEFAULT_TRAINING_SEEDS)
+    test_seeds = args.test_seeds or (args.seed,)
     fair = tuning.tune_all(args.estimators, objective, training,
-                           seed_cases(scenario, [args.seed]), quiet=args.quiet)
+                           seed_cases(scenario, test_seeds), quiet=args.quiet)
     print(f"tuned for {objective} on seeds {format_seeds([c.seed for c in training])}, "
-          f"tested on seed {args.seed} (default -> tuned):")
+          f"tested on seeds {format_seeds(test_seeds)} (default -> tuned):")
     print(tuning.format_fair_comparison(fair))
     write_text(args.out / "tuned.toml", fair.toml())
     experiments.write_json(args.out / "tuned.json", {"objective": objective,

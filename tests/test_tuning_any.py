@@ -220,3 +220,17 @@ def test_the_likelihood_finds_the_broad_gyros_delay_without_the_reference():
     for objective in (0, 1):
         assert scores[1.7][objective] < min(scores[0.0][objective], scores[4.0][objective])
     assert scores[1.7][1] < 0.36 < 0.66 < scores[0.0][1]     # RMS, degrees (measured 0.33, 0.66)
+
+
+def test_compare_tuned_scores_on_its_test_seeds_and_refuses_an_overlap(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["compare", "--estimators", "dead-reckoning-resets,ekf", "--tstop", "5",
+                 "--tuned", "rms", "--train-seeds", "0-1", "--test-seeds", "2-3",
+                 "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "tested on seeds 2-3" in printed and "(none to tune)" in printed
+    assert "[estimators.ekf]" in (out / "tuned.toml").read_text()
+    assert main(["compare", "--tstop", "5", "--tuned", "rms", "--train-seeds", "0-1",
+                 "--test-seeds", "1", "--out", str(tmp_path / "b"), "--quiet"]) == 2
+    assert "must share no seed" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists() or not any((tmp_path / "b").iterdir())
