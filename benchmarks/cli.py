@@ -294,7 +294,8 @@ def _parse_tune(commands) -> None:
     tune = commands.add_parser("tune", help="fminbnd-style tuning of pc_exponent; "
                                "write tune.json and tune.png")
     tune.add_argument("--bounds", nargs=2, type=_number, metavar=("LO", "HI"),
-                      default=[-16.0, 0.0], help="search interval (default -16 0)")
+                      help="pc_exponent's search interval (default -16 0; with --estimator, "
+                      "--range NAME=LO:HI)")
     tune.add_argument("--xtol", type=_number, default=0.01, metavar="X",
                       help="x tolerance (default 0.01)")
     tune.add_argument("--seeds", type=_seed_list, default=(0,), metavar="SPEC",
@@ -639,7 +640,11 @@ def _tuned_for_comparison(args, scenario):
     from benchmarks.experiments import tuning
     from benchmarks.experiments.objectives import checked_objective, seed_cases
     objective = checked_objective(args.tuned)
-    training = seed_cases(scenario, args.train_seeds or tuning.DEFAULT_TRAINING_SEEDS)
+    training_seeds = args.train_seeds or tuning.DEFAULT_TRAINING_SEEDS
+    if args.seed in training_seeds:
+        raise InvalidParameterError("seed", args.seed, "is a training seed of --tuned: the "
+                                    "comparison must run on a seed the tuning did not see")
+    training = seed_cases(scenario, training_seeds)
     test_seeds = args.test_seeds or (args.seed,)
     fair = tuning.tune_all(args.estimators, objective, training,
                            seed_cases(scenario, test_seeds), quiet=args.quiet)
@@ -667,7 +672,11 @@ def command_sweep(args, scenario):
 
 def command_tune(args, scenario):
     if args.estimator is not None:
+        if args.bounds is not None:
+            raise UsageError("--bounds is pc_exponent's interval without --estimator; with it, "
+                             "give each setting's range as --range NAME=LO:HI")
         return command_tune_estimator(args, scenario)
+    args.bounds = args.bounds or [-16.0, 0.0]
     for flag, given in (("--parameters", args.parameters), ("--range", args.ranges),
                         ("--dataset", args.datasets), ("--test-seeds", args.test_seeds),
                         ("--test-dataset", args.test_datasets),
@@ -704,8 +713,18 @@ def command_tune_estimator(args, scenario):
     from benchmarks.experiments import tuning
     from benchmarks.experiments.objectives import checked_objective
     objective = checked_objective(args.objective)
-    training = tuning.cases_of(scenario, args.seeds, args.datasets)
-    test = (tuning.cases_of(scenario, args.test_seeds, args.test_datasets, "test")
+    settings = None
+    if args.datasets or args.test_datasets:
+        # A recording's scenario comes from it; a file may set [estimators.NAME] only.
+        if args.scenario and len(args.scenario) > 1:
+            raise UsageError("with --dataset, give at most one --scenario FILE (of "
+                             "[estimators.NAME] sections)")
+        settings = args.scenario[0] if args.scenario else None
+    imports = allowed_imports(args)
+    training = tuning.cases_of(scenario, args.seeds, args.datasets, settings=settings,
+                               allow_imports=imports)
+    test = (tuning.cases_of(scenario, args.test_seeds, args.test_datasets, "test",
+                            settings=settings, allow_imports=imports)
             if args.test_seeds or args.test_datasets else [])
     tuning.disjoint(training, test)
     result = tuning.tune_estimator(args.estimator, training, objective, args.parameters,
@@ -849,15 +868,20 @@ def command_consistency(args, scenario):
 def command_replay(args, _scenario):
     from benchmarks.experiments.replay import load_replay, run_replay, write_replay
     from benchmarks.resources import check_memory, per_run_bytes
-    from benchmarks.experiments.replay import likeliest_gyro_delay
+    from benchmarks.experiments.replay import DELAY_SEARCH_SAMPLES, likeliest_gyro_delay
     # The recording, the settings and the memory are checked before any write.
     delay = args.gyro_delay
     if delay == "auto":
-        delay, log = likeliest_gyro_delay(args.dataset, "mekf", args.star_tracker_interval,
-                                          args.star_tracker_noise_deg, args.seed,
-                                          args.scenario, allowed_imports(args), args.quiet)
+        delay, log, at_bound = likeliest_gyro_delay(
+            args.dataset, "mekf", args.star_tracker_interval, args.star_tracker_noise_deg,
+            args.seed, args.scenario, allowed_imports(args), args.quiet)
         print(f"gyro delay {delay * 1000:.3f} ms: the MEKF's innovations likeliest "
               f"({log.evaluations} evaluations, no reference used)")
+        if at_bound:
+            low, high = DELAY_SEARCH_SAMPLES
+            print(f"{PROG}: warning: the delay found is at an end of the search ({low:g} to "
+                  f"{high:g} samples): the likeliest may lie beyond; give --gyro-delay "
+                  "SECONDS", file=sys.stderr)
     data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
                        args.seed, settings=args.scenario, allow_imports=allowed_imports(args),
                        gyro_delay_s=delay)

@@ -682,6 +682,7 @@ class KalmanEstimator(AttitudeEstimator):
         measurement is processed at its own time)."""
         if not self.applies_reading_times:
             return self._step(omega_meas_radps, star_tracker_quat, vectors)
+        self._tracker_innovation = None
         estimate = self._estimate_at_step(None, vectors)
         self.propagate(omega_meas_radps, offset_s)
         self._correct_logged(star_tracker_quat)

@@ -28,7 +28,7 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 
-SCALES = ("log", "linear")
+SCALES = ("log", "linear", "log-complement")
 
 
 @dataclass(frozen=True)
@@ -39,8 +39,9 @@ class Tunable:
     ----------
     name : str
         The constructor keyword (or, with ``scales``, the name of the factor).
-    scale : {"log", "linear"}
-        The tuner searches ``log10(value)`` or ``value``.
+    scale : {"log", "linear", "log-complement"}
+        The tuner searches ``log10(value)``, ``value``, or ``log10(1 − value)``
+        (a probability near 1: 0.99, 0.999 and 0.9999 a step apart).
     limits : (low, high)
         The values the setting accepts (inclusive); a range asked for must
         lie within them.
@@ -65,11 +66,20 @@ class Tunable:
 
     def coordinate(self, value: float) -> float:
         """The tuner's coordinate of ``value``."""
-        return math.log10(value) if self.scale == "log" else float(value)
+        if self.scale == "log":
+            return math.log10(value)
+        if self.scale == "log-complement":
+            return math.log10(1.0 - value)
+        return float(value)
 
     def value(self, coordinate: float) -> float:
         """The setting's value at the tuner's ``coordinate``, within the limits."""
-        value = 10.0 ** coordinate if self.scale == "log" else float(coordinate)
+        if self.scale == "log":
+            value = 10.0 ** coordinate
+        elif self.scale == "log-complement":
+            value = 1.0 - 10.0 ** coordinate
+        else:
+            value = float(coordinate)
         return min(max(value, self.limits[0]), self.limits[1])
 
     def default(self, settings: dict) -> float | None:
@@ -124,6 +134,6 @@ GYRO_BIAS_RANDOM_WALK = Tunable("gyro_bias_random_walk", "log", (1e-20, 1e3), sp
 MEASUREMENT_SCALE = Tunable("measurement_scale", "log", (1e-12, 1e12), span=3.0,
                             scales="measurement_covariance",
                             description="a factor on the star tracker's covariance R")
-GATE_PROBABILITY = Tunable("gate_probability", "linear", (1e-6, 1.0 - 1e-12),
+GATE_PROBABILITY = Tunable("gate_probability", "log-complement", (1e-6, 1.0 - 1e-12),
                            search=(0.9, 0.999999),
                            description="the χ² probability of innovation gating")

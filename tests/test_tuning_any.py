@@ -225,12 +225,57 @@ def test_the_likelihood_finds_the_broad_gyros_delay_without_the_reference():
 def test_compare_tuned_scores_on_its_test_seeds_and_refuses_an_overlap(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["compare", "--estimators", "dead-reckoning-resets,ekf", "--tstop", "5",
-                 "--tuned", "rms", "--train-seeds", "0-1", "--test-seeds", "2-3",
+                 "--tuned", "rms", "--train-seeds", "0-1", "--test-seeds", "2-3", "--seed", "2",
                  "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "tested on seeds 2-3" in printed and "(none to tune)" in printed
     assert "[estimators.ekf]" in (out / "tuned.toml").read_text()
     assert main(["compare", "--tstop", "5", "--tuned", "rms", "--train-seeds", "0-1",
-                 "--test-seeds", "1", "--out", str(tmp_path / "b"), "--quiet"]) == 2
+                 "--test-seeds", "1", "--seed", "5", "--out", str(tmp_path / "b"),
+                 "--quiet"]) == 2
     assert "must share no seed" in capsys.readouterr().err
     assert not (tmp_path / "b").exists() or not any((tmp_path / "b").iterdir())
+
+
+def test_the_gate_is_searched_in_decades_of_its_miss_probability():
+    from estimators.tunable import GATE_PROBABILITY
+    assert GATE_PROBABILITY.coordinate(0.999) == pytest.approx(-3.0)
+    assert GATE_PROBABILITY.value(-4.0) == pytest.approx(0.9999)
+    scenario = Scenario.from_toml(SCENARIOS / "smallsat.toml").replace(tstop=20.0)
+    tuning = tune_estimator("mekf", seed_cases(scenario, [0]), "rms", ["gate_probability"],
+                            quiet=True)
+    assert 0.9 <= tuning.tuned["gate_probability"] <= 0.999999
+    # The EKF's kernel does not gate: its likelihood then comes from the per-run path.
+    gated = Objective("ekf", "likelihood", seed_cases(scenario, [0]))
+    assert math.isfinite(gated({"gate_probability": 0.99}))
+
+
+def test_an_optimum_beyond_the_range_is_flagged():
+    # The workshop EKF's optimum is near -7.9; a range of -12..-10 ends below it.
+    tuning = tune_estimator("ekf", seed_cases(Scenario(), [0]), "std", ["pc_exponent"],
+                            {"pc_exponent": (-12.0, -10.0)}, quiet=True)
+    assert tuning.at_bound == ["pc_exponent"]
+    inside = tune_estimator("ekf", seed_cases(Scenario(), [0]), "std", ["pc_exponent"],
+                            {"pc_exponent": (-16.0, 0.0)}, quiet=True)
+    assert inside.at_bound == []
+
+
+def test_json_outputs_hold_no_nan(tmp_path, capsys):
+    import json
+    out = tmp_path / "out"
+    assert main(["compare", "--estimators", "dead-reckoning-resets,mekf", "--tstop", "5",
+                 "--tuned", "likelihood", "--train-seeds", "0-1", "--seed", "3",
+                 "--out", str(out), "--quiet"]) == 0
+    def refuse(constant):
+        raise AssertionError(f"{constant} in tuned.json")
+    rows = json.loads((out / "tuned.json").read_text(), parse_constant=refuse)["rows"]
+    assert rows[0]["scores"]["test"]["default"]["likelihood"] is None   # resets: no innovations
+
+
+def test_compare_refuses_a_seed_it_trained_on_and_bounds_beside_an_estimator(tmp_path, capsys):
+    assert main(["compare", "--tstop", "5", "--tuned", "rms", "--train-seeds", "0-2",
+                 "--seed", "1", "--out", str(tmp_path / "a"), "--quiet"]) == 2
+    assert "seed = 1: is a training seed of --tuned" in capsys.readouterr().err
+    assert main(["tune", "--estimator", "ekf", "--bounds", "-12", "-4",
+                 "--out", str(tmp_path / "b"), "--quiet"]) == 2
+    assert "--bounds is pc_exponent's interval without --estimator" in capsys.readouterr().err

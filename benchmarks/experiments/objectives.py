@@ -114,7 +114,9 @@ def with_settings(scenario: Scenario, name: str, settings: dict) -> Scenario:
 
 class Objective:
     """``objective(settings)``: the score of estimator ``name`` with
-    ``settings`` (constructor keywords over the scenario's) on ``cases``."""
+    ``settings`` (constructor keywords over the scenario's, or a function of
+    a case's scenario giving them: a scale multiplies each case's own
+    default) on ``cases``."""
 
     def __init__(self, name: str, objective: str, cases: list[Case], *, threads=None):
         self.name, self.objective, self.cases = name, checked_objective(objective), cases
@@ -132,13 +134,20 @@ class Objective:
             objective != "likelihood" or (name in ENGINE_ESTIMATORS and engine_limitation(
                 cases[0].scenario, None, name) is None))
 
-    def __call__(self, settings: dict) -> float:
-        scores = self.engine_scores(settings) if self.on_engine else self.case_scores(settings)
+    def __call__(self, settings) -> float:
+        chosen = settings if callable(settings) else (lambda scenario: settings)
+        scores = self.engine_scores(chosen) if self.on_engine else self.case_scores(chosen)
         return _combined(self.objective, scores)
 
-    def engine_scores(self, settings: dict) -> dict:
+    def engine_scores(self, settings) -> dict:
         """Every case's numbers from one batch (the engine where there is a kernel)."""
-        scenario = with_settings(self.cases[0].scenario, self.name, settings)
+        scenario = with_settings(self.cases[0].scenario, self.name,
+                                 settings(self.cases[0].scenario))
+        if self.objective == "likelihood" and engine_limitation(scenario, None,
+                                                                self.name) is not None:
+            # A setting the kernel does not model (a gate, for the EKF): the
+            # likelihood's sums come from the per-run path.
+            return self.case_scores(settings)
         runs = make_runs(scenario, [case.seed for case in self.cases])
         consistency = self.objective in ("anees", "nis", "likelihood")
         settle = int(SETTLE_FRACTION * scenario.n_steps)
@@ -163,11 +172,11 @@ class Objective:
         return {"values": np.where(diverged, np.inf,
                                    batch.statistics[self.name][OBJECTIVES[self.objective]])}
 
-    def case_scores(self, settings: dict) -> dict:
+    def case_scores(self, settings) -> dict:
         """Every case run on the per-run path."""
         values, nis_dof, sums = [], 3, {"updates": 0, "total": 0.0}
         for case in self.cases:
-            scenario = with_settings(case.scenario, self.name, settings)
+            scenario = with_settings(case.scenario, self.name, settings(case.scenario))
             estimator = resolve_estimator(self.name).from_scenario(scenario)
             estimator.log_innovations = self.objective == "likelihood"
             with warnings.catch_warnings():

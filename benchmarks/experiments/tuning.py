@@ -179,7 +179,7 @@ def tune_pc_exponent(scenario: Scenario, seeds=(0,), bounds=DEFAULT_BOUNDS,
 
 #: Nelder–Mead's stopping rule, in the scaled coordinates (decades, or the
 #: linear unit): the simplex within ``XATOL`` and its losses within ``FATOL``
-#: relative, or ``MAX_EVALUATIONS`` evaluations.
+#: (absolute), or ``MAX_EVALUATIONS`` evaluations.
 XATOL = 0.01
 FATOL = 1e-4
 MAX_EVALUATIONS = 200
@@ -204,14 +204,9 @@ class EstimatorTuning:
     message: str
     cases: list                  # the training cases' labels
     seconds: float = 0.0
-
-    @property
-    def at_bound(self) -> list:
-        """The settings tuned to an end of their range: the optimum may lie
-        beyond it (widen the range with ``--range``)."""
-        return [name for name, (low, high) in zip(self.parameters, self.ranges)
-                if np.isclose(self.tuned[name], low, rtol=1e-6, atol=0)
-                or np.isclose(self.tuned[name], high, rtol=1e-6, atol=0)]
+    #: The settings tuned to an end of their range (within twice the
+    #: search's tolerance, in its coordinates): the optimum may lie beyond.
+    at_bound: list = field(default_factory=list)
 
     def as_json(self) -> dict:
         def number(value):
@@ -291,8 +286,8 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
     settings = {**cls.settings_from_scenario(scenario), **cls.scenario_section(scenario)}
     plan = tuning_plan(cls, settings, parameters, ranges)
     score = Objective(name, objective, cases)
-    low = np.array([t.coordinate(b[0]) for t, _, b in plan])
-    high = np.array([t.coordinate(b[1]) for t, _, b in plan])
+    ends = np.array([[t.coordinate(b[0]), t.coordinate(b[1])] for t, _, b in plan])
+    low, high = ends.min(axis=1), ends.max(axis=1)   # log10(1 − p) runs backwards
     start = np.array([t.coordinate(d) if d is not None and (t.scale != "log" or d > 0)
                       else 0.5 * (lo + hi) for (t, d, _), lo, hi in zip(plan, low, high)])
     start = np.clip(start, low, high)
@@ -303,9 +298,15 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
 
     def loss(u) -> float:
         values = values_at(u)
-        overrides = {}
-        for tunable, _, _ in plan:
-            overrides.update(tunable.overrides(values[tunable.name], settings))
+
+        def overrides(case_scenario) -> dict:
+            """The values as constructor keywords, a scale on each case's own default."""
+            own = {**cls.settings_from_scenario(case_scenario),
+                   **cls.scenario_section(case_scenario)}
+            found = {}
+            for tunable, _, _ in plan:
+                found.update(tunable.overrides(values[tunable.name], own))
+            return found
         value = float(score(overrides))
         evaluations.append({"count": len(evaluations) + 1, "values": values, "loss": value})
         bar.update()
@@ -319,7 +320,7 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
         loss_default = loss(start) if at_default else None
         if len(plan) == 1:
             log = minimize_bounded(lambda x: loss(np.array([x])), (low[0], high[0]), xatol)
-            iterations = [{"iteration": row["count"], "count": row["count"] + 1,
+            iterations = [{"iteration": row["count"], "count": row["count"] + int(at_default),
                            "loss": row["f"], "values": values_at([row["x"]]),
                            "procedure": row["procedure"]} for row in log.iterations]
             message, method = log.message, "bounded Brent"
@@ -338,13 +339,17 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
                                        "fatol": FATOL, "maxfev": max_evaluations})
             message, method = str(result.message), "Nelder-Mead"
     best = min(evaluations, key=lambda row: row["loss"])
+    at_bound = [t.name for (t, _, _), lo, hi in zip(plan, low, high)
+                if min(abs(t.coordinate(best["values"][t.name]) - lo),
+                       abs(t.coordinate(best["values"][t.name]) - hi)) <= 2.0 * xatol]
     return EstimatorTuning(
         estimator=name, objective=objective, parameters=[t.name for t, _, _ in plan],
         scales=[t.scale for t, _, _ in plan], ranges=[b for _, _, b in plan],
         default={t.name: d for t, d, _ in plan}, tuned=best["values"],
         loss_default=loss_default, loss=best["loss"], method=method,
         evaluations=evaluations, iterations=iterations, message=message,
-        cases=[case.label for case in cases], seconds=time.perf_counter() - began)
+        cases=[case.label for case in cases], seconds=time.perf_counter() - began,
+        at_bound=at_bound)
 
 
 def _vertex(start, axis: int, low, high) -> np.ndarray:
@@ -371,15 +376,19 @@ def format_tuning_table(tuning: EstimatorTuning) -> str:
     return "\n".join(lines)
 
 
-def cases_of(scenario: Scenario, seeds=None, datasets=None, what: str = "training") -> list:
+def cases_of(scenario: Scenario, seeds=None, datasets=None, what: str = "training",
+             settings=None, allow_imports=()) -> list:
     """The cases to tune (or score) on: recordings if ``datasets`` are
-    named, else simulated ``seeds`` of ``scenario``."""
+    named (``settings``, a file of ``[estimators.NAME]`` sections over what
+    each recording derives), else simulated ``seeds`` of ``scenario``."""
     from benchmarks.experiments.objectives import recording_case, seed_cases
     from benchmarks.experiments.replay import load_replay
     if datasets:
         if len(set(datasets)) != len(datasets):
             raise InvalidParameterError(f"{what} datasets", list(datasets), "must each be named once")
-        return [recording_case(load_replay(name), name) for name in datasets]
+        return [recording_case(load_replay(name, settings=settings,
+                                           allow_imports=allow_imports), name)
+                for name in datasets]
     return seed_cases(scenario, seeds)
 
 
