@@ -127,10 +127,17 @@ class AttitudeEstimator:
         return settings
 
     @classmethod
-    def from_scenario(cls, scenario, **overrides) -> "AttitudeEstimator":
-        """This estimator as ``scenario`` configures it (``overrides`` last)."""
+    def configured_settings(cls, scenario) -> dict:
+        """The constructor keywords ``scenario`` gives: its defaults for this
+        estimator, then its ``[estimators.NAME]`` section."""
         settings = cls.settings_from_scenario(scenario)
         settings.update(cls.scenario_section(scenario))
+        return settings
+
+    @classmethod
+    def from_scenario(cls, scenario, **overrides) -> "AttitudeEstimator":
+        """This estimator as ``scenario`` configures it (``overrides`` last)."""
+        settings = cls.configured_settings(scenario)
         settings.update(overrides)
         return cls(**settings)
 

@@ -176,13 +176,8 @@ class Objective:
         """Every case run on the per-run path."""
         values, nis_dof, sums = [], 3, {"updates": 0, "total": 0.0}
         for case in self.cases:
-            scenario = with_settings(case.scenario, self.name, settings(case.scenario))
-            estimator = resolve_estimator(self.name).from_scenario(scenario)
-            estimator.log_innovations = self.objective == "likelihood"
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")   # a class that ignores vectors is said once
-                vectors = vectors_for(estimator, self.name, case.sensors.vectors)
-            trace = estimator.track(*case.sensors.record, vectors=vectors)
+            estimator, trace = run_case(self.name, case, settings(case.scenario),
+                                        log_innovations=self.objective == "likelihood")
             if estimator.diverged_step is not None:
                 values.append(math.inf)
                 continue
@@ -210,6 +205,18 @@ class Objective:
             return float(np.mean(values[settled]))
         error = attitude_error_deg(case.q_reference, trace.quat)[case.scored]
         return error_statistics(error)[OBJECTIVES[self.objective]]
+
+
+def run_case(name: str, case: Case, settings: dict, log_innovations: bool = False):
+    """Estimator ``name`` with ``settings`` tracked through ``case`` on the
+    per-run path: the estimator after the run, and its trace."""
+    estimator = resolve_estimator(name).from_scenario(
+        with_settings(case.scenario, name, settings))
+    estimator.log_innovations = log_innovations
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # a class that ignores vectors is said once
+        vectors = vectors_for(estimator, name, case.sensors.vectors)
+    return estimator, estimator.track(*case.sensors.record, vectors=vectors)
 
 
 def _combined(objective: str, scores: dict) -> float:

@@ -21,7 +21,6 @@ import io
 import math
 import re
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -282,9 +281,7 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
     from benchmarks.experiments.objectives import Objective
     from estimators import resolve_estimator
     cls = resolve_estimator(name)
-    scenario = cases[0].scenario
-    settings = {**cls.settings_from_scenario(scenario), **cls.scenario_section(scenario)}
-    plan = tuning_plan(cls, settings, parameters, ranges)
+    plan = tuning_plan(cls, cls.configured_settings(cases[0].scenario), parameters, ranges)
     score = Objective(name, objective, cases)
     ends = np.array([[t.coordinate(b[0]), t.coordinate(b[1])] for t, _, b in plan])
     low, high = ends.min(axis=1), ends.max(axis=1)   # log10(1 − p) runs backwards
@@ -298,16 +295,8 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
 
     def loss(u) -> float:
         values = values_at(u)
-
-        def overrides(case_scenario) -> dict:
-            """The values as constructor keywords, a scale on each case's own default."""
-            own = {**cls.settings_from_scenario(case_scenario),
-                   **cls.scenario_section(case_scenario)}
-            found = {}
-            for tunable, _, _ in plan:
-                found.update(tunable.overrides(values[tunable.name], own))
-            return found
-        value = float(score(overrides))
+        # A scale multiplies each case's own default.
+        value = float(score(lambda case_scenario: keyword_values(cls, values, case_scenario)))
         evaluations.append({"count": len(evaluations) + 1, "values": values, "loss": value})
         bar.update()
         return value
@@ -400,18 +389,22 @@ def disjoint(training: list, test: list) -> None:
                                     "with the training set (a score on tuned-on data is not a test)")
 
 
-def tuned_settings(tuning: EstimatorTuning, scenario: Scenario) -> dict:
-    """The constructor keywords the tuned values set (a scale as the
-    quantity it multiplies), as an ``[estimators.NAME]`` section holds them."""
-    from estimators import resolve_estimator
+def keyword_values(cls, values: dict, scenario: Scenario) -> dict:
+    """Tuned ``values`` (setting → value) as the constructor keywords they
+    set on ``scenario`` (a scale as the quantity it multiplies, from the
+    scenario's own default), as an ``[estimators.NAME]`` section holds them."""
     from estimators.tunable import tunables
-    cls = resolve_estimator(tuning.estimator)
-    settings = {**cls.settings_from_scenario(scenario), **cls.scenario_section(scenario)}
-    declared = tunables(cls)
-    overrides = {}
-    for name, value in tuning.tuned.items():
-        overrides.update(declared[name].overrides(value, settings))
-    return overrides
+    declared, own = tunables(cls), cls.configured_settings(scenario)
+    found = {}
+    for name, value in values.items():
+        found.update(declared[name].overrides(value, own))
+    return found
+
+
+def tuned_settings(tuning: EstimatorTuning, scenario: Scenario) -> dict:
+    """:func:`keyword_values` of what ``tuning`` found, on ``scenario``."""
+    from estimators import resolve_estimator
+    return keyword_values(resolve_estimator(tuning.estimator), tuning.tuned, scenario)
 
 
 def scores(name: str, objective: str, cases: list, settings: dict) -> dict:
@@ -472,16 +465,10 @@ def plain(settings: dict) -> dict:
 def case_error(name: str, case, settings: dict) -> np.ndarray:
     """Estimator ``name``'s error (degrees) on ``case`` with ``settings``,
     NaN where the case has no reference."""
-    from benchmarks.experiments.objectives import with_settings
+    from benchmarks.experiments.objectives import run_case
     from benchmarks.metrics import attitude_error_deg
-    from benchmarks.simulation import vectors_for
-    from estimators import resolve_estimator
-    estimator = resolve_estimator(name).from_scenario(with_settings(case.scenario, name, settings))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        vectors = vectors_for(estimator, name, case.sensors.vectors)
-    estimates = estimator.run(*case.sensors.record, vectors=vectors)
-    return attitude_error_deg(case.q_reference, estimates)
+    _, trace = run_case(name, case, settings)
+    return attitude_error_deg(case.q_reference, trace.quat)
 
 
 #: ``compare --tuned``'s training seeds, unless given: away from the seeds a
