@@ -17,7 +17,7 @@ from benchmarks.experiments import SWEEP_PARAMETERS
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import check_output_folder, write_figure, write_text
 from benchmarks.scenario import SETTINGS, Scenario
-from benchmarks.seeds import format_seeds, parse_seeds
+from benchmarks.seeds import DEFAULT_TRAINING_SEEDS, format_seeds, parse_seeds
 from benchmarks.divergence import EXIT_DIVERGED, DivergenceReport, report_of
 from benchmarks.experiments.replay import DEFAULT_ESTIMATORS as REPLAY_ESTIMATORS
 from benchmarks.simulation import WORKSHOP_ESTIMATORS
@@ -246,16 +246,24 @@ def _parse_compare(commands) -> None:
                          help=f"any of {', '.join(ESTIMATORS)} or package.module:ClassName "
                          "(default: the workshop's three; with vector sensors, "
                          f"{','.join(VECTOR_DEFAULTS)})")
-    compare.add_argument("--tuned", metavar="OBJ",
-                         help="first tune every estimator with tunable settings on "
-                         "--train-seeds for objective OBJ (see tune), then compare them all "
-                         "tuned; scores default and tuned on both sets, writes tuned.toml")
-    compare.add_argument("--train-seeds", type=_seed_list, metavar="SPEC",
-                         help="the training seeds of --tuned (default 100-104)")
-    compare.add_argument("--test-seeds", type=_seed_list, metavar="SPEC",
-                         help="the test seeds of --tuned (default: --seed, the compared one); "
-                         "none may be a training seed")
+    _tuned_options(compare, "--seed, the compared one")
     _add_common(compare)
+
+
+def _tuned_options(parser, default_test: str) -> None:
+    """``--tuned OBJ`` and its training and test seeds."""
+    group = parser.add_argument_group("fair comparison (every estimator tuned first)")
+    group.add_argument("--tuned", metavar="OBJ",
+                       help="first tune every estimator with tunable settings on "
+                       "--train-seeds for objective OBJ (see tune), then run them all "
+                       "tuned; scores default and tuned on both sets, writes tuned.toml "
+                       "and tuned.json")
+    group.add_argument("--train-seeds", type=_seed_list, metavar="SPEC",
+                       help="the training seeds of --tuned (default "
+                       f"{format_seeds(DEFAULT_TRAINING_SEEDS)}); none may be a seed run")
+    group.add_argument("--test-seeds", type=_seed_list, metavar="SPEC",
+                       help=f"the test seeds of --tuned (default: {default_test}); "
+                       "none may be a training seed")
 
 
 def _parse_show_config(commands) -> None:
@@ -369,6 +377,7 @@ def _parse_montecarlo(commands) -> None:
                        help="run chunks on an existing Dask cluster")
     montecarlo.add_argument("--resume", action="store_true",
                             help="finish an interrupted campaign in --out")
+    _tuned_options(montecarlo, f"the campaign's first {TUNED_TEST_RUNS} seeds")
     _add_common(montecarlo, seed=False)
 
 
@@ -395,6 +404,7 @@ def _parse_consistency(commands) -> None:
                              "(default 20)")
     consistency.add_argument("--workers", type=_whole("workers", 1), metavar="N",
                              help="run those per-run simulations on a local Dask cluster")
+    _tuned_options(consistency, f"the first {TUNED_TEST_RUNS} seeds run")
     _add_common(consistency, seed=False)
 
 
@@ -424,6 +434,14 @@ def _parse_replay(commands) -> None:
     replay.add_argument("--scenario", metavar="FILE", type=Path,
                         help="a TOML file of [estimators.NAME] sections overriding the "
                         "settings derived from the recording")
+    replay.add_argument("--tuned", metavar="OBJ",
+                        help="first tune every estimator with tunable settings on the "
+                        "--train-dataset recordings for objective OBJ (see tune), then replay "
+                        "--dataset with them all tuned; writes tuned.toml and tuned.json")
+    replay.add_argument("--train-dataset", action="append", metavar="NAME_OR_PATH",
+                        dest="train_datasets", help="a training recording of --tuned, never "
+                        "--dataset itself (repeatable; the same pseudo star tracker and gyro "
+                        "delay)")
     _add_import_option(replay)
     replay.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                         help="output folder (default results/)")
@@ -624,38 +642,63 @@ def command_run(args, scenario):
 
 
 def command_compare(args, scenario):
-    if (args.train_seeds or args.test_seeds) and not args.tuned:
-        raise UsageError("--train-seeds and --test-seeds need --tuned OBJ")
     if args.tuned:
-        scenario = _tuned_for_comparison(args, scenario)
+        scenario = _tuned_scenario(args, scenario, (args.seed,), (args.seed,))
+    else:
+        _no_tuning_options(args)
     _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
     return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
 
 
-def _tuned_for_comparison(args, scenario):
-    """``compare --tuned``: every estimator tuned on the training seeds and
-    scored on the test seed; the scenario with the tuned settings."""
+#: The test seeds of ``montecarlo --tuned`` and ``consistency --tuned``,
+#: unless given: the first of the seeds run.
+TUNED_TEST_RUNS = 10
+
+
+def _no_tuning_options(args) -> None:
+    for flag, given in (("--train-seeds", getattr(args, "train_seeds", None)),
+                        ("--test-seeds", getattr(args, "test_seeds", None)),
+                        ("--train-dataset", getattr(args, "train_datasets", None))):
+        if given:
+            raise UsageError(f"{flag} needs --tuned OBJ")
+
+
+def _tuned_scenario(args, scenario, run_seeds, default_test):
+    """``--tuned``: every estimator tuned on the training seeds, none of them
+    among ``run_seeds`` (a range or a tuple: the seeds the command runs), and
+    scored on the test seeds; the scenario with the tuned settings."""
+    from benchmarks.experiments.objectives import seed_cases
+    training_seeds = args.train_seeds or DEFAULT_TRAINING_SEEDS
+    shared = [seed for seed in training_seeds if seed in run_seeds]
+    if shared:
+        raise InvalidParameterError("train-seeds", format_seeds(shared), "must not be seeds "
+                                    "this command runs: it must run on seeds the tuning did "
+                                    "not see")
+    test_seeds = args.test_seeds or tuple(default_test)
+    fair = _fair_comparison(args, seed_cases(scenario, training_seeds),
+                            seed_cases(scenario, test_seeds),
+                            f"seeds {format_seeds(training_seeds)}",
+                            f"seeds {format_seeds(test_seeds)}")
+    return fair.scenario(scenario)
+
+
+def _fair_comparison(args, training, test, trained_on: str, tested_on: str):
+    """Tune every estimator of ``args`` on ``training``, score on ``test``,
+    print the table and write tuned.toml and tuned.json."""
     from benchmarks.experiments import tuning
-    from benchmarks.experiments.objectives import checked_objective, seed_cases
+    from benchmarks.experiments.objectives import checked_objective
     objective = checked_objective(args.tuned)
-    training_seeds = args.train_seeds or tuning.DEFAULT_TRAINING_SEEDS
-    if args.seed in training_seeds:
-        raise InvalidParameterError("seed", args.seed, "is a training seed of --tuned: the "
-                                    "comparison must run on a seed the tuning did not see")
-    training = seed_cases(scenario, training_seeds)
-    test_seeds = args.test_seeds or (args.seed,)
-    fair = tuning.tune_all(args.estimators, objective, training,
-                           seed_cases(scenario, test_seeds), quiet=args.quiet)
-    print(f"tuned for {objective} on seeds {format_seeds([c.seed for c in training])}, "
-          f"tested on seeds {format_seeds(test_seeds)} (default -> tuned):")
+    fair = tuning.tune_all(args.estimators, objective, training, test, quiet=args.quiet)
+    print(f"tuned for {objective} on {trained_on}, tested on {tested_on} (default -> tuned):")
     print(tuning.format_fair_comparison(fair))
     write_text(args.out / "tuned.toml", fair.toml())
-    experiments.write_json(args.out / "tuned.json", {"objective": objective,
-                                                     "rows": fair.rows})
+    experiments.write_json(args.out / "tuned.json", {
+        "objective": objective, "training": [c.label for c in training],
+        "test": [c.label for c in test], "rows": fair.rows})
     print(f"wrote {args.out / 'tuned.toml'} and {args.out / 'tuned.json'}\n")
-    return fair.scenario(scenario)
+    return fair
 
 
 def command_sweep(args, scenario):
@@ -796,6 +839,11 @@ def command_montecarlo(args, scenario):
     from benchmarks.output import write_csv, write_figure
     from benchmarks.figures.plots import distribution_figure
     from benchmarks.progress import progress
+    if args.tuned:
+        runs = range(args.seed, args.seed + args.runs)
+        scenario = _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
+    else:
+        _no_tuning_options(args)
     campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
                         base_seed=args.seed, chunk_runs=args.chunk_size)
     try:
@@ -850,6 +898,11 @@ def command_consistency(args, scenario):
     if args.settle is not None and not 0 <= args.settle < scenario.tstop:
         raise UsageError(f"settle = {args.settle!r}: must be >= 0 and below tstop = "
                          f"{scenario.tstop:g}")
+    if args.tuned:
+        runs = range(args.seed, args.seed + args.runs)
+        scenario = _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
+    else:
+        _no_tuning_options(args)
     engine = [name for name in args.estimators if name in ENGINE_ESTIMATORS]
     total = args.runs * len(engine) + min(args.runs, args.per_run_limit) * (
         len(args.estimators) - len(engine))
@@ -885,6 +938,10 @@ def command_replay(args, _scenario):
     data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
                        args.seed, settings=args.scenario, allow_imports=allowed_imports(args),
                        gyro_delay_s=delay)
+    if args.tuned:
+        data = _tuned_replay(args, data, delay)
+    else:
+        _no_tuning_options(args)
     check_memory(data.scenario, per_run_bytes(data.recording.n_samples, len(args.estimators),
                                               traced=True))
     result = run_replay(data, args.estimators, args.seed, quiet=args.quiet)
@@ -899,6 +956,26 @@ def command_replay(args, _scenario):
     if result.attribution:
         print(result.attribution)
     return report_of(result.run.scenario.dt, result.run.diverged_step)
+
+
+def _tuned_replay(args, data, delay: float):
+    """``replay --tuned``: every estimator tuned on the training recordings
+    (their pseudo star trackers and gyro delay as the replay's) and scored on
+    the replayed one; ``data`` with the tuned settings."""
+    import dataclasses
+    from benchmarks.experiments import tuning
+    from benchmarks.experiments.objectives import recording_case
+    if not args.train_datasets:
+        raise UsageError("--tuned needs at least one --train-dataset NAME_OR_PATH (a "
+                         "recording other than --dataset to tune on)")
+    replay = {"interval_s": args.star_tracker_interval,
+              "noise_deg": args.star_tracker_noise_deg, "seed": args.seed,
+              "gyro_delay_s": delay}
+    training = tuning.cases_of(None, datasets=args.train_datasets, settings=args.scenario,
+                               allow_imports=allowed_imports(args), replay=replay)
+    fair = _fair_comparison(args, training, [recording_case(data, args.dataset)],
+                            ", ".join(args.train_datasets), args.dataset)
+    return dataclasses.replace(data, scenario=fair.scenario(data.scenario))
 
 
 def _engine_memory(args, scenario) -> None:

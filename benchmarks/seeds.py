@@ -49,3 +49,8 @@ def format_seeds(seeds) -> str:
             parts.append(str(first) if first == last else f"{first}-{last}")
             start = i
     return ",".join(parts)
+
+
+#: The training seeds of ``--tuned``, unless given: away from the seeds a
+#: user runs (0, 1, …).
+DEFAULT_TRAINING_SEEDS = tuple(range(100, 105))

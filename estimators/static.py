@@ -10,7 +10,10 @@ covariance the solver's (Shuster's :math:`[\sum_i \sigma_i^{-2}(I_3 - b_i
 b_i^\mathsf{T})]^{-1}` for the optimal solvers, Shuster & Oh's for TRIAD;
 :mod:`estimators.wahba`), each direction weighed by
 :math:`a_i = \sigma_i^{-2}` with :math:`\sigma_i` its angular noise (a
-magnetometer's σ in nT over the field's strength). Nothing of earlier steps
+magnetometer's σ in nT over the field's strength), the magnetometer's times
+``magnetometer_weight`` (1 by default: tunable, since a magnetometer's real
+error is often its model's, not its noise; only the ratios of the weights
+move the solution, the covariance keeps each σ). Nothing of earlier steps
 is kept: that is what makes it static, and what a filter adds.
 
 Between solutions (one sensor in eclipse, or none), ``between`` says what
@@ -37,6 +40,7 @@ from dynamics.quaternion import IDENTITY, quat_from_rotvec, quat_multiply, rotat
 from dynamics.validation import finite_number, one_of
 from estimators import wahba
 from estimators.base import AttitudeEstimator, axis_sigmas, finite_state
+from estimators.tunable import MAGNETOMETER_WEIGHT
 
 BETWEEN = ("propagate", "hold")
 
@@ -59,16 +63,21 @@ class StaticAttitude(AttitudeEstimator):
     min_separation_deg : float
         Two directions closer than this (or to its supplement) count as
         one: no solution from them alone.
+    magnetometer_weight : float
+        A factor on the magnetometer's weight σ⁻² against
+        the other sensors'.
     on_invalid : {"raise", "skip"}
     """
 
     uses_vector_readings = True
+    tunable = (MAGNETOMETER_WEIGHT,)
     solver = staticmethod(wahba.svd)
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise"}
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  initial_attitude_sigma_rad=0.1, between: str = "propagate",
-                 min_separation_deg: float = 1.0, on_invalid: str = "raise"):
+                 min_separation_deg: float = 1.0, magnetometer_weight: float = 1.0,
+                 on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
         self.initial_covariance = np.diag(axis_sigmas("initial_attitude_sigma_rad",
@@ -76,6 +85,8 @@ class StaticAttitude(AttitudeEstimator):
         self.between = one_of("between", between, BETWEEN)
         separation = finite_number("min_separation_deg", min_separation_deg, minimum=0.0)
         self.min_sine = math.sin(math.radians(min(separation, 90.0)))
+        self.magnetometer_weight = finite_number("magnetometer_weight", magnetometer_weight,
+                                                 strictly_positive=True)
         self.reset()
 
     def reset(self) -> None:
@@ -116,7 +127,9 @@ class StaticAttitude(AttitudeEstimator):
         sigmas = np.sqrt([v.variance for v in vectors]) / reference_norm
         if not _separated(body, reference, self.min_sine):
             return None
-        weights = 1.0 / sigmas ** 2
+        factors = [self.magnetometer_weight if v.sensor == "magnetometer" else 1.0
+                   for v in vectors]
+        weights = np.asarray(factors) / sigmas ** 2
         return self.solution(body, reference, weights), self.covariance(body, reference, sigmas)
 
     def solution(self, body, reference, weights) -> np.ndarray:

@@ -137,3 +137,7 @@ MEASUREMENT_SCALE = Tunable("measurement_scale", "log", (1e-12, 1e12), span=3.0,
 GATE_PROBABILITY = Tunable("gate_probability", "log-complement", (1e-6, 1.0 - 1e-12),
                            search=(0.9, 0.999999),
                            description="the χ² probability of innovation gating")
+#: A static solver's weight on the magnetometer against the other sensors.
+MAGNETOMETER_WEIGHT = Tunable("magnetometer_weight", "log", (1e-9, 1e9), search=(1e-3, 1e3),
+                              description="a factor on the magnetometer's weight σ⁻² in "
+                              "Wahba's loss")

@@ -365,18 +365,20 @@ def format_tuning_table(tuning: EstimatorTuning) -> str:
     return "\n".join(lines)
 
 
-def cases_of(scenario: Scenario, seeds=None, datasets=None, what: str = "training",
-             settings=None, allow_imports=()) -> list:
+def cases_of(scenario: Scenario | None, seeds=None, datasets=None, what: str = "training",
+             settings=None, allow_imports=(), replay=None) -> list:
     """The cases to tune (or score) on: recordings if ``datasets`` are
     named (``settings``, a file of ``[estimators.NAME]`` sections over what
-    each recording derives), else simulated ``seeds`` of ``scenario``."""
+    each recording derives; ``replay``, keywords of
+    :func:`~benchmarks.experiments.replay.load_replay`: the pseudo star
+    tracker, the gyro delay), else simulated ``seeds`` of ``scenario``."""
     from benchmarks.experiments.objectives import recording_case, seed_cases
     from benchmarks.experiments.replay import load_replay
     if datasets:
         if len(set(datasets)) != len(datasets):
             raise InvalidParameterError(f"{what} datasets", list(datasets), "must each be named once")
-        return [recording_case(load_replay(name, settings=settings,
-                                           allow_imports=allow_imports), name)
+        return [recording_case(load_replay(name, settings=settings, allow_imports=allow_imports,
+                                           **(replay or {})), name)
                 for name in datasets]
     return seed_cases(scenario, seeds)
 
@@ -471,9 +473,6 @@ def case_error(name: str, case, settings: dict) -> np.ndarray:
     return attitude_error_deg(case.q_reference, trace.quat)
 
 
-#: ``compare --tuned``'s training seeds, unless given: away from the seeds a
-#: user compares on (0, 1, …).
-DEFAULT_TRAINING_SEEDS = tuple(range(100, 105))
 
 
 @dataclass
