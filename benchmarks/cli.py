@@ -266,6 +266,36 @@ def _tuned_options(parser, default_test: str) -> None:
                        "none may be a training seed")
 
 
+def _parse_broad(commands) -> None:
+    """The ``broad`` command's arguments."""
+    broad = commands.add_parser(
+        "broad", help="every estimator on the BROAD trials (gyro, accelerometer, magnetometer "
+        "against an optical reference), scored as the dataset's authors score; write "
+        "broad_trials.csv, broad_groups.csv, broad.png and broad_trial.png")
+    broad.add_argument("--broad", type=Path, metavar="DIR",
+                       help="a BROAD folder (trials.json with data_mat/, data_hdf5/ or .npz "
+                       "trials; default: $ATTITUDE_BENCH_BROAD, else the two shipped trials)")
+    broad.add_argument("--trials", type=_name_list, metavar="A,B",
+                       help="trials by number or name (default: every trial present)")
+    broad.add_argument("--estimators", type=_estimator_list, metavar="A,B,...",
+                       help="any of the registry's (default: dead reckoning, QUEST, the MEKF, "
+                       "Madgwick (both), Mahony, and VQF and Fusion when installed)")
+    broad.add_argument("--gyro-delay", type=_number, default=0.0, metavar="SECONDS",
+                       help="how late the gyro's samples are against the other channels "
+                       "(default 0)")
+    broad.add_argument("--accelerometer-sigma", type=_number, default=None, metavar="M/S2",
+                       help="the smallest σ per axis the filters take for the accelerometer "
+                       "(default 0.3: in motion it reads the linear acceleration too)")
+    broad.add_argument("--magnetometer-sigma", type=_number, default=None, metavar="UT",
+                       help="the same for the magnetometer, µT (default 4)")
+    broad.add_argument("--case-study", action="store_true",
+                       help="instead: the authors' Madgwick and Mahony at their chosen "
+                       "settings beside their published numbers (writes broad_case_study.csv)")
+    broad.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
+                       help="output folder (default results/)")
+    broad.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
 def _parse_show_config(commands) -> None:
     """The ``show-config`` command's arguments."""
     show = commands.add_parser("show-config", help="every estimator's effective settings on "
@@ -543,7 +573,7 @@ def allowed_imports(args: argparse.Namespace) -> list[str]:
 def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     """The scenario file (or defaults) with the command-line overrides applied
     (None for ``replay``, whose scenario comes from its recording)."""
-    if args.command in ("replay", "wahba"):
+    if args.command in ("replay", "wahba", "broad"):
         return None
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
@@ -978,6 +1008,44 @@ def _tuned_replay(args, data, delay: float):
     return dataclasses.replace(data, scenario=fair.scenario(data.scenario))
 
 
+def command_broad(args, _scenario):
+    from benchmarks.broad import benchmark, case_study
+    from benchmarks.broad.dataset import ATTRIBUTION, broad_folder, open_broad
+    dataset = open_broad(broad_folder(args.broad))
+    trials = ([dataset.trial_name(text) for text in args.trials] if args.trials
+              else dataset.available)
+    if args.case_study:
+        frame = case_study.reproduce(dataset, trials, case_study.published_results(
+            dataset.folder), quiet=args.quiet)
+        print(frame.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
+        write_text(args.out / "broad_case_study.csv", frame.to_csv(index=False))
+        write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+        print(f"wrote {args.out / 'broad_case_study.csv'}\n{ATTRIBUTION}")
+        return None
+    sigmas = {}
+    for sensor, value in (("accelerometer", args.accelerometer_sigma),
+                          ("magnetometer", args.magnetometer_sigma)):
+        if value is not None:
+            if not value > 0:
+                raise UsageError(f"{sensor}_sigma = {value!r}: must be > 0 (from "
+                                 f"--{sensor}-sigma)")
+            sigmas[sensor] = value
+    result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
+                                 quiet=args.quiet)
+    print(benchmark.format_trials(result))
+    print("\ntotal RMSE (°) per group, mean over its trials (trials run):")
+    print(benchmark.format_groups(result))
+    write_text(args.out / "broad_trials.csv", result.trials.to_csv(index=False))
+    write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
+    write_figure(args.out / "broad.png", benchmark.groups_figure(result))
+    write_figure(args.out / "broad_trial.png", benchmark.trial_figure(result))
+    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+    names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
+             "ATTRIBUTION.txt")
+    print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{ATTRIBUTION}")
+    return None
+
+
 def _engine_memory(args, scenario) -> None:
     """A command on the streaming engine alone: its memory is flat."""
     from benchmarks.resources import check_memory, engine_bytes
@@ -1041,6 +1109,9 @@ COMMAND_TABLE = (
             ("consistency.csv", "consistency.png"), _per_run_memory(True)),
     Command("replay", _parse_replay, command_replay,
             ("replay.png", "summary.csv", "ATTRIBUTION.txt"), None),
+    Command("broad", _parse_broad, command_broad,
+            ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
+             "broad_case_study.csv", "ATTRIBUTION.txt"), None),
     Command("workshop", _parse_workshop, command_workshop, ("report.md",),
             _per_run_memory(True)),
     Command("show-config", _parse_show_config, command_show_config, (), None),
@@ -1071,7 +1142,11 @@ def default_estimators(command: str, scenario) -> tuple:
     """``--estimators`` when not given: with vector sensors, the filters and
     two static solvers (:data:`VECTOR_DEFAULTS`) for every command; else the
     workshop's three for ``compare`` and ``montecarlo``, and every star
-    tracker estimator for ``consistency``."""
+    tracker estimator for ``consistency``; ``broad``'s own
+    (:func:`benchmarks.broad.benchmark.default_estimators`)."""
+    if command == "broad":
+        from benchmarks.broad.benchmark import default_estimators as broad_defaults
+        return broad_defaults()
     if scenario is not None and scenario.has_vector_sensors:
         return VECTOR_DEFAULTS
     return STAR_TRACKER_DEFAULTS if command == "consistency" else tuple(WORKSHOP_ESTIMATORS)

@@ -11,6 +11,10 @@ name                           class
 ``triad``, ``q-method``,       the static solutions of Wahba's problem
 ``quest``, ``esoq2``,          (:mod:`estimators.static`, solvers in
 ``foam``, ``svd``              :mod:`estimators.wahba`)
+``madgwick``, ``mahony``       the complementary filters
+``madgwick-broad``             (:mod:`estimators.complementary`)
+``vqf``, ``vqf-6d``,           other libraries' filters, through adapters
+``fusion``                     (:mod:`estimators.peers`, the ``peers`` extra)
 =============================  ==========================================
 
 Each takes keyword-only settings, steps on 1-D arrays and returns ``(4,)``
@@ -20,17 +24,20 @@ import importlib
 
 from dynamics.validation import InvalidParameterError
 from estimators.base import AttitudeEstimator, EstimateTrace
+from estimators.complementary import Madgwick, MadgwickBROAD, Mahony
 from estimators.dead_reckoning import DeadReckoning
 from estimators.dead_reckoning_resets import DeadReckoningWithResets
 from estimators.ekf import QuaternionEKF
 from estimators.mekf import MultiplicativeEKF
+from estimators.peers import PEER_ESTIMATORS
 from estimators.static import STATIC_ESTIMATORS
 from estimators.usque import USQUE
 
 #: Command-line name → class: the workshop's three in the order it introduces
 #: them, then the flight filters. Adding an estimator is one line here.
 ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
-                                        MultiplicativeEKF, USQUE, *STATIC_ESTIMATORS)}
+                                        MultiplicativeEKF, USQUE, *STATIC_ESTIMATORS,
+                                        Madgwick, MadgwickBROAD, Mahony, *PEER_ESTIMATORS)}
 
 #: What a concrete estimator must override: the base class's raise NotImplementedError.
 ABSTRACT_METHODS = ("_step", "reset")

@@ -14,7 +14,7 @@ malformed file is one clear error, not a traceback deep in a filter.
 from __future__ import annotations
 
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,9 @@ from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 #: The sampling rates a recording may have, Hz.
 MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 1e6
 REQUIRED_KEYS = ("imu_gyr_radps", "opt_quat", "movement", "sampling_rate_hz")
+#: The optional vector channels: the accelerometer (N, 3) m/s², the
+#: magnetometer (N, 3) µT.
+VECTOR_KEYS = ("imu_acc_mps2", "imu_mag_uT")
 #: A reference quaternion may be off unit length by this much (rounding of
 #: the recording, not a different convention or scale).
 UNIT_TOLERANCE = 1e-6
@@ -44,6 +47,9 @@ class Recording:
     movement : (N,) bool, the movement phase
     rate_hz : float, sampling rate
     info : str, the recording's own description
+    accelerometer_mps2 : (N, 3) or None, the accelerometer's specific force,
+        m/s², body frame (gravity reads +up at rest)
+    magnetometer_uT : (N, 3) or None, the magnetometer, µT, body frame
     """
 
     name: str
@@ -52,6 +58,13 @@ class Recording:
     movement: np.ndarray
     rate_hz: float
     info: str = ""
+    accelerometer_mps2: np.ndarray | None = None
+    magnetometer_uT: np.ndarray | None = None
+
+    @property
+    def has_vectors(self) -> bool:
+        """Whether the accelerometer and the magnetometer were recorded."""
+        return self.accelerometer_mps2 is not None and self.magnetometer_uT is not None
 
     @property
     def dt(self) -> float:
@@ -87,8 +100,15 @@ class Recording:
 
     def from_sample(self, start: int) -> "Recording":
         """The recording from sample ``start`` on."""
-        return Recording(self.name, self.gyro_radps[start:], self.reference_quat[start:],
-                         self.movement[start:], self.rate_hz, self.info)
+        return replace(self, gyro_radps=self.gyro_radps[start:],
+                       reference_quat=self.reference_quat[start:],
+                       movement=self.movement[start:],
+                       accelerometer_mps2=_rows_from(self.accelerometer_mps2, start),
+                       magnetometer_uT=_rows_from(self.magnetometer_uT, start))
+
+
+def _rows_from(channel, start: int):
+    return None if channel is None else channel[start:]
 
 
 def load_recording(path, name: str | None = None) -> Recording:
@@ -110,7 +130,13 @@ def load_recording(path, name: str | None = None) -> Recording:
         refuse("file does not exist")
     if not zipfile.is_zipfile(path):
         refuse("must be a numpy .npz archive (a zip file); this file is not one")
-    data = _read_archive(path, refuse)
+    return checked_recording(_read_archive(path, refuse), name or path.stem, refuse)
+
+
+def checked_recording(data: dict, name: str, refuse) -> Recording:
+    """A :class:`Recording` of arrays under :data:`REQUIRED_KEYS` (and,
+    optionally, :data:`VECTOR_KEYS`), each checked; ``refuse(rule)`` raises
+    the error that names the source."""
     missing = [key for key in REQUIRED_KEYS if key not in data]
     if missing:
         refuse(f"has no key {missing[0]!r}; a recording needs {', '.join(REQUIRED_KEYS)}")
@@ -160,8 +186,24 @@ def load_recording(path, name: str | None = None) -> Recording:
         refuse(f"opt_quat must hold unit quaternions [w, x, y, z]; row {row} has norm "
                f"{norms[off[0]]:.6g}")
     info = str(data["info"]) if "info" in data and data["info"].shape == () else ""
-    return Recording(name=name or path.stem, gyro_radps=gyro, reference_quat=reference,
-                     movement=movement.astype(bool), rate_hz=float(rate), info=info)
+    vectors = {key: _checked_channel(key, data[key], n, refuse)
+               for key in VECTOR_KEYS if key in data}
+    return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
+                     movement=movement.astype(bool), rate_hz=float(rate), info=info,
+                     accelerometer_mps2=vectors.get("imu_acc_mps2"),
+                     magnetometer_uT=vectors.get("imu_mag_uT"))
+
+
+def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:
+    """A vector channel: (n, 3) finite real numbers, one row per gyro sample."""
+    _check_numbers(key, array, refuse)
+    if array.shape != (n, 3):
+        refuse(f"{key} has shape {array.shape}; must be ({n}, 3), one row per gyro sample")
+    array = array.astype(float)
+    bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
+    if len(bad):
+        refuse(f"{key} must be finite; row {bad[0]} is {array[bad[0]].tolist()}")
+    return array
 
 
 def _read_archive(path: Path, refuse) -> dict:

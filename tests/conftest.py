@@ -17,7 +17,7 @@ def pytest_report_header(config):
     """Name the versions the suite ran on (CI's log then says what was tested)."""
     from importlib.metadata import PackageNotFoundError, version
     names = ("filterpy", "numpy", "scipy", "numba", "matplotlib", "seaborn", "pandas", "tqdm",
-             "sgp4", "ppigrf", "hypothesis", "dask", "ahrs")
+             "sgp4", "ppigrf", "hypothesis", "dask", "ahrs", "vqf", "imufusion", "h5py")
     found = []
     for name in names:
         try:

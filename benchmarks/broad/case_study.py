@@ -1,0 +1,91 @@
+"""The BROAD authors' case study (their ``example_code/process_data.py``):
+Madgwick's filter over β and Mahony's over (Kp, Ki), each started from the
+first accelerometer and magnetometer sample, turned to ENU and scored by
+:mod:`benchmarks.broad.metric`; per trial and group, the value at the one
+setting chosen for all trials (the lowest average total RMSE over their 39
+trials) and each trial's own best. Their Madgwick is Madgwick's C code with
+the halved field reference (``madgwick-broad``,
+:mod:`estimators.complementary`).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from estimators.complementary import NWU_TO_ENU
+from dynamics.quaternion import quat_multiply
+
+#: The authors' grids (``process_data.py``).
+MADGWICK_BETAS = np.round(np.arange(0.01, 0.300001, 0.01), 8)
+MAHONY_KPS = np.round(np.arange(0.02, 2.000001, 0.02), 8)
+MAHONY_KIS = np.round(np.arange(0.0, 0.0040001, 0.0001), 8)
+#: The settings they chose for all trials (``case_study/*.json``, ``tagp_parameters``).
+CHOSEN = {"madgwick-broad": {"beta": 0.12}, "mahony": {"kp": 0.74, "ki": 0.0012}}
+#: Their result files, in a BROAD folder.
+RESULT_FILES = {"madgwick-broad": "case_study/results_madgwick_average_rmse.json",
+                "mahony": "case_study/results_mahony_average_rmse.json"}
+
+
+def authors_initial_state(acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
+    """The authors' ``quatFromAccMag`` (``broad_utils.py``), verbatim, as
+    their filters' NWU state, turned to ENU as this toolkit's estimators take
+    it. It is exact only for a level sensor with x east or west (BROAD's
+    trials start so): :func:`benchmarks.broad.inputs.initial_attitude` is
+    the general one."""
+    z = np.asarray(acc, dtype=float)
+    x = np.cross(np.cross(z, -np.asarray(mag, dtype=float)), z)
+    y = np.cross(z, x)
+    r = np.column_stack([x / np.linalg.norm(x), y / np.linalg.norm(y), z / np.linalg.norm(z)])
+    squares = np.array([1 + r[0, 0] + r[1, 1] + r[2, 2], 1 + r[0, 0] - r[1, 1] - r[2, 2],
+                        1 - r[0, 0] + r[1, 1] - r[2, 2], 1 - r[0, 0] - r[1, 1] + r[2, 2]]) / 4
+    q = np.sqrt(squares)
+    q[1] = np.copysign(q[1], r[2, 1] - r[1, 2])
+    q[2] = np.copysign(q[2], r[0, 2] - r[2, 0])
+    q[3] = np.copysign(q[3], r[1, 0] - r[0, 1])
+    return quat_multiply(NWU_TO_ENU, q)
+
+
+def published_results(folder: Path) -> dict:
+    """``estimator → the authors' JSON`` for the result files present in ``folder``."""
+    found = {}
+    for name, relative in RESULT_FILES.items():
+        path = Path(folder) / relative
+        if path.is_file():
+            found[name] = json.loads(path.read_text())
+    return found
+
+
+def reproduce(dataset, trials, published: dict, quiet: bool = False) -> "pd.DataFrame":
+    """The authors' Madgwick and Mahony at their chosen settings, started as
+    they start them, on ``trials``: per trial and metric, the published
+    value (NaN where ``published`` has none), ours and the difference."""
+    import pandas as pd
+    from benchmarks.broad.metric import METRICS, rmse_deg
+    from benchmarks.broad.inputs import imu_inputs
+    from benchmarks.progress import progress
+    from estimators import resolve_estimator
+    rows = []
+    with progress(total=len(trials) * len(CHOSEN), desc="case study", unit="run",
+                  quiet=quiet) as bar:
+        for trial in trials:
+            recording = dataset.load(trial)
+            sensors = imu_inputs(recording).sensors
+            start = authors_initial_state(recording.accelerometer_mps2[0],
+                                          recording.magnetometer_uT[0])
+            for name, settings in CHOSEN.items():
+                estimator = resolve_estimator(name)(dt=recording.dt, initial_attitude=start,
+                                                    **settings)
+                estimate = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
+                                         sensors.available, vectors=sensors.vectors)
+                ours = rmse_deg(estimate, recording.reference_quat, recording.movement)
+                theirs = published.get(name, {}).get("trials", {}).get(trial, {}).get(
+                    "tagp_parameters", {})
+                for metric in METRICS:
+                    value = theirs.get(metric, float("nan"))
+                    rows.append({"trial": trial, "estimator": name, "metric": metric,
+                                 "published": value, "ours": ours[metric],
+                                 "difference": ours[metric] - value})
+                bar.update()
+    return pd.DataFrame(rows)

@@ -1,0 +1,62 @@
+r"""The BROAD authors' error metric (Laidig et al. 2021, §4; their
+``example_code/broad_utils.py``), exactly.
+
+The error is the rotation between estimate and reference *in the earth
+frame*, :math:`q_e = \hat q \otimes q_{ref}^{-1}` (both body → ENU). Its
+total angle is :math:`2\arccos|w|`; its heading part, the rotation about
+the vertical, :math:`2\arctan|z/w|`; its inclination part, what is left,
+:math:`2\arccos\sqrt{w^2 + z^2}`. Each is scored as an RMS over the samples
+of the movement phase, samples without a reference (NaN) left out of the
+mean, as ``numpy.nanmean`` leaves them out in the authors' code. A trial's
+group score is the plain mean of its trials' scores.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dynamics.quaternion import quat_conjugate, quat_multiply
+
+#: The three RMSEs, degrees, in the authors' names.
+METRICS = ("total_rmse_deg", "heading_rmse_deg", "inclination_rmse_deg")
+
+
+def earth_error_quat(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``(N, 4)``: :math:`\\hat q \\otimes q_{ref}^{-1}`, both normalised first."""
+    estimate = estimate / np.linalg.norm(estimate, axis=1, keepdims=True)
+    reference = reference / np.linalg.norm(reference, axis=1, keepdims=True)
+    error = quat_multiply(estimate, quat_conjugate(reference))
+    return error / np.linalg.norm(error, axis=1, keepdims=True)
+
+
+def total_error_rad(error: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arccos(np.clip(np.abs(error[:, 0]), 0.0, 1.0))
+
+
+def heading_error_rad(error: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return 2.0 * np.arctan(np.abs(error[:, 3] / error[:, 0]))
+
+
+def inclination_error_rad(error: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arccos(np.clip(np.sqrt(error[:, 0] ** 2 + error[:, 3] ** 2), 0.0, 1.0))
+
+
+def errors_deg(estimate: np.ndarray, reference: np.ndarray) -> dict:
+    """Total, heading and inclination error of every sample, degrees."""
+    error = earth_error_quat(estimate, reference)
+    return {"total": np.degrees(total_error_rad(error)),
+            "heading": np.degrees(heading_error_rad(error)),
+            "inclination": np.degrees(inclination_error_rad(error))}
+
+
+def rmse_deg(estimate: np.ndarray, reference: np.ndarray, movement: np.ndarray) -> dict:
+    """:data:`METRICS` of ``estimate`` against ``reference`` over the
+    ``movement`` samples (those without a reference left out)."""
+    movement = np.asarray(movement, dtype=bool)
+    found = {}
+    for key, error in errors_deg(estimate, reference).items():
+        part = error[movement]
+        with np.errstate(invalid="ignore"):
+            found[f"{key}_rmse_deg"] = float(np.sqrt(np.nanmean(part ** 2))) \
+                if np.isfinite(part).any() else float("nan")
+    return found

@@ -1,0 +1,116 @@
+"""The attitude filters of other libraries, as registry estimators, so that
+every metric, figure and tuner of the toolkit applies to them unchanged.
+Each needs its package, in the ``peers`` extra (``pip install
+'attitude-bench[peers]'``); without it, the estimator is refused in one line.
+
+* ``vqf``, ``vqf-6d`` — Laidig & Seel's VQF (``vqf``; "VQF: Highly accurate
+  IMU orientation estimation with bias estimation and magnetic disturbance
+  rejection", Information Fusion 91, 2023), with its default settings, causal
+  (``VQF.update`` per sample, not the acausal ``offlineVQF``). It starts
+  itself from its first readings; ``vqf-6d`` is its output without the
+  magnetometer, whose heading is its own (score it by inclination).
+* ``fusion`` — x-io's Fusion (``imufusion``), the settings of its README
+  example: gain 0.5, 2000 °/s gyro range, 10° acceleration and magnetic
+  rejection, 5 s rejection timeout; in its NWU convention, turned to ENU
+  (imufusion 1.3.3 answered in NWU whichever convention it was given).
+
+All output body → ENU after each sample's update, as the complementary
+filters do (:mod:`estimators.complementary`).
+"""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from dynamics.quaternion import IDENTITY, quat_multiply
+from dynamics.validation import InvalidParameterError
+from estimators.base import AttitudeEstimator
+from estimators.complementary import NWU_TO_ENU, acc_mag
+
+#: m/s² per g, as Fusion takes the accelerometer.
+STANDARD_GRAVITY = 9.80665
+
+
+def _package(estimator: str, module: str):
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise InvalidParameterError("estimator", estimator, f"needs the {module} package: pip "
+                                    "install 'attitude-bench[peers]'") from None
+
+
+class PeerFilter(AttitudeEstimator):
+    """What the adapters share: a peer filter made at each reset, fed each
+    step's rate, accelerometer and magnetometer."""
+
+    uses_vector_readings = True
+
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise"):
+        super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+        self.reset()
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
+        acc, mag = acc_mag(vectors)
+        gyro = np.ascontiguousarray(omega_meas_radps, dtype=float)
+        self._q = np.asarray(self.update(gyro, acc, mag), dtype=float)
+        return self._q.copy()
+
+    @property
+    def attitude(self) -> np.ndarray:
+        return self._q.copy()
+
+    def state_is_finite(self) -> bool:
+        return bool(np.isfinite(self._q).all())
+
+
+class VQF9D(PeerFilter):
+    name = "vqf"
+    label = "VQF"
+    output = "getQuat9D"
+
+    def reset(self) -> None:
+        self.filter = _package(self.name, "vqf").VQF(self.dt)
+        self._q = self.initial_attitude.copy()
+
+    def update(self, gyro, acc, mag):
+        self.filter.updateGyr(gyro)
+        if acc is not None:
+            self.filter.updateAcc(np.ascontiguousarray(acc, dtype=float))
+        if mag is not None:
+            self.filter.updateMag(np.ascontiguousarray(mag, dtype=float))
+        return getattr(self.filter, self.output)()
+
+
+class VQF6D(VQF9D):
+    name = "vqf-6d"
+    label = "VQF 6D"
+    output = "getQuat6D"
+
+
+class Fusion(PeerFilter):
+    name = "fusion"
+    label = "Fusion"
+
+    def reset(self) -> None:
+        imufusion = _package(self.name, "imufusion")
+        rate = 1.0 / self.dt
+        self.filter = imufusion.Ahrs()
+        self.filter.set_settings(imufusion.AhrsSettings(
+            sample_rate=rate, convention=imufusion.CONVENTION_NWU, gain=0.5,
+            gyroscope_range=2000.0, acceleration_rejection=10.0, magnetic_rejection=10.0,
+            rejection_timeout=5.0))
+        self._q = self.initial_attitude.copy()
+
+    def update(self, gyro, acc, mag):
+        # Fusion takes degrees per second and g.
+        gyro_dps = np.degrees(gyro)
+        if acc is not None and mag is None:
+            self.filter.update_no_magnetometer(gyro_dps, np.asarray(acc) / STANDARD_GRAVITY)
+        elif acc is not None:
+            self.filter.update(gyro_dps, np.asarray(acc) / STANDARD_GRAVITY,
+                               np.asarray(mag, dtype=float))
+        return quat_multiply(NWU_TO_ENU, self.filter.get_quaternion())
+
+
+PEER_ESTIMATORS = (VQF9D, VQF6D, Fusion)
