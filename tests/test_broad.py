@@ -20,14 +20,23 @@ from benchmarks.broad.dataset import ENVIRONMENT_VARIABLE, broad_folder, open_br
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import errors_deg, rmse_deg
 from benchmarks.cli import main
+from benchmarks.shipped import shipped_file
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, rotation_matrix
 from estimators import MultiplicativeEKF, resolve_estimator
 from sensors.vector import VectorObservation
 
-SHIPPED = broad_folder(None)
+#: The shipped subset itself (broad_folder(None) is the full set where it is set).
+SHIPPED = shipped_file("datasets/broad/trials.json").parent
 FULL = os.environ.get(ENVIRONMENT_VARIABLE)
 full_broad = pytest.mark.skipif(not FULL, reason=f"needs the full BROAD dataset: set "
                                 f"{ENVIRONMENT_VARIABLE} (.ci/run does)")
+
+
+def test_without_a_folder_the_environment_variable_or_the_shipped_subset_is_read(monkeypatch):
+    monkeypatch.delenv(ENVIRONMENT_VARIABLE, raising=False)
+    assert broad_folder(None) == SHIPPED
+    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "/somewhere/broad")
+    assert broad_folder(None) == Path("/somewhere/broad")
 
 
 def test_the_shipped_subset_is_a_broad_folder_with_both_vector_channels():
@@ -212,7 +221,7 @@ def test_the_gate_rejects_the_attached_magnets_disturbed_field():
 
 def test_the_broad_command_writes_its_tables_and_figures(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["broad", "--trials", "02", "--estimators", "madgwick,dead-reckoning",
+    assert main(["broad", "--broad", str(SHIPPED), "--trials", "02", "--estimators", "madgwick,dead-reckoning",
                  "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "all_trials (1)" in printed and "CC BY 4.0" in printed
