@@ -714,6 +714,16 @@ def _tuned_scenario(args, scenario, run_seeds, default_test):
     return fair.scenario(scenario)
 
 
+def _tuned_campaign(args, scenario):
+    """``montecarlo`` and ``consistency``: the scenario tuned on training
+    seeds outside the campaign's (``--tuned``), or as it is."""
+    if not args.tuned:
+        _no_tuning_options(args)
+        return scenario
+    runs = range(args.seed, args.seed + args.runs)
+    return _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
+
+
 def _fair_comparison(args, training, test, trained_on: str, tested_on: str):
     """Tune every estimator of ``args`` on ``training``, score on ``test``,
     print the table and write tuned.toml and tuned.json."""
@@ -869,11 +879,7 @@ def command_montecarlo(args, scenario):
     from benchmarks.output import write_csv, write_figure
     from benchmarks.figures.plots import distribution_figure
     from benchmarks.progress import progress
-    if args.tuned:
-        runs = range(args.seed, args.seed + args.runs)
-        scenario = _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
-    else:
-        _no_tuning_options(args)
+    scenario = _tuned_campaign(args, scenario)
     campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
                         base_seed=args.seed, chunk_runs=args.chunk_size)
     try:
@@ -928,11 +934,7 @@ def command_consistency(args, scenario):
     if args.settle is not None and not 0 <= args.settle < scenario.tstop:
         raise UsageError(f"settle = {args.settle!r}: must be >= 0 and below tstop = "
                          f"{scenario.tstop:g}")
-    if args.tuned:
-        runs = range(args.seed, args.seed + args.runs)
-        scenario = _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
-    else:
-        _no_tuning_options(args)
+    scenario = _tuned_campaign(args, scenario)
     engine = [name for name in args.estimators if name in ENGINE_ESTIMATORS]
     total = args.runs * len(engine) + min(args.runs, args.per_run_limit) * (
         len(args.estimators) - len(engine))
@@ -1015,6 +1017,12 @@ def command_broad(args, _scenario):
     trials = ([dataset.trial_name(text) for text in args.trials] if args.trials
               else dataset.available)
     if args.case_study:
+        for flag, given in (("--gyro-delay", args.gyro_delay),
+                            ("--accelerometer-sigma", args.accelerometer_sigma),
+                            ("--magnetometer-sigma", args.magnetometer_sigma)):
+            if given:
+                raise UsageError(f"{flag} does not apply to --case-study: it runs the "
+                                 "authors' filters on the data as they ran them")
         frame = case_study.reproduce(dataset, trials, case_study.published_results(
             dataset.folder), quiet=args.quiet)
         print(frame.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
@@ -1043,7 +1051,8 @@ def command_broad(args, _scenario):
     names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
              "ATTRIBUTION.txt")
     print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{ATTRIBUTION}")
-    return None
+    return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
+                                 in result.trials.groupby("estimator", sort=False)})
 
 
 def _engine_memory(args, scenario) -> None:

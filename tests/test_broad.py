@@ -115,6 +115,19 @@ def test_the_rmse_is_over_the_movement_samples_with_a_reference():
     assert found["inclination_rmse_deg"] == pytest.approx(0.0, abs=1e-6)
 
 
+def test_a_diverged_estimate_scores_nan_not_the_mean_of_what_is_left():
+    # The reference's gaps are left out; an estimate's NaN (a filter that
+    # diverged) is not a gap: a mean over the steps before it would flatter it.
+    reference = np.tile([1.0, 0.0, 0.0, 0.0], (4, 1))
+    estimate = np.array([quat_from_rotvec(np.radians([0.0, 0.0, 2.0]))] * 4)
+    estimate[3] = np.nan
+    found = rmse_deg(estimate, reference, np.ones(4, dtype=bool))
+    assert all(math.isnan(value) for value in found.values())
+    reference[3] = np.nan                     # now that sample is not scored
+    assert rmse_deg(estimate, reference, np.ones(4, dtype=bool))["total_rmse_deg"] == \
+        pytest.approx(2.0)
+
+
 # --- the estimators on 9-D data --------------------------------------------------
 
 #: The BROAD authors' published values at their chosen settings (Madgwick's
@@ -254,6 +267,9 @@ def _broken_folder(tmp_path, change):
     (lambda tmp: _broken_folder(tmp, lambda a: a.pop("imu_mag_uT")), [],
      "has no accelerometer or no magnetometer channel"),
     (lambda tmp: SHIPPED, ["--trials", "99"], "trials = '99': is not a trial of"),
+    (lambda tmp: SHIPPED, ["--gyro-delay", "1"], "gyro_delay = 1.0: must be within ±50 samples"),
+    (lambda tmp: SHIPPED, ["--case-study", "--gyro-delay", "0.003"],
+     "--gyro-delay does not apply to --case-study"),
 ])
 def test_bad_broad_input_gets_one_line_exit_2_and_nothing_written(tmp_path, capsys, make,
                                                                   argv, message):

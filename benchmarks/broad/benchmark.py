@@ -13,7 +13,7 @@ import pandas as pd
 
 from benchmarks.broad.dataset import BroadDataset
 from benchmarks.broad.inputs import imu_inputs
-from benchmarks.broad.metric import METRICS, errors_deg, rmse_deg
+from benchmarks.broad.metric import METRICS, errors_deg, rmse_of
 from benchmarks.progress import progress
 from benchmarks.simulation import build_estimator
 
@@ -23,7 +23,7 @@ from benchmarks.simulation import build_estimator
 DEFAULT_ESTIMATORS = ("dead-reckoning", "quest", "mekf", "madgwick", "madgwick-broad", "mahony")
 PEERS = ("vqf", "fusion")
 TRIAL_COLUMNS = ("trial", "estimator", *METRICS, "us_per_sample", "samples",
-                 "rejected_accelerometer", "rejected_magnetometer")
+                 "rejected_accelerometer", "rejected_magnetometer", "diverged_step")
 
 
 def default_estimators() -> tuple:
@@ -42,11 +42,19 @@ class BroadResult:
     curves: dict                 # the first trial's: estimator → (time_s, total error °)
     curve_trial: str
 
+    @property
+    def dt(self) -> float:
+        """The first trial's sample interval, s (for the divergence report)."""
+        time_s = next(iter(self.curves.values()))[0]
+        return float(time_s[1] - time_s[0])
+
 
 def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float = 0.0,
               sigmas=None, bar=None) -> tuple[list, dict, dict]:
     """Each of ``estimators`` on ``trial`` (:func:`benchmarks.broad.inputs.imu_inputs`
-    with ``gyro_delay_s`` and ``sigmas``): its rows, total errors over time, labels."""
+    with ``gyro_delay_s`` and ``sigmas``): its rows (a diverged estimator's
+    scores NaN, its step in ``diverged_step``, else -1), total errors over
+    time, labels."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
     sensors = inputs.sensors
@@ -57,13 +65,16 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         estimate = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
                                  sensors.available, vectors=sensors.vectors)
         seconds = time.perf_counter() - start
-        scores = rmse_deg(estimate, recording.reference_quat, recording.movement)
+        errors = errors_deg(estimate, recording.reference_quat)
+        scores = rmse_of(errors, estimate, recording.reference_quat, recording.movement)
+        diverged = estimator.diverged_step
         rows.append({"trial": trial, "estimator": name, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
                      "rejected_accelerometer": estimator.rejected.get("accelerometer", 0),
-                     "rejected_magnetometer": estimator.rejected.get("magnetometer", 0)})
-        curves[name] = (recording.time_s, errors_deg(estimate, recording.reference_quat)["total"])
+                     "rejected_magnetometer": estimator.rejected.get("magnetometer", 0),
+                     "diverged_step": -1 if diverged is None else diverged})
+        curves[name] = (recording.time_s, errors["total"])
         labels[name] = estimator.label
         if bar is not None:
             bar.update()

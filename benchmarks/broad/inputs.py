@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from benchmarks.experiments.replay import BIAS_RANDOM_WALK, INITIAL_BIAS_SIGMA_RADPS, \
-    delayed_gyro
+    checked_gyro_delay, delayed_gyro
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import SensorData
 from estimators import wahba
@@ -89,6 +89,7 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
     :class:`ImuInputs`; ``gyro_delay_s``: how late the gyro's samples are
     (:func:`benchmarks.experiments.replay.delayed_gyro`); ``sigmas``:
     sensor → the smallest σ the filters take (:func:`rest_references`)."""
+    delay = checked_gyro_delay(recording, gyro_delay_s)
     references, variances = rest_references(recording, sigmas)
     n, dt = recording.n_samples, recording.dt
     rest_gyro = recording.gyro_radps[recording.rest_samples]
@@ -113,7 +114,7 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         star_tracker_model="rotation", star_tracker_outages_s=((0.0, n * dt),),
         estimator_options={"mekf": dict(six_state), "usque": dict(six_state),
                            "ekf": {"gate_probability": GATE_PROBABILITY}})
-    sensors = SensorData(omega_meas_radps=delayed_gyro(recording, gyro_delay_s),
+    sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
                          available=np.zeros(n, dtype=bool), vectors=vectors)
     return ImuInputs(recording=recording, scenario=scenario, sensors=sensors,

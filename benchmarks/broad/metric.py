@@ -52,11 +52,16 @@ def errors_deg(estimate: np.ndarray, reference: np.ndarray) -> dict:
 def rmse_deg(estimate: np.ndarray, reference: np.ndarray, movement: np.ndarray) -> dict:
     """:data:`METRICS` of ``estimate`` against ``reference`` over the
     ``movement`` samples (those without a reference left out)."""
-    movement = np.asarray(movement, dtype=bool)
-    found = {}
-    for key, error in errors_deg(estimate, reference).items():
-        part = error[movement]
-        with np.errstate(invalid="ignore"):
-            found[f"{key}_rmse_deg"] = float(np.sqrt(np.nanmean(part ** 2))) \
-                if np.isfinite(part).any() else float("nan")
-    return found
+    return rmse_of(errors_deg(estimate, reference), estimate, reference, movement)
+
+
+def rmse_of(errors: dict, estimate: np.ndarray, reference: np.ndarray,
+            movement: np.ndarray) -> dict:
+    """:func:`rmse_deg` from the :func:`errors_deg` already taken. Only the
+    reference's gaps are left out: an estimate that is not finite on a scored
+    sample (a diverged filter) makes every score NaN, not a mean of the rest."""
+    scored = np.asarray(movement, dtype=bool) & np.isfinite(reference).all(axis=1)
+    if not scored.any() or not np.isfinite(estimate[scored]).all():
+        return {metric: float("nan") for metric in METRICS}
+    return {f"{key}_rmse_deg": float(np.sqrt(np.mean(error[scored] ** 2)))
+            for key, error in errors.items()}

@@ -223,11 +223,7 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     ``gyro_delay_s`` is how late the gyro's samples are against the
     reference (:func:`delayed_gyro`)."""
     recording, attribution = open_dataset(dataset)
-    delay = finite_number("gyro_delay", gyro_delay_s)
-    if abs(delay) > MAX_GYRO_DELAY_SAMPLES * recording.dt:
-        raise InvalidParameterError("gyro_delay", gyro_delay_s, f"must be within "
-                                    f"±{MAX_GYRO_DELAY_SAMPLES} samples "
-                                    f"(±{MAX_GYRO_DELAY_SAMPLES * recording.dt:g} s)")
+    delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
     start = int(np.argmax(recording.has_reference))
@@ -246,6 +242,16 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
 
 #: The largest gyro delay :func:`load_replay` takes, in samples.
 MAX_GYRO_DELAY_SAMPLES = 50
+
+
+def checked_gyro_delay(recording: Recording, delay_s) -> float:
+    """``delay_s`` as a number within ±:data:`MAX_GYRO_DELAY_SAMPLES` samples."""
+    delay = finite_number("gyro_delay", delay_s)
+    if abs(delay) > MAX_GYRO_DELAY_SAMPLES * recording.dt:
+        raise InvalidParameterError("gyro_delay", delay_s, f"must be within "
+                                    f"±{MAX_GYRO_DELAY_SAMPLES} samples "
+                                    f"(±{MAX_GYRO_DELAY_SAMPLES * recording.dt:g} s)")
+    return delay
 
 
 def delayed_gyro(recording: Recording, delay_s: float) -> np.ndarray:
