@@ -142,9 +142,9 @@ def groups_figure(result: BroadResult):
     grid.set_axis_labels("", "RMSE (°)")
     grid.set_titles("{row_name}")
     for axis in grid.axes.flat:
-        axis.tick_params(axis="x", labelrotation=30)
-    grid.figure.suptitle("BROAD: error during the movement, per group (mean over trials)",
-                         y=1.01)
+        plt.setp(axis.get_xticklabels(), rotation=30, ha="right")
+    grid.figure.suptitle("BROAD: error during the movement, per group (mean over trials)")
+    grid.figure.tight_layout(rect=(0, 0, 0.80, 1))   # title, names and legend inside
     plt.close(grid.figure)
     return grid.figure
 
