@@ -278,8 +278,9 @@ def _parse_broad(commands) -> None:
     broad.add_argument("--trials", type=_name_list, metavar="A,B",
                        help="trials by number or name (default: every trial present)")
     broad.add_argument("--estimators", type=_estimator_list, metavar="A,B,...",
-                       help="any of the registry's (default: dead reckoning, QUEST, the MEKF, "
-                       "Madgwick (both), Mahony, and VQF and Fusion when installed)")
+                       help="any of the registry's (default: dead reckoning, TRIAD, the MEKF, "
+                       "USQUE, Madgwick (both), Mahony, and VQF (9D, 6D) and Fusion when "
+                       "installed)")
     broad.add_argument("--gyro-delay", type=_number, default=0.0, metavar="SECONDS",
                        help="how late the gyro's samples are against the other channels "
                        "(default 0)")
@@ -291,6 +292,14 @@ def _parse_broad(commands) -> None:
     broad.add_argument("--case-study", action="store_true",
                        help="instead: the authors' Madgwick and Mahony at their chosen "
                        "settings beside their published numbers (writes broad_case_study.csv)")
+    broad.add_argument("--tune", choices=("none", "all-trials", "per-trial"), default="none",
+                       help="tune each estimator's settings (the authors' grid for Madgwick's "
+                       "β, the tuner otherwise): all-trials, on the other half of the trials "
+                       "than those scored (2-fold); per-trial, on each trial itself "
+                       "(optimistic); none, the defaults (default); writes broad_tuning.csv")
+    broad.add_argument("--workers", type=_whole("workers", 1), default=0, metavar="N",
+                       help="run the trials on a local Dask cluster of N processes (default: "
+                       "in this process)")
     broad.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                        help="output folder (default results/)")
     broad.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -1011,7 +1020,7 @@ def _tuned_replay(args, data, delay: float):
 
 
 def command_broad(args, _scenario):
-    from benchmarks.broad import benchmark, case_study
+    from benchmarks.broad import benchmark, case_study, tuning
     from benchmarks.broad.dataset import ATTRIBUTION, broad_folder, open_broad
     dataset = open_broad(broad_folder(args.broad))
     trials = ([dataset.trial_name(text) for text in args.trials] if args.trials
@@ -1019,7 +1028,8 @@ def command_broad(args, _scenario):
     if args.case_study:
         for flag, given in (("--gyro-delay", args.gyro_delay),
                             ("--accelerometer-sigma", args.accelerometer_sigma),
-                            ("--magnetometer-sigma", args.magnetometer_sigma)):
+                            ("--magnetometer-sigma", args.magnetometer_sigma),
+                            ("--tune", args.tune != "none")):
             if given:
                 raise UsageError(f"{flag} does not apply to --case-study: it runs the "
                                  "authors' filters on the data as they ran them")
@@ -1038,10 +1048,17 @@ def command_broad(args, _scenario):
                 raise UsageError(f"{sensor}_sigma = {value!r}: must be > 0 (from "
                                  f"--{sensor}-sigma)")
             sigmas[sensor] = value
+    options, tunings = tuning.tuned_options(dataset, trials, args.estimators, args.tune,
+                                            args.gyro_delay, sigmas, args.workers, args.quiet)
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
-                                 quiet=args.quiet)
+                                 quiet=args.quiet, workers=args.workers, options=options,
+                                 tuning=args.tune)
     print(benchmark.format_trials(result))
-    print("\ntotal RMSE (°) per group, mean over its trials (trials run):")
+    if len(tunings):
+        print("\ntuned (training loss: mean total RMSE over the training trials, °):")
+        print(tunings.to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+    print(f"\ntotal RMSE (°) per group, mean over its trials (trials run), "
+          f"{tuning.MODE_LABELS[args.tune]}:")
     print(benchmark.format_groups(result))
     write_text(args.out / "broad_trials.csv", result.trials.to_csv(index=False))
     write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
@@ -1050,6 +1067,9 @@ def command_broad(args, _scenario):
     write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
     names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
              "ATTRIBUTION.txt")
+    if len(tunings):
+        write_text(args.out / "broad_tuning.csv", tunings.to_csv(index=False))
+        names += ("broad_tuning.csv",)
     print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{ATTRIBUTION}")
     return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
                                  in result.trials.groupby("estimator", sort=False)})
@@ -1120,7 +1140,7 @@ COMMAND_TABLE = (
             ("replay.png", "summary.csv", "ATTRIBUTION.txt"), None),
     Command("broad", _parse_broad, command_broad,
             ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
-             "broad_case_study.csv", "ATTRIBUTION.txt"), None),
+             "broad_case_study.csv", "broad_tuning.csv", "ATTRIBUTION.txt"), None),
     Command("workshop", _parse_workshop, command_workshop, ("report.md",),
             _per_run_memory(True)),
     Command("show-config", _parse_show_config, command_show_config, (), None),

@@ -127,6 +127,14 @@ class AttitudeEstimator:
         return settings
 
     @classmethod
+    def constructor_defaults(cls) -> dict:
+        """The constructor's own defaults of its keyword-only settings."""
+        return {name: parameter.default for name, parameter in
+                inspect.signature(cls.__init__).parameters.items()
+                if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+                and parameter.default is not inspect.Parameter.empty}
+
+    @classmethod
     def configured_settings(cls, scenario) -> dict:
         """The constructor keywords ``scenario`` gives: its defaults for this
         estimator, then its ``[estimators.NAME]`` section."""

@@ -42,24 +42,30 @@ NWU_TO_ENU = np.array([math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
 ENU_TO_NWU = NWU_TO_ENU * np.array([1.0, -1.0, -1.0, -1.0])
 
 
-def _unit(x: float, y: float, z: float):
-    norm = math.sqrt(x * x + y * y + z * z)
-    return x / norm, y / norm, z / norm
+#: A reading that is absent: the steps below then only integrate the rate.
+NO_READING = (0.0, 0.0, 0.0)
 
 
 def madgwick_step(q, gyro, acc, mag, beta: float, dt: float, halved_field: bool):
-    """One MARG step of Madgwick's C code (floats in, a tuple ``q`` out);
-    ``halved_field``: the BROAD authors' variant (module docstring).
-    Written out element by element as the C code is: it runs every sample."""
+    """One MARG step of Madgwick's C code (tuples of floats in, a tuple ``q``
+    out; an absent reading is :data:`NO_READING`); ``halved_field``: the
+    BROAD authors' variant (module docstring). Written out element by
+    element as the C code is (it runs every sample), and in plain scalar
+    arithmetic, so that the engine compiles this very function
+    (:mod:`benchmarks.engine.kernels.complementary`)."""
     q0, q1, q2, q3 = q
     gx, gy, gz = gyro
+    ax, ay, az = acc
+    mx, my, mz = mag
     d0 = 0.5 * (-q1 * gx - q2 * gy - q3 * gz)
     d1 = 0.5 * (q0 * gx + q2 * gz - q3 * gy)
     d2 = 0.5 * (q0 * gy - q1 * gz + q3 * gx)
     d3 = 0.5 * (q0 * gz + q1 * gy - q2 * gx)
-    if acc is not None and mag is not None and any(acc) and any(mag):
-        ax, ay, az = _unit(*acc)
-        mx, my, mz = _unit(*mag)
+    if (ax != 0.0 or ay != 0.0 or az != 0.0) and (mx != 0.0 or my != 0.0 or mz != 0.0):
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / norm, ay / norm, az / norm
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        mx, my, mz = mx / norm, my / norm, mz / norm
         _2q0mx, _2q0my, _2q0mz, _2q1mx = 2 * q0 * mx, 2 * q0 * my, 2 * q0 * mz, 2 * q1 * mx
         _2q0, _2q1, _2q2, _2q3 = 2 * q0, 2 * q1, 2 * q2, 2 * q3
         _2q0q2, _2q2q3 = 2 * q0 * q2, 2 * q2 * q3
@@ -103,13 +109,18 @@ def madgwick_step(q, gyro, acc, mag, beta: float, dt: float, halved_field: bool)
 
 def mahony_step(q, integral, gyro, acc, mag, kp: float, ki: float, dt: float):
     """One MARG step of Mahony's filter as Madgwick's C code writes it;
-    returns ``(q, integral)`` (the integral of :math:`K_i e`, rad/s)."""
+    returns ``(q, integral)`` (the integral of :math:`K_i e`, rad/s). Plain
+    scalar arithmetic, as :func:`madgwick_step`."""
     q0, q1, q2, q3 = q
     gx, gy, gz = gyro
     ix, iy, iz = integral
-    if acc is not None and mag is not None and any(acc) and any(mag):
-        ax, ay, az = _unit(*acc)
-        mx, my, mz = _unit(*mag)
+    ax, ay, az = acc
+    mx, my, mz = mag
+    if (ax != 0.0 or ay != 0.0 or az != 0.0) and (mx != 0.0 or my != 0.0 or mz != 0.0):
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / norm, ay / norm, az / norm
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        mx, my, mz = mx / norm, my / norm, mz / norm
         q0q0, q0q1, q0q2, q0q3 = q0 * q0, q0 * q1, q0 * q2, q0 * q3
         q1q1, q1q2, q1q3 = q1 * q1, q1 * q2, q1 * q3
         q2q2, q2q3, q3q3 = q2 * q2, q2 * q3, q3 * q3
@@ -164,7 +175,8 @@ class ComplementaryFilter(AttitudeEstimator):
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
         acc, mag = acc_mag(vectors)
-        self.update(tuple(float(x) for x in omega_meas_radps), acc, mag)
+        self.update(tuple(float(x) for x in omega_meas_radps), acc or NO_READING,
+                    mag or NO_READING)
         return self.attitude
 
 

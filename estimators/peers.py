@@ -56,6 +56,17 @@ class PeerFilter(AttitudeEstimator):
         self._q = np.asarray(self.update(gyro, acc, mag), dtype=float)
         return self._q.copy()
 
+    def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
+        """``run``'s estimates at once when every sample has both the
+        accelerometer and the magnetometer and nothing else
+        (:meth:`run_readings`); None otherwise (the per-run path then)."""
+        found = {v.sensor: v for v in vectors}
+        if set(found) != {"accelerometer", "magnetometer"} or len(vectors) != 2 or \
+                not all(np.all(v.available) for v in vectors):
+            return None
+        return np.asarray(self.run_readings(omega_meas_radps, found["accelerometer"].body,
+                                            found["magnetometer"].body), dtype=float)
+
     @property
     def attitude(self) -> np.ndarray:
         return self._q.copy()
@@ -72,6 +83,15 @@ class VQF9D(PeerFilter):
     def reset(self) -> None:
         self.filter = _package(self.name, "vqf").VQF(self.dt)
         self._q = self.initial_attitude.copy()
+
+    def run_readings(self, gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
+        """``(N, 4)`` estimates over whole ``(N, 3)`` channels (each sample
+        with all three), from a fresh filter: VQF's ``updateBatch``, its own
+        loop over :meth:`update`'s calls, in compiled code."""
+        self.reset()
+        batch = self.filter.updateBatch(*(np.ascontiguousarray(x, dtype=float)
+                                          for x in (gyro, acc, mag)))
+        return batch["quat9D" if self.output == "getQuat9D" else "quat6D"]
 
     def update(self, gyro, acc, mag):
         self.filter.updateGyr(gyro)
@@ -101,6 +121,19 @@ class Fusion(PeerFilter):
             gyroscope_range=2000.0, acceleration_rejection=10.0, magnetic_rejection=10.0,
             rejection_timeout=5.0))
         self._q = self.initial_attitude.copy()
+
+    def run_readings(self, gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
+        """``(N, 4)`` estimates over whole ``(N, 3)`` channels (each sample
+        with all three), from a fresh filter: :meth:`update`'s calls in a
+        plain loop (imufusion has no batch call), the turn to ENU at once."""
+        self.reset()
+        gyro_dps, acc_g = np.degrees(gyro), np.asarray(acc, dtype=float) / STANDARD_GRAVITY
+        mag = np.asarray(mag, dtype=float)
+        nwu = np.empty((len(gyro), 4))
+        for k in range(len(gyro)):
+            self.filter.update(gyro_dps[k], acc_g[k], mag[k])
+            nwu[k] = self.filter.get_quaternion()
+        return quat_multiply(NWU_TO_ENU, nwu)
 
     def update(self, gyro, acc, mag):
         # Fusion takes degrees per second and g.

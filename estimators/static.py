@@ -176,6 +176,40 @@ class TRIAD(StaticAttitude):
         first, second = wahba.triad_pair(body, reference, 1.0 / sigmas ** 2, self.min_sine)
         return wahba.triad_covariance(body, sigmas, first, second)
 
+    def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
+        """``run``'s estimates at once for two vector sensors read at every
+        sample (no star tracker): each sample's TRIAD where both readings
+        are non-zero and separated in both frames (:meth:`solve`'s weights
+        pick the anchor), and between those, the steps ``run`` takes
+        (:meth:`_propagate`, or the held estimate). None otherwise (the
+        per-run path then)."""
+        if len(vectors) != 2 or not all(np.all(v.available) for v in vectors):
+            return None
+        units, weights, nonzero = [], [], []
+        for v in vectors:
+            body, reference = np.asarray(v.body, float), np.asarray(v.reference, float)
+            body_norm, reference_norm = (np.linalg.norm(x, axis=1) for x in (body, reference))
+            nonzero.append(body_norm > 0)
+            units.append((body / np.where(body_norm > 0, body_norm, 1.0)[:, None],
+                          reference / reference_norm[:, None]))
+            factor = self.magnetometer_weight if v.sensor == "magnetometer" else 1.0
+            weights.append(factor * reference_norm ** 2 / np.asarray(v.variance, float))
+        (b1, r1), (b2, r2) = units
+        solved = nonzero[0] & nonzero[1]
+        for u, w in ((b1, b2), (r1, r2)):
+            solved &= np.linalg.norm(np.cross(u, w), axis=1) > max(self.min_sine, 1e-12)
+        second = (weights[1] > weights[0])[:, None]     # the heavier anchors; ties, the first
+        estimates = np.empty((len(b1), 4))
+        estimates[solved] = wahba.triad_attitudes(
+            *(np.where(second, y, x)[solved] for x, y in ((b1, b2), (b2, b1), (r1, r2), (r2, r1))))
+        self.reset()
+        for k in np.flatnonzero(~solved):
+            self.q_hat = self.initial_attitude.copy() if k == 0 else estimates[k - 1].copy()
+            if k > 0 and self.between == "propagate":
+                self._propagate(omega_meas_radps[k - 1])
+            estimates[k] = self.q_hat
+        return estimates
+
 
 class DavenportQ(StaticAttitude):
     """Davenport's q-method (:func:`estimators.wahba.davenport_q`)."""

@@ -266,13 +266,20 @@ def triad(body, reference, weights, min_sine: float = 0.0) -> np.ndarray:
     """TRIAD on the two most heavily weighted separated observations,
     anchored on the first (module docstring; :func:`triad_pair`)."""
     first, second = triad_pair(body, reference, weights, min_sine)
+    return triad_attitudes(body[first], body[second], reference[first], reference[second])
 
+
+def triad_attitudes(b1, b2, r1, r2) -> np.ndarray:
+    """TRIAD's quaternion of the pairs ``(b1, r1)`` (the anchor) and
+    ``(b2, r2)`` of separated unit vectors; stacks along leading axes (a
+    record's samples at once, as :meth:`estimators.static.TRIAD.run_batch`
+    takes them)."""
     def frame(v1, v2):
         cross = np.cross(v1, v2)
-        cross /= np.sqrt(cross @ cross)
-        return np.column_stack([v1, cross, np.cross(v1, cross)])
+        cross = cross / np.linalg.norm(cross, axis=-1, keepdims=True)
+        return np.stack([v1, cross, np.cross(v1, cross)], axis=-1)
 
-    A = frame(reference[first], reference[second]) @ frame(body[first], body[second]).T
+    A = frame(r1, r2) @ np.swapaxes(frame(b1, b2), -1, -2)
     return _matrix_quaternion(A)
 
 

@@ -44,6 +44,10 @@ def test_vector_kernels_equal_the_per_run_filters_at_every_step(cubesat_batch, n
         trace = reference.traces[name]
         assert trace.rejected.get("magnetometer") is not None      # the gate bites
         assert np.abs(batch.estimates[name][i] - reference.estimates[name]).max() < 1e-9
+        # The kernel counts each sensor's rejected readings as the per-run class does.
+        sensors = [sensor.name for sensor in CUBESAT.build_vector_sensors()]
+        assert list(batch.rejected[name][i]) == [len(trace.rejected.get(sensor, ()))
+                                                 for sensor in sensors]
         assert np.allclose(batch.attitude_variances[name][i],
                            np.diagonal(trace.attitude_covariance, axis1=1, axis2=2),
                            rtol=1e-7, atol=0)

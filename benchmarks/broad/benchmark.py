@@ -11,25 +11,29 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from dataclasses import replace
+
 from benchmarks.broad.dataset import BroadDataset
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import METRICS, errors_deg, rmse_of
 from benchmarks.progress import progress
-from benchmarks.simulation import build_estimator
+from benchmarks.engine.recorded import path_of, run_recorded
+from estimators import resolve_estimator
 
 #: ``broad`` without ``--estimators``: the textbook filter, a static
 #: solution, dead reckoning and the complementary filters; the peers when
 #: installed (:func:`default_estimators`).
-DEFAULT_ESTIMATORS = ("dead-reckoning", "quest", "mekf", "madgwick", "madgwick-broad", "mahony")
-PEERS = ("vqf", "fusion")
+DEFAULT_ESTIMATORS = ("dead-reckoning", "triad", "mekf", "usque", "madgwick", "madgwick-broad",
+                      "mahony")
+PEERS = ("vqf", "vqf-6d", "fusion")
 TRIAL_COLUMNS = ("trial", "estimator", *METRICS, "us_per_sample", "samples",
-                 "rejected_accelerometer", "rejected_magnetometer", "diverged_step")
+                 "rejected_accelerometer", "rejected_magnetometer", "diverged_step", "path")
 
 
 def default_estimators() -> tuple:
     """:data:`DEFAULT_ESTIMATORS`, and :data:`PEERS` whose packages are installed."""
     import importlib.util
-    modules = {"vqf": "vqf", "fusion": "imufusion"}
+    modules = {"vqf": "vqf", "vqf-6d": "vqf", "fusion": "imufusion"}
     return DEFAULT_ESTIMATORS + tuple(name for name in PEERS
                                       if importlib.util.find_spec(modules[name]) is not None)
 
@@ -41,6 +45,7 @@ class BroadResult:
     labels: dict                 # estimator → label
     curves: dict                 # the first trial's: estimator → (time_s, total error °)
     curve_trial: str
+    tuning: str = "none"         # how the settings were chosen (benchmarks.broad.tuning.MODES)
 
     @property
     def dt(self) -> float:
@@ -50,35 +55,52 @@ class BroadResult:
 
 
 def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float = 0.0,
-              sigmas=None, bar=None) -> tuple[list, dict, dict]:
+              sigmas=None, options=None) -> tuple[list, dict, dict]:
     """Each of ``estimators`` on ``trial`` (:func:`benchmarks.broad.inputs.imu_inputs`
-    with ``gyro_delay_s`` and ``sigmas``): its rows (a diverged estimator's
-    scores NaN, its step in ``diverged_step``, else -1), total errors over
-    time, labels."""
+    with ``gyro_delay_s`` and ``sigmas``; ``options``: estimator → settings
+    over its defaults, a tuned set for this trial), through the engine where it can
+    (:func:`benchmarks.engine.recorded.run_recorded`): its rows (a diverged
+    estimator's scores NaN, its step in ``diverged_step``, else -1), total
+    errors over time, labels."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
     sensors = inputs.sensors
     rows, curves, labels = [], {}, {}
     for name in estimators:
-        estimator = build_estimator(name, inputs.scenario)
+        estimator = resolve_estimator(name).from_scenario(inputs.scenario,
+                                                          **(options or {}).get(name, {}))
+        _warm_up(estimator, sensors)
         start = time.perf_counter()
-        estimate = estimator.run(sensors.omega_meas_radps, sensors.star_tracker_quat,
-                                 sensors.available, vectors=sensors.vectors)
+        run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
         seconds = time.perf_counter() - start
-        errors = errors_deg(estimate, recording.reference_quat)
-        scores = rmse_of(errors, estimate, recording.reference_quat, recording.movement)
-        diverged = estimator.diverged_step
+        errors = errors_deg(run.estimates, recording.reference_quat)
+        scores = rmse_of(errors, run.estimates, recording.reference_quat, recording.movement)
         rows.append({"trial": trial, "estimator": name, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
-                     "rejected_accelerometer": estimator.rejected.get("accelerometer", 0),
-                     "rejected_magnetometer": estimator.rejected.get("magnetometer", 0),
-                     "diverged_step": -1 if diverged is None else diverged})
+                     "rejected_accelerometer": run.rejected.get("accelerometer", 0),
+                     "rejected_magnetometer": run.rejected.get("magnetometer", 0),
+                     "diverged_step": -1 if run.diverged_step is None else run.diverged_step,
+                     "path": run.path})
         curves[name] = (recording.time_s, errors["total"])
         labels[name] = estimator.label
-        if bar is not None:
-            bar.update()
     return rows, curves, labels
+
+
+_WARM = set()
+
+
+def _warm_up(estimator, sensors) -> None:
+    """The first run of a compiled path in a process loads (or compiles) its
+    machine code: done once on a few samples, so that no trial's time per
+    sample counts it."""
+    key = (type(estimator), path_of(estimator, sensors.vectors))
+    if key[1] in ("kernel", "compiled") and key not in _WARM:
+        run_recorded(estimator, sensors.omega_meas_radps[:4],
+                     [replace(v, body=v.body[:4], reference=v.reference[:4],
+                              available=v.available[:4], variance=v.variance[:4])
+                      for v in sensors.vectors])
+        _WARM.add(key)
 
 
 def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
@@ -98,21 +120,27 @@ def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
 
 
 def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0.0,
-              sigmas=None, quiet: bool = False) -> BroadResult:
-    """:func:`run_trial` over ``trials``; the tidy table and the group means."""
-    rows, labels, first = [], {}, {}
-    with progress(total=len(trials) * len(estimators), desc="broad", unit="run",
-                  quiet=quiet) as bar:
-        for index, trial in enumerate(trials):
-            found, curves, names = run_trial(dataset, trial, estimators, gyro_delay_s, sigmas,
-                                             bar)
-            rows += found
-            labels.update(names)
-            if index == 0:
-                first = curves
+              sigmas=None, quiet: bool = False, workers: int = 0,
+              options=None, tuning: str = "none") -> BroadResult:
+    """:func:`run_trial` over ``trials`` (on a local Dask cluster of
+    ``workers`` processes, one trial per task, if ``workers``), with
+    ``options``: trial → its estimators' settings
+    (:func:`benchmarks.broad.tuning.tuned_options` under ``tuning``, a
+    :data:`~benchmarks.broad.tuning.MODES` name); the tidy table and the
+    group means."""
+    from benchmarks.engine.runner import map_tasks
+    rows, labels = [], {}
+    arguments = [(dataset, trial, tuple(estimators), gyro_delay_s, sigmas,
+                  (options or {}).get(trial)) for trial in trials]
+    with progress(total=len(trials), desc="broad", unit="trial", quiet=quiet) as bar:
+        results = map_tasks(run_trial, arguments, workers, bar)
+    for found, _, names in results:
+        rows += found
+        labels.update(names)
+    first = results[0][1]
     frame = pd.DataFrame(rows, columns=list(TRIAL_COLUMNS))
     return BroadResult(trials=frame, groups=group_means(dataset, frame), labels=labels,
-                       curves=first, curve_trial=trials[0])
+                       curves=first, curve_trial=trials[0], tuning=tuning)
 
 
 def format_groups(result: BroadResult, metric: str = "total_rmse_deg") -> str:

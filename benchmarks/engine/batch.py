@@ -218,6 +218,9 @@ class BatchResult:
     #: estimator's error (degrees) at steps 0, m, 2m, ... (``sample_time_s``).
     error_samples: dict | None = None
     sample_time_s: np.ndarray | None = None
+    #: Per estimator whose kernel gates (``GATING``): ``(B, S)``, each run's
+    #: vector readings rejected by gating, per sensor in the scenario's order.
+    rejected: dict | None = None
 
     def frame(self) -> pd.DataFrame:
         """Tidy: one row per (run, estimator) with the run's settings and statistics."""
@@ -403,7 +406,8 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
 
 
 def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
-            nees_every: int, settle_steps: int, health: bool, error_every: int):
+            nees_every: int, settle_steps: int, health: bool, error_every: int,
+            n_sensors: int = 0):
     """The kernels' outputs, one row per estimator in ``names``."""
     from benchmarks.engine.kernels.common import N_ACCUMULATORS, N_HEALTH, Record
     rows = len(names)
@@ -424,7 +428,8 @@ def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bo
         nees_samples=np.zeros((rows, n_runs, n_samples)), nees_sum=np.zeros((rows, n_runs)),
         nis_sum=np.zeros((rows, n_runs)), nis_count=np.zeros((rows, n_runs)),
         likelihood=np.zeros((rows, n_runs, 2)),
-        check_health=bool(health), health=np.zeros((rows, n_runs if health else 0, N_HEALTH)))
+        check_health=bool(health), health=np.zeros((rows, n_runs if health else 0, N_HEALTH)),
+        rejected=np.zeros((rows, n_runs, n_sensors), dtype=np.int64))
 
 
 def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict, record,
@@ -509,12 +514,12 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     kernels = {name: kernel(name) for name in names}
     objects = {name: per_run_estimators(scenario, runs, name) for name in names}
     states = {name: kernels[name].initial_state(objects[name]) for name in names}
-    record = _record(names, len(runs), scenario.n_steps, keep_traces, consistency, nees_every,
-                     settle_steps, health, error_every)
     vectors = scenario.has_vector_sensors and any(
         getattr(module, "VECTOR_READINGS", False) for module in kernels.values())
-    readings = _advance(scenario, _sensors(scenario, runs, block_steps, threads, vectors),
-                        kernels, states, record, cache_steps, progress_bar)
+    sensors = _sensors(scenario, runs, block_steps, threads, vectors)
+    record = _record(names, len(runs), scenario.n_steps, keep_traces, consistency, nees_every,
+                     settle_steps, health, error_every, len(sensors.vectors.sensors))
+    readings = _advance(scenario, sensors, kernels, states, record, cache_steps, progress_bar)
     return _result(scenario, runs, kernels, objects, states, record,
                    next(iter(readings.values())))
 
@@ -549,7 +554,9 @@ def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchR
                 for row, name in enumerate(names)} if record.check_health else None,
         error_samples={name: record.error_samples[row] for row, name in enumerate(names)}
         if error_every else None,
-        sample_time_s=np.arange(0, n_steps, error_every) * scenario.dt if error_every else None)
+        sample_time_s=np.arange(0, n_steps, error_every) * scenario.dt if error_every else None,
+        rejected={name: record.rejected[row].copy() for row, name in enumerate(names)
+                  if getattr(kernels[name], "GATING", False)})
 
 
 def _variances(record, row: int) -> np.ndarray:

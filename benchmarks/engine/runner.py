@@ -77,7 +77,7 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
             limited = per_run_limit is not None and name not in ENGINE_ESTIMATORS
             count = min(len(runs), per_run_limit) if limited else len(runs)
             arguments = [(scenario, runs, i, name, kept) for i in range(count)]
-            results[name] = _concatenated(_map(_one_run, arguments, workers, progress_bar))
+            results[name] = _concatenated(map_tasks(_one_run, arguments, workers, progress_bar))
 
     def each(key):
         return {name: results[name][key] for name in estimators if key in results[name]}
@@ -181,7 +181,7 @@ def _concatenated(records: list) -> dict:
     return joined
 
 
-def _map(function, arguments, workers: int, progress_bar) -> list:
+def map_tasks(function, arguments, workers: int, progress_bar) -> list:
     """``function(*a)`` for each ``a``, in order; on a local Dask cluster with ``workers``."""
     if not workers:
         out = []

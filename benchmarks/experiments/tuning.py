@@ -264,9 +264,12 @@ def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None) -
 
 def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=None, *,
                    xatol: float = XATOL, max_evaluations: int = MAX_EVALUATIONS,
-                   quiet: bool = False) -> EstimatorTuning:
+                   quiet: bool = False, score=None) -> EstimatorTuning:
     """Tune estimator ``name``'s declared settings to minimise ``objective``
-    over ``cases`` (:mod:`benchmarks.experiments.objectives`).
+    over ``cases`` (:mod:`benchmarks.experiments.objectives`), or ``score``
+    if given: a callable of ``settings_of(case_scenario) → keyword values``
+    returning the loss (each case has a ``scenario`` and a ``label``), as
+    the BROAD benchmark scores its trials (:mod:`benchmarks.broad.tuning`).
 
     The search runs in scaled coordinates (log10 of a log-scale setting), so
     one step means the same in every direction. One parameter: scipy's
@@ -281,8 +284,10 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
     from benchmarks.experiments.objectives import Objective
     from estimators import resolve_estimator
     cls = resolve_estimator(name)
-    plan = tuning_plan(cls, cls.configured_settings(cases[0].scenario), parameters, ranges)
-    score = Objective(name, objective, cases)
+    # What the estimator runs with: the scenario's settings over its constructor's defaults.
+    plan = tuning_plan(cls, {**cls.constructor_defaults(),
+                             **cls.configured_settings(cases[0].scenario)}, parameters, ranges)
+    score = Objective(name, objective, cases) if score is None else score
     ends = np.array([[t.coordinate(b[0]), t.coordinate(b[1])] for t, _, b in plan])
     low, high = ends.min(axis=1), ends.max(axis=1)   # log10(1 − p) runs backwards
     start = np.array([t.coordinate(d) if d is not None and (t.scale != "log" or d > 0)

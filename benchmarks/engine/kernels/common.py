@@ -44,6 +44,9 @@ class Record(NamedTuple):
     likelihood: np.ndarray       # (rows, B, 2)
     check_health: bool
     health: np.ndarray           # (rows, B, N_HEALTH), or (rows, 0, N_HEALTH)
+    #: Per run and vector sensor (the block's order): the readings gating
+    #: rejected (estimators.base: ``rejected``), by the kernels that gate.
+    rejected: np.ndarray         # (rows, B, S) int64
 
 
 class Block(NamedTuple):

@@ -234,6 +234,7 @@ def advance(block, sensors, state, record, row):
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
+    rejected = record.rejected[row]
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
         scratch6 = np.empty((10, 6, 6))
@@ -273,6 +274,8 @@ def advance(block, sensors, state, record, row):
                         scratch6, dq)
                     if streaming and applied:
                         fold_innovation(run, nis, determinant, likelihood)
+                    if not applied:
+                        rejected[run, s] += 1
                     if check:
                         check_health(q, True, P, 6, health[run], factor)
             if posterior:

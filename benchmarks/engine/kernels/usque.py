@@ -344,14 +344,15 @@ def _any_reading(available, run, j):
 @njit(cache=True, error_model="numpy")
 def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, gate,
              vector_body, vector_reference, vector_variance, vector_available, vector_dof,
-             scratch, predicted, R_vector, nis_out, streaming, likelihood):
+             scratch, predicted, R_vector, nis_out, streaming, likelihood, rejected):
     """The step's updates, as ``USQUE._estimate_at_step`` makes them: the
     tracker's, then each vector reading's, each followed by the reset (or the
     reset alone without any reading), each applied one folded into the
     likelihood sums if ``streaming``. Returns whether the sigma points of
     every update existed (``False``: the per-run class's Cholesky factor
     fails) and whether the tracker's reading was applied (its NIS in
-    ``nis_out[0]``)."""
+    ``nis_out[0]``); each vector reading gating rejects is counted in
+    ``rejected[run, s]``."""
     updated, applied = False, False
     if available:
         nis_out[0], applied, determinant = _update(q, x, P, sigmas, z, R, Wm, Wc, gating,
@@ -373,6 +374,8 @@ def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, g
                 predicted, R_vector)
             if streaming and used:
                 fold_innovation(run, nis, determinant, likelihood)
+            if not used:
+                rejected[run, s] += 1
             _fold_reference(q, x)
             updated = True
     return True, applied
@@ -399,6 +402,7 @@ def advance(block, sensors, state, record, row):
                                               state.Wm, state.Wc)
     beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
     gating, gate = state.gating, state.gate
+    rejected = record.rejected[row]
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
         scratch = np.empty((6, 6, 6))
@@ -429,7 +433,7 @@ def advance(block, sensors, state, record, row):
                 q, x, P, sigmas, available, z, run, j, R_all[run], Wm, Wc, spread[run],
                 gating[run], gate[run], vector_body, vector_reference, vector_variance,
                 vector_available, vector_dof, scratch, propagated, R_vector, nis, streaming,
-                likelihood)
+                likelihood, rejected)
             if not factored:
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue

@@ -1,0 +1,160 @@
+"""Recorded readings through the engine: one estimator over one recording
+(a gyro and vector readings, as :mod:`benchmarks.broad` makes them from a
+real IMU), by the fastest path that gives the per-run class's numbers.
+
+* An estimator with a Monte Carlo kernel (:data:`~benchmarks.engine.kernels.
+  KERNELS`) that models what it needs runs through that kernel, one run over
+  one block that holds the whole recording: the recorded rates are the
+  block's "true" rates with a noise-free gyro (σ = 0, no bias, no scale:
+  the kernel's reading is then the recorded rate exactly), the tracker is out
+  throughout, and the vector readings are the recording's. The kernel's
+  error against the block's truth is not used (the truth is the identity):
+  the estimates are kept and scored by the caller.
+* Madgwick's and Mahony's filters run through their compiled step functions
+  (:mod:`benchmarks.engine.kernels.complementary`).
+* An estimator with a ``run_batch(omega, vectors)`` method (the peers'
+  adapters, :mod:`estimators.peers`, which feed their library the whole
+  recording at once; TRIAD, :mod:`estimators.static`, whose every sample is
+  its own solution) runs so, unless that method answers None for this
+  recording (missing readings, say).
+* Anything else runs on the per-run path (``estimator.run``).
+
+Every path reads its settings and its start off the per-run object after
+its reset; the tests hold each to the per-run path to 1e-9 at every sample.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from benchmarks.engine.kernels import KERNELS, kernel
+from dynamics.quaternion import IDENTITY, quat_multiply
+from estimators.complementary import NWU_TO_ENU
+
+
+@dataclass(frozen=True)
+class RecordedRun:
+    """An estimator's estimates over a recording, ``(N, 4)`` body → reference."""
+
+    estimates: np.ndarray
+    #: The first sample whose estimate was not finite (None: never).
+    diverged_step: int | None
+    #: sensor → the readings gating rejected.
+    rejected: dict = field(default_factory=dict)
+    #: "kernel", "compiled", "batch" or "per-run": the path it took.
+    path: str = "per-run"
+
+
+def path_of(estimator, vectors=()) -> str:
+    """The path ``estimator`` (a per-run object) takes on a recording with
+    ``vectors`` (module docstring)."""
+    from benchmarks.engine.kernels import complementary
+    name = getattr(estimator, "name", None)
+    if name in KERNELS and type(estimator).__module__.startswith("estimators."):
+        module = kernel(name)
+        needs_vectors = bool(vectors) and estimator.uses_vector_readings
+        gated = getattr(estimator, "gate_probability", None) is not None
+        if (not needs_vectors or getattr(module, "VECTOR_READINGS", False)) and \
+                (not gated or getattr(module, "GATING", False)):
+            return "kernel"
+    if name in complementary.NAMES and type(estimator).__module__ == "estimators.complementary":
+        return "compiled"
+    if hasattr(estimator, "run_batch"):
+        return "batch"
+    return "per-run"
+
+
+def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> RecordedRun:
+    """``estimator`` (reset first, as ``run`` resets it) over the recorded
+    rates ``(N, 3)`` and vector readings
+    (:class:`sensors.vector.VectorReadings`), by :func:`path_of`'s path."""
+    omega = np.ascontiguousarray(omega_meas_radps, dtype=float)
+    vectors = tuple(vectors)
+    path = path_of(estimator, vectors)
+    estimator.reset()
+    if path == "kernel":
+        return _through_kernel(estimator, omega, vectors)
+    if path == "compiled":
+        from benchmarks.engine.kernels import complementary
+        acc, has_acc, mag, has_mag = _channels(vectors)
+        states = complementary.run(estimator, omega, acc, has_acc, mag, has_mag)
+        return _finished(quat_multiply(NWU_TO_ENU, states), path)
+    if path == "batch":
+        estimates = estimator.run_batch(omega, vectors)
+        if estimates is not None:
+            return _finished(np.asarray(estimates, dtype=float), path)
+        path = "per-run"
+    n = len(omega)
+    estimates = estimator.run(omega, np.tile(IDENTITY, (n, 1)), np.zeros(n, dtype=bool),
+                              vectors=vectors)
+    return RecordedRun(estimates=estimates, diverged_step=estimator.diverged_step,
+                       rejected=dict(estimator.rejected), path=path)
+
+
+def _finished(estimates: np.ndarray, path: str) -> RecordedRun:
+    """The estimates NaN from the first sample that is not finite, which is
+    where the per-run path stops (``AttitudeEstimator.state_is_finite``)."""
+    lost = ~np.isfinite(estimates).all(axis=1)
+    first = int(np.argmax(lost)) if lost.any() else None
+    if first is not None:
+        estimates = estimates.copy()
+        estimates[first:] = np.nan
+    return RecordedRun(estimates=estimates, diverged_step=first, path=path)
+
+
+def _channels(vectors) -> tuple:
+    """The accelerometer's and magnetometer's readings and flags, zeros and
+    False where a sensor is absent."""
+    found = {v.sensor: v for v in vectors}
+    n = len(vectors[0].body) if vectors else 0
+    out = []
+    for name in ("accelerometer", "magnetometer"):
+        v = found.get(name)
+        out += ([np.zeros((n, 3)), np.zeros(n, dtype=bool)] if v is None else
+                [np.ascontiguousarray(v.body, dtype=float),
+                 np.ascontiguousarray(v.available, dtype=bool)])
+    return tuple(out)
+
+
+def _through_kernel(estimator, omega: np.ndarray, vectors) -> RecordedRun:
+    """One run of the estimator's kernel over one block: the recording."""
+    from benchmarks.engine.batch import _record
+    from benchmarks.engine.kernels.common import Block
+    from benchmarks.engine.kernels.sensors import SensorState
+    module = kernel(estimator.name)
+    used = vectors if estimator.uses_vector_readings else ()
+    n = len(omega)
+    record = _record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used))
+    block = Block(
+        k0=0, steps=n, last_step=n - 1, dt=float(estimator.dt),
+        q_true=np.tile(IDENTITY, (n, 1)), omega_true=omega,
+        gyro_std=np.zeros(1), gyro_normals=np.zeros((1, n, 3)), bias_model=np.zeros(5),
+        gyro_scale=np.zeros((3, 3)), has_scale=False, has_bias=False,
+        rotation_model=True, star_std=np.zeros(1), steps_between=np.ones(1, dtype=np.int64),
+        star_normals=np.zeros((1, n + 1, 3)), sigma_rad=np.zeros(3), sensor_to_body=np.eye(3),
+        canonical=False, outage=np.ones(n, dtype=bool), dropout_probability=0.0,
+        dropout_uniforms=np.zeros((1, 0)),
+        **_vector_arrays(used, n))
+    module.advance(block, SensorState(bias=np.zeros((1, 6)), bias_last=np.zeros((1, 3))),
+                   module.initial_state([estimator]), record, 0)
+    diverged = int(record.diverged[0, 0])
+    rejected = {v.sensor: int(count) for v, count in zip(used, record.rejected[0, 0]) if count}
+    return RecordedRun(estimates=record.traces[0, 0], diverged_step=None if diverged < 0
+                       else diverged, rejected=rejected, path="kernel")
+
+
+def _vector_arrays(vectors, n: int) -> dict:
+    """The ``Block.vector_*`` arrays of one run from recorded readings."""
+    count = len(vectors)
+    arrays = dict(vector_body=np.zeros((1, n, count, 3)),
+                  vector_reference=np.zeros((n, count, 3)),
+                  vector_variance=np.zeros((1, n, count)),
+                  vector_available=np.zeros((1, n, count), dtype=bool),
+                  vector_dof=np.array([v.dof for v in vectors], dtype=np.int64))
+    for s, v in enumerate(vectors):
+        arrays["vector_body"][0, :, s] = v.body
+        arrays["vector_reference"][:, s] = v.reference
+        arrays["vector_variance"][0, :, s] = v.variance
+        arrays["vector_available"][0, :, s] = v.available
+    return arrays

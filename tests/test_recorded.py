@@ -1,0 +1,150 @@
+"""Recorded readings through the engine (:mod:`benchmarks.engine.recorded`):
+every fast path (a Monte Carlo kernel, the compiled complementary filters,
+the batch calls of the peers and of TRIAD) against the per-run class, to
+1e-9 at every sample, with the same gating counts; and the fallbacks.
+
+The data are a slice of the shipped BROAD trial 07 (fast rotation) from the
+start of its movement, where the MEKF's gate rejects most accelerometer
+readings: the counts are compared, not only the estimates.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.inputs import imu_inputs
+from benchmarks.engine.recorded import _finished, path_of, run_recorded
+from benchmarks.shipped import shipped_file
+from benchmarks.simulation import build_estimator
+from estimators import AttitudeEstimator, wahba
+
+#: The slice: from the start of trial 07's movement (sample 7573), long
+#: enough for the gate to act, short enough for the per-run USQUE.
+START, LENGTH = 7500, 1500
+
+
+@pytest.fixture(scope="module")
+def trial():
+    dataset = open_broad(shipped_file("datasets/broad/trials.json").parent)
+    inputs = imu_inputs(dataset.load("07_undisturbed_fast_rotation_B"))
+    part = slice(START, START + LENGTH)
+    vectors = tuple(replace(v, body=v.body[part], reference=v.reference[part],
+                            available=v.available[part], variance=v.variance[part])
+                    for v in inputs.sensors.vectors)
+    return inputs.scenario, inputs.sensors.omega_meas_radps[part], vectors
+
+
+def _per_run(estimator, omega, vectors):
+    n = len(omega)
+    estimates = estimator.run(omega, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool),
+                              vectors=vectors)
+    return estimates, dict(estimator.rejected)
+
+
+@pytest.mark.parametrize("name, path", [
+    ("dead-reckoning", "kernel"), ("mekf", "kernel"), ("usque", "kernel"),
+    ("madgwick", "compiled"), ("madgwick-broad", "compiled"), ("mahony", "compiled"),
+    ("triad", "batch"), ("vqf", "batch"), ("vqf-6d", "batch"), ("fusion", "batch")])
+def test_each_fast_path_gives_the_per_run_estimates_and_rejections(trial, name, path):
+    if name in ("vqf", "vqf-6d"):
+        pytest.importorskip("vqf")
+    if name == "fusion":
+        pytest.importorskip("imufusion")
+    scenario, omega, vectors = trial
+    reference, rejected = _per_run(build_estimator(name, scenario), omega, vectors)
+    # A used object: the fast path resets it first, as run does.
+    estimator = build_estimator(name, scenario)
+    estimator.run(omega[:10], np.tile([1.0, 0, 0, 0], (10, 1)), np.zeros(10, bool),
+                  vectors=[replace(v, body=v.body[:10], reference=v.reference[:10],
+                                   available=v.available[:10], variance=v.variance[:10])
+                           for v in vectors])
+    run = run_recorded(estimator, omega, vectors)
+    assert run.path == path
+    # Sign-aligned: q and -q are one attitude, and every path keeps the sign its class keeps.
+    np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-9)
+    assert run.rejected == rejected
+    assert run.diverged_step is None
+
+
+def test_the_mekf_gate_is_counted_on_the_kernel_path(trial):
+    scenario, omega, vectors = trial
+    run = run_recorded(build_estimator("mekf", scenario), omega, vectors)
+    # Fast rotation: the centripetal acceleration fails the gate (not a vacuous count).
+    assert run.rejected.get("accelerometer", 0) > LENGTH // 10
+
+
+def test_without_the_magnetometer_the_batch_paths_fall_back_to_the_per_run_path(trial):
+    scenario, omega, vectors = trial
+    gravity_only = vectors[:1]
+    for name in ("triad", "vqf"):
+        if name == "vqf":
+            pytest.importorskip("vqf")
+        estimator = build_estimator(name, scenario)
+        run = run_recorded(estimator, omega, gravity_only)
+        assert run.path == "per-run"
+        reference, _ = _per_run(build_estimator(name, scenario), omega, gravity_only)
+        np.testing.assert_array_equal(run.estimates, reference)
+
+
+def test_an_estimator_of_a_users_own_takes_the_per_run_path(trial):
+    class Still(AttitudeEstimator):
+        name = "still"
+
+        def reset(self):
+            pass
+
+        def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()):
+            return self.initial_attitude.copy()
+
+        @property
+        def attitude(self):
+            return self.initial_attitude.copy()
+
+    scenario, omega, vectors = trial
+    estimator = Still(dt=scenario.dt, initial_attitude=np.array([1.0, 0.0, 0.0, 0.0]))
+    assert path_of(estimator, vectors) == "per-run"
+    assert np.all(run_recorded(estimator, omega, vectors).estimates[:, 0] == 1.0)
+
+
+def test_a_fast_paths_estimates_are_nan_from_the_first_sample_not_finite():
+    estimates = np.tile([1.0, 0.0, 0.0, 0.0], (6, 1))
+    estimates[3, 2] = np.inf
+    run = _finished(estimates, "compiled")
+    assert run.diverged_step == 3
+    assert np.isnan(run.estimates[3:]).all() and np.isfinite(run.estimates[:3]).all()
+
+
+unit = st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3).map(np.array) \
+    .filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(unit, unit, unit, unit), min_size=1, max_size=5))
+def test_triad_on_stacked_pairs_is_triad_on_each(pairs):
+    pairs = [p for p in pairs if all(np.linalg.norm(np.cross(a, b)) > 0.05
+                                     for a, b in ((p[0], p[1]), (p[2], p[3])))]
+    if not pairs:
+        return
+    b1, b2, r1, r2 = (np.array(column) for column in zip(*pairs))
+    stacked = wahba.triad_attitudes(b1, b2, r1, r2)
+    for k, (u, v, x, y) in enumerate(pairs):
+        one = wahba.triad(np.array([u, v]), np.array([x, y]), np.array([2.0, 1.0]))
+        np.testing.assert_allclose(stacked[k], one, rtol=0, atol=1e-12)
+
+
+def test_triads_batch_anchors_on_the_heavier_reading_as_solve_does(trial):
+    scenario, omega, vectors = trial
+    heavy_field = scenario.replace(estimator_options={"triad": {"magnetometer_weight": 1e3}})
+    reference, _ = _per_run(build_estimator("triad", heavy_field), omega[:300],
+                            [replace(v, body=v.body[:300], reference=v.reference[:300],
+                                     available=v.available[:300], variance=v.variance[:300])
+                             for v in vectors])
+    part = [replace(v, body=v.body[:300], reference=v.reference[:300],
+                    available=v.available[:300], variance=v.variance[:300]) for v in vectors]
+    run = run_recorded(build_estimator("triad", heavy_field), omega[:300], part)
+    light = run_recorded(build_estimator("triad", scenario), omega[:300], part)
+    np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-12)
+    # The anchor matters: gravity first and the field first are different solutions.
+    assert np.max(np.abs(run.estimates - light.estimates)) > 1e-3
