@@ -44,7 +44,7 @@ from dynamics.validation import (
     one_of,
 )
 from estimators.tunable import (GATE_PROBABILITY, GYRO_BIAS_RANDOM_WALK, GYRO_NOISE,
-                                MEASUREMENT_SCALE)
+                                MAGNETIC_NORM_TOLERANCE, MEASUREMENT_SCALE)
 
 #: What an estimator does with a measurement that cannot be used (a
 #: non-finite rate, a non-finite or zero reading).
@@ -528,6 +528,13 @@ def gate_probability_setting(value) -> float | None:
     return probability
 
 
+def norm_tolerance_setting(value) -> float | None:
+    """A magnetic norm tolerance: None (off) or a fraction > 0."""
+    if value is None:
+        return None
+    return finite_number("magnetic_norm_tolerance", value, strictly_positive=True)
+
+
 def finite_state(vector, covariance=None) -> bool:
     """The divergence test: ``sum(vector)`` and ``trace(covariance)`` finite
     (a NaN or infinity in either makes its sum non-finite). Summed left to
@@ -606,6 +613,36 @@ class KalmanEstimator(AttitudeEstimator):
         """The update with one vector reading (:class:`sensors.vector.VectorObservation`)."""
         raise NotImplementedError
 
+    #: Magnetic disturbance detection: a magnetometer reading whose
+    #: magnitude is off its reference's by more than this fraction is
+    #: rejected before any update (None: no test). See :meth:`passes_norm`.
+    magnetic_norm_tolerance = None
+
+    def passes_norm(self, observation) -> bool:
+        r"""Whether a vector reading passes the magnetic disturbance test,
+        :math:`\bigl|\,\lVert b\rVert / \lVert r\rVert - 1\bigr| \le`
+        :attr:`magnetic_norm_tolerance` (magnetometers only; always, when it
+        is None). A disturbed field (a magnet, steel nearby) changes its
+        magnitude; its direction alone can pass the χ² gate while it pulls
+        the heading away (VQF's detector tests the magnitude and the dip;
+        Laidig & Seel 2023, §3.3). Rejected readings are counted as the
+        gate counts them."""
+        tolerance = self.magnetic_norm_tolerance
+        if tolerance is None or observation.sensor != "magnetometer":
+            return True
+        b0, b1, b2 = np.asarray(observation.body, dtype=float).tolist()
+        r0, r1, r2 = np.asarray(observation.reference, dtype=float).tolist()
+        ratio = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2) / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if abs(ratio - 1.0) <= tolerance:
+            return True
+        self._reject(observation.sensor)
+        return False
+
+    def _reject(self, sensor: str) -> None:
+        """Count a rejected reading of ``sensor`` at this step."""
+        self.rejected[sensor] = self.rejected.get(sensor, 0) + 1
+        self.rejections.append((self.step_index - 1, sensor))
+
     def accepts(self, y: np.ndarray, S: np.ndarray, dof: int, sensor: str) -> bool:
         r"""Innovation gating: whether a reading of innovation ``y`` and
         innovation covariance ``S`` passes the χ² test of its NIS,
@@ -619,8 +656,7 @@ class KalmanEstimator(AttitudeEstimator):
         nis = float(y @ np.linalg.solve(S, y))
         if nis <= gate_threshold(self.gate_probability, dof):
             return True
-        self.rejected[sensor] = self.rejected.get(sensor, 0) + 1
-        self.rejections.append((self.step_index - 1, sensor))
+        self._reject(sensor)
         return False
 
     #: The star tracker update's (y, S) on a step whose vector updates followed it.
@@ -719,7 +755,8 @@ class AttitudeAndBiasEstimator(KalmanEstimator):
                          "measurement_covariance": "star_tracker_attitude_covariance_rad2"}
     #: The gyro's σ_v² and σ_u the filter assumes, a factor on the tracker's
     #: R, and the gate (tuned only when named: it is off by default).
-    tunable = (GYRO_NOISE, GYRO_BIAS_RANDOM_WALK, MEASUREMENT_SCALE, GATE_PROBABILITY)
+    tunable = (GYRO_NOISE, GYRO_BIAS_RANDOM_WALK, MEASUREMENT_SCALE, GATE_PROBABILITY,
+               MAGNETIC_NORM_TOLERANCE)
 
     @classmethod
     def settings_from_scenario(cls, scenario) -> dict:

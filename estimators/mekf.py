@@ -128,7 +128,7 @@ from filterpy.kalman import KalmanFilter
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
                                  rotvec_from_quat, skew, to_body_frame)
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
-                             gate_probability_setting)
+                             gate_probability_setting, norm_tolerance_setting)
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -214,6 +214,10 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
     gate_probability : float or None
         Innovation gating: a reading whose NIS exceeds the χ² quantile of
         this probability is rejected (None: no gating).
+    magnetic_norm_tolerance : float or None
+        Magnetic disturbance detection: a magnetometer reading whose
+        magnitude is off its reference's by more than this fraction is
+        rejected (None: no test; :meth:`~estimators.base.KalmanEstimator.passes_norm`).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
@@ -232,10 +236,12 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, output: str = "posterior",
-                 gate_probability: float | None = None, on_invalid: str = "raise"):
+                 gate_probability: float | None = None,
+                 magnetic_norm_tolerance: float | None = None, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self.gate_probability = gate_probability_setting(gate_probability)
+        self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         self.filter = KalmanFilter(dim_x=6, dim_z=3)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
@@ -282,6 +288,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
 
     def correct_vector(self, observation) -> None:
         """Kalman update with one vector reading, then the reset."""
+        if not self.passes_norm(observation):
+            return
         y, H = self.vector_model(observation)
         R = observation.variance * _I3
         if self.gate_probability is not None and not self.accepts(

@@ -7,7 +7,7 @@ tuned value is an ``[estimators.NAME]`` key, reusable in a scenario file):
 
 >>> from estimators import MultiplicativeEKF
 >>> [t.name for t in MultiplicativeEKF.tunable]
-['gyro_noise', 'gyro_bias_random_walk', 'measurement_scale', 'gate_probability']
+['gyro_noise', 'gyro_bias_random_walk', 'measurement_scale', 'gate_probability', 'magnetic_norm_tolerance']
 
 A user's class declares its own the same way. The *default* of a setting is
 the value the estimator takes from the scenario (``from_scenario``, with
@@ -137,6 +137,10 @@ MEASUREMENT_SCALE = Tunable("measurement_scale", "log", (1e-12, 1e12), span=3.0,
 GATE_PROBABILITY = Tunable("gate_probability", "log-complement", (1e-6, 1.0 - 1e-12),
                            search=(0.9, 0.999999),
                            description="the χ² probability of innovation gating")
+MAGNETIC_NORM_TOLERANCE = Tunable("magnetic_norm_tolerance", "log", (1e-6, 1e3),
+                                  search=(0.01, 1.0),
+                                  description="the magnetic disturbance test's tolerance on "
+                                  "the field's magnitude (a fraction)")
 #: A static solver's weight on the magnetometer against the other sensors.
 MAGNETOMETER_WEIGHT = Tunable("magnetometer_weight", "log", (1e-9, 1e9), search=(1e-3, 1e3),
                               description="a factor on the magnetometer's weight σ⁻² in "

@@ -79,7 +79,7 @@ from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_fr
                                  quat_multiply, relative_rotation, to_body_frame)
 from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
-                             gate_probability_setting)
+                             gate_probability_setting, norm_tolerance_setting)
 from estimators.mekf import discrete_error_model
 
 #: n, the filter's state: the attitude error's GRPs and the gyro bias.
@@ -141,7 +141,7 @@ class USQUE(AttitudeAndBiasEstimator):
     ----------
     dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
-    initial_bias_sigma_radps, output, gate_probability, on_invalid
+    initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance, on_invalid
         As for :class:`~estimators.MultiplicativeEKF`.
     alpha, beta, kappa : float
         The scaled sigma points' spread, prior-knowledge and secondary
@@ -165,10 +165,12 @@ class USQUE(AttitudeAndBiasEstimator):
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, alpha: float = 1.0, beta: float = 2.0,
                  kappa: float = 0.0, output: str = "posterior",
-                 gate_probability: float | None = None, on_invalid: str = "raise"):
+                 gate_probability: float | None = None,
+                 magnetic_norm_tolerance: float | None = None, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self.gate_probability = gate_probability_setting(gate_probability)
+        self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
         _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
         _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
@@ -243,9 +245,11 @@ class USQUE(AttitudeAndBiasEstimator):
         reference = np.asarray(observation.reference, dtype=float)
         R = observation.variance * np.eye(3)
         z = np.asarray(observation.body, dtype=float)
-        if self.gate_probability is None or self._gate(z, self._hx_vector, R, observation.dof,
-                                                       observation.sensor,
-                                                       reference=reference):
+        # A rejected reading, by either test, leaves the reset alone.
+        if self.passes_norm(observation) and (
+                self.gate_probability is None or self._gate(
+                    z, self._hx_vector, R, observation.dof, observation.sensor,
+                    reference=reference)):
             self.filter.update(z, R=R, hx=self._hx_vector, reference=reference)
         self._reset()
         self._updated = True

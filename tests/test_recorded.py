@@ -148,3 +148,24 @@ def test_triads_batch_anchors_on_the_heavier_reading_as_solve_does(trial):
     np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-12)
     # The anchor matters: gravity first and the field first are different solutions.
     assert np.max(np.abs(run.estimates - light.estimates)) > 1e-3
+
+
+@pytest.mark.parametrize("name", ["mekf", "usque"])
+def test_a_disturbed_field_is_rejected_by_its_magnitude_on_both_paths(trial, name):
+    scenario, omega, vectors = trial
+    accelerometer, magnetometer = vectors
+    body = magnetometer.body.copy()
+    body[400:700] *= 1.3            # a magnet nearby: the field 30 % stronger
+    disturbed = (accelerometer, replace(magnetometer, body=body))
+    options = dict(scenario.estimator_options)
+    options[name] = {**options[name], "magnetic_norm_tolerance": 0.1}
+    tested = scenario.replace(estimator_options=options)
+    reference, rejected = _per_run(build_estimator(name, tested), omega, disturbed)
+    run = run_recorded(build_estimator(name, tested), omega, disturbed)
+    np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-9)
+    assert run.rejected == rejected
+    assert rejected["magnetometer"] >= 300          # every disturbed reading, at least
+    options[name]["magnetic_norm_tolerance"] = None
+    _, untested = _per_run(build_estimator(name, scenario.replace(estimator_options=options)),
+                           omega, disturbed)
+    assert untested.get("magnetometer", 0) < 300    # the χ² gate alone lets some through

@@ -210,3 +210,19 @@ def test_a_rejected_star_tracker_reading_has_no_nis_and_breaks_nothing(name):
     assert np.isnan(trace.nis[steps[0]]) and np.isnan(trace.nis[steps[2]])
     assert np.isfinite(trace.nis[steps[1]])
     assert trace.nis_dof == (4 if name == "ekf" else 3)
+
+
+def test_the_magnetic_norm_test_rejects_by_magnitude_and_refuses_a_bad_tolerance():
+    from estimators import MultiplicativeEKF
+    from dynamics.validation import InvalidParameterError
+    from sensors.vector import VectorObservation
+    mekf = MultiplicativeEKF(magnetic_norm_tolerance=0.1)
+    mekf.step(np.zeros(3))
+    field = np.array([20.0, 0.0, 40.0])
+    assert mekf.passes_norm(VectorObservation(1.05 * field, field, 1.0, "magnetometer"))
+    assert not mekf.passes_norm(VectorObservation(1.2 * field, field, 1.0, "magnetometer"))
+    # Other sensors are not tested: an accelerometer's magnitude varies in motion.
+    assert mekf.passes_norm(VectorObservation(1.5 * field, field, 1.0, "accelerometer"))
+    assert mekf.rejected == {"magnetometer": 1}
+    with pytest.raises(InvalidParameterError, match="magnetic_norm_tolerance"):
+        MultiplicativeEKF(magnetic_norm_tolerance=-0.1)

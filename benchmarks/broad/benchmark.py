@@ -6,18 +6,15 @@ figure of the groups and one trial's errors over time.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-import numpy as np
 import pandas as pd
-
-from dataclasses import replace
 
 from benchmarks.broad.dataset import BroadDataset
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import METRICS, errors_deg, rmse_of
-from benchmarks.progress import progress
 from benchmarks.engine.recorded import path_of, run_recorded
+from benchmarks.progress import progress
 from estimators import resolve_estimator
 
 #: ``broad`` without ``--estimators``: the textbook filter, a static

@@ -22,7 +22,9 @@ its reference attitude:
 
 In motion the accelerometer also reads the linear acceleration and the
 magnetometer any disturbance: the filters' χ² gate
-(``gate_probability``) is what keeps such readings out.
+(``gate_probability``) keeps such readings out, and for the field a test
+of its magnitude against the rest's (``magnetic_norm_tolerance``): a
+disturbed field can keep a plausible direction, never its magnitude.
 """
 from __future__ import annotations
 
@@ -45,6 +47,10 @@ MOTION_SIGMAS = {"accelerometer": 0.3, "magnetometer": 4.0}
 INITIAL_ATTITUDE_SIGMA_RAD = math.radians(5.0)
 #: The filters' χ² gate on the acc/mag readings unless a section sets one.
 GATE_PROBABILITY = 0.9999
+#: Their magnetic disturbance test: a field reading more than 10 % off the
+#: rest's magnitude is rejected (VQF's default threshold, ``magNormTh``,
+#: taken as published, not tuned here).
+MAGNETIC_NORM_TOLERANCE = 0.1
 
 
 @dataclass(frozen=True)
@@ -104,7 +110,8 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
                                     ("magnetometer", recording.magnetometer_uT, "uT")))
     six_state = {"initial_attitude_sigma_rad": INITIAL_ATTITUDE_SIGMA_RAD,
                  "initial_bias_sigma_radps": INITIAL_BIAS_SIGMA_RADPS,
-                 "gate_probability": GATE_PROBABILITY}
+                 "gate_probability": GATE_PROBABILITY,
+                 "magnetic_norm_tolerance": MAGNETIC_NORM_TOLERANCE}
     scenario = Scenario(
         tstop=(n - 1) * dt, dt=dt, initial_state=start, initial_attitude_quat=start,
         gyro_noise=noise_power, gyro_bias_random_walk=BIAS_RANDOM_WALK,

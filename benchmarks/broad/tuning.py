@@ -46,9 +46,9 @@ FOLDS = 2
 GRIDS = {"madgwick": {"beta": MADGWICK_BETAS}, "madgwick-broad": {"beta": MADGWICK_BETAS}}
 #: The settings tuned where the declared defaults would add one that does
 #: nothing on BROAD (the MEKF's and USQUE's ``measurement_scale`` scales the
-#: star tracker's R; there is no tracker here).
-PARAMETERS = {name: ("gyro_noise", "gyro_bias_random_walk", "gate_probability")
-              for name in ("mekf", "usque")}
+#: star tracker's R; there is no tracker here) or leave out the gates.
+PARAMETERS = {name: ("gyro_noise", "gyro_bias_random_walk", "gate_probability",
+                     "magnetic_norm_tolerance") for name in ("mekf", "usque")}
 MAX_EVALUATIONS = 60
 #: How the table names each mode's numbers.
 MODE_LABELS = {"none": "default settings",

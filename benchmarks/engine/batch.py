@@ -405,9 +405,9 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
                                             np.ascontiguousarray(truth.q_true)))
 
 
-def _record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
-            nees_every: int, settle_steps: int, health: bool, error_every: int,
-            n_sensors: int = 0):
+def new_record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
+                nees_every: int, settle_steps: int, health: bool, error_every: int,
+                n_sensors: int = 0):
     """The kernels' outputs, one row per estimator in ``names``."""
     from benchmarks.engine.kernels.common import N_ACCUMULATORS, N_HEALTH, Record
     rows = len(names)
@@ -517,8 +517,9 @@ def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS
     vectors = scenario.has_vector_sensors and any(
         getattr(module, "VECTOR_READINGS", False) for module in kernels.values())
     sensors = _sensors(scenario, runs, block_steps, threads, vectors)
-    record = _record(names, len(runs), scenario.n_steps, keep_traces, consistency, nees_every,
-                     settle_steps, health, error_every, len(sensors.vectors.sensors))
+    record = new_record(names, len(runs), scenario.n_steps, keep_traces, consistency,
+                        nees_every, settle_steps, health, error_every,
+                        len(sensors.vectors.sensors))
     readings = _advance(scenario, sensors, kernels, states, record, cache_steps, progress_bar)
     return _result(scenario, runs, kernels, objects, states, record,
                    next(iter(readings.values())))

@@ -119,13 +119,13 @@ def _channels(vectors) -> tuple:
 
 def _through_kernel(estimator, omega: np.ndarray, vectors) -> RecordedRun:
     """One run of the estimator's kernel over one block: the recording."""
-    from benchmarks.engine.batch import _record
+    from benchmarks.engine.batch import new_record
     from benchmarks.engine.kernels.common import Block
     from benchmarks.engine.kernels.sensors import SensorState
     module = kernel(estimator.name)
     used = vectors if estimator.uses_vector_readings else ()
     n = len(omega)
-    record = _record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used))
+    record = new_record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used))
     block = Block(
         k0=0, steps=n, last_step=n - 1, dt=float(estimator.dt),
         q_true=np.tile(IDENTITY, (n, 1)), omega_true=omega,
@@ -151,7 +151,9 @@ def _vector_arrays(vectors, n: int) -> dict:
                   vector_reference=np.zeros((n, count, 3)),
                   vector_variance=np.zeros((1, n, count)),
                   vector_available=np.zeros((1, n, count), dtype=bool),
-                  vector_dof=np.array([v.dof for v in vectors], dtype=np.int64))
+                  vector_dof=np.array([v.dof for v in vectors], dtype=np.int64),
+                  vector_magnetic=np.array([v.sensor == "magnetometer" for v in vectors],
+                                           dtype=bool))
     for s, v in enumerate(vectors):
         arrays["vector_body"][0, :, s] = v.body
         arrays["vector_reference"][:, s] = v.reference

@@ -85,7 +85,9 @@ def vector_block(streams: VectorStreams, n_runs: int, k0: int, q_true: np.ndarra
                   vector_reference=np.zeros((steps, count, 3)),
                   vector_variance=np.zeros((n_runs, steps, count)),
                   vector_available=np.zeros((n_runs, steps, count), dtype=bool),
-                  vector_dof=streams.dof)
+                  vector_dof=streams.dof,
+                  vector_magnetic=np.array([sensor.name == "magnetometer"
+                                            for sensor in streams.sensors], dtype=bool))
     if not count:
         return arrays
     references = references_between(streams.references, k0, k0 + steps)

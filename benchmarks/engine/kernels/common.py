@@ -92,6 +92,7 @@ class Block(NamedTuple):
     vector_variance: np.ndarray   # (B, T, S) σ² per axis
     vector_available: np.ndarray  # (B, T, S) bool
     vector_dof: np.ndarray        # (S,) int64
+    vector_magnetic: np.ndarray   # (S,) bool: a magnetometer (its norm tested, passes_norm)
 
 
 #: Per-run streaming accumulators: Welford mean and M2, max, final value.
@@ -459,6 +460,22 @@ def gate_thresholds(estimators) -> dict:
             gate[run, 1:] = [gate_threshold(estimator.gate_probability, dof) for dof in (1, 2, 3)]
     return {"gating": np.array([e.gate_probability is not None for e in estimators]),
             "gate": gate}
+
+
+def norm_tolerances(estimators) -> np.ndarray:
+    """Each run's magnetic norm tolerance, read off its per-run filter
+    (``magnetic_norm_tolerance``; infinite where it does not test)."""
+    return np.array([math.inf if getattr(e, "magnetic_norm_tolerance", None) is None
+                     else float(e.magnetic_norm_tolerance) for e in estimators])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def passes_norm(body, reference, tolerance):
+    """:meth:`estimators.base.KalmanEstimator.passes_norm` of a magnetometer
+    reading: |‖b‖ / ‖r‖ − 1| ≤ ``tolerance``, the same arithmetic."""
+    ratio = math.sqrt(body[0] * body[0] + body[1] * body[1] + body[2] * body[2]) / math.sqrt(
+        reference[0] * reference[0] + reference[1] * reference[1] + reference[2] * reference[2])
+    return abs(ratio - 1.0) <= tolerance
 
 
 #: Health counters per estimator and run (``run_batch(health=True)``): the

@@ -15,6 +15,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               fold_innovation,
                                               gate_thresholds, gauss_jordan, keep_output,
                                               log_error, mark_diverged, nees_arrays,
+                                              norm_tolerances, passes_norm,
                                               quadratic_form, quat_exp, quat_times_normalized,
                                               record_error, to_body_frame)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
@@ -41,6 +42,7 @@ class State(NamedTuple):
     posterior: bool
     gating: np.ndarray           # (B,) bool: the filter gates its readings
     gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
+    magnetic_tolerance: np.ndarray  # (B,) the magnetic norm test's (inf: none)
 
 
 def initial_state(estimators) -> State:
@@ -54,6 +56,7 @@ def initial_state(estimators) -> State:
                  R=np.array([e.filter.R for e in estimators]).reshape(-1, 3, 3),
                  beta_last=beta.copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior",
+                 magnetic_tolerance=norm_tolerances(estimators),
                  **gate_thresholds(estimators))
 
 
@@ -226,7 +229,7 @@ def advance(block, sensors, state, record, row):
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
     (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof) = vector_arrays(block)
+     vector_dof, vector_magnetic) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -234,7 +237,7 @@ def advance(block, sensors, state, record, row):
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
-    rejected = record.rejected[row]
+    rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
         scratch6 = np.empty((10, 6, 6))
@@ -268,6 +271,11 @@ def advance(block, sensors, state, record, row):
                     fold_innovation(run, nis, determinant, likelihood)
             for s in range(vector_dof.shape[0]):
                 if vector_available[run, j, s]:
+                    if vector_magnetic[s] and not passes_norm(
+                            vector_body[run, j, s], vector_reference[j, s],
+                            magnetic_tolerance[run]):
+                        rejected[run, s] += 1      # a disturbed field: no update
+                        continue
                     nis, applied, determinant = _mekf_vector_update(
                         q, beta, P, vector_body[run, j, s], vector_reference[j, s],
                         vector_variance[run, j, s], gating[run], gate[run, vector_dof[s]],

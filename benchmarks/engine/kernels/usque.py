@@ -35,7 +35,7 @@ from numba import njit, prange
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation,
                                               gate_thresholds, gauss_jordan, keep_output,
-                                              mark_diverged, nees_arrays, quadratic_form,
+                                              norm_tolerances, passes_norm, mark_diverged, nees_arrays, quadratic_form,
                                               quat_exp, record_error, to_body_frame)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
@@ -69,6 +69,7 @@ class State(NamedTuple):
     posterior: bool
     gating: np.ndarray           # (B,) bool: the filter gates its readings
     gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
+    magnetic_tolerance: np.ndarray  # (B,) the magnetic norm test's (inf: none)
 
 
 def _spread(points) -> float:
@@ -96,6 +97,7 @@ def initial_state(estimators) -> State:
                  Wc=stack((f.Wc for f in filters), (N_SIGMAS,)),
                  beta_last=x[:, 3:].copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior",
+                 magnetic_tolerance=norm_tolerances(estimators),
                  **gate_thresholds(estimators))
 
 
@@ -344,7 +346,8 @@ def _any_reading(available, run, j):
 @njit(cache=True, error_model="numpy")
 def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, gate,
              vector_body, vector_reference, vector_variance, vector_available, vector_dof,
-             scratch, predicted, R_vector, nis_out, streaming, likelihood, rejected):
+             scratch, predicted, R_vector, nis_out, streaming, likelihood, rejected,
+             vector_magnetic, magnetic_tolerance):
     """The step's updates, as ``USQUE._estimate_at_step`` makes them: the
     tracker's, then each vector reading's, each followed by the reset (or the
     reset alone without any reading), each applied one folded into the
@@ -368,10 +371,15 @@ def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, g
             # Sigma points about the current (x, P) for a second update within a step.
             if updated and not _sigma_points(x, P, spread, sigmas, scratch[0]):
                 return False, applied
-            nis, used, determinant = _vector_update(
-                q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
-                vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]], scratch,
-                predicted, R_vector)
+            if vector_magnetic[s] and not passes_norm(vector_body[run, j, s],
+                                                      vector_reference[j, s],
+                                                      magnetic_tolerance):
+                nis, used, determinant = 0.0, False, 1.0   # a disturbed field: the reset alone
+            else:
+                nis, used, determinant = _vector_update(
+                    q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
+                    vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]], scratch,
+                    predicted, R_vector)
             if streaming and used:
                 fold_innovation(run, nis, determinant, likelihood)
             if not used:
@@ -392,7 +400,7 @@ def advance(block, sensors, state, record, row):
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
     (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof) = vector_arrays(block)
+     vector_dof, vector_magnetic) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -402,7 +410,7 @@ def advance(block, sensors, state, record, row):
                                               state.Wm, state.Wc)
     beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
     gating, gate = state.gating, state.gate
-    rejected = record.rejected[row]
+    rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
     for run in prange(q_all.shape[0]):
         w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
         scratch = np.empty((6, 6, 6))
@@ -433,7 +441,7 @@ def advance(block, sensors, state, record, row):
                 q, x, P, sigmas, available, z, run, j, R_all[run], Wm, Wc, spread[run],
                 gating[run], gate[run], vector_body, vector_reference, vector_variance,
                 vector_available, vector_dof, scratch, propagated, R_vector, nis, streaming,
-                likelihood, rejected)
+                likelihood, rejected, vector_magnetic, magnetic_tolerance[run])
             if not factored:
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
