@@ -80,6 +80,12 @@ class VectorReadings:
         return VectorObservation(self.body[k], self.reference[k], float(self.variance[k]),
                                  self.sensor, self.dof)
 
+    def steps(self, part: slice) -> "VectorReadings":
+        """The readings of the steps ``part`` (a slice of the record)."""
+        return VectorReadings(sensor=self.sensor, body=self.body[part],
+                              reference=self.reference[part], available=self.available[part],
+                              variance=self.variance[part], dof=self.dof, unit=self.unit)
+
     def run(self, index: int) -> "VectorReadings":
         """One run's readings of readings made for several
         (:meth:`VectorSensor.measure_runs`: ``body`` ``(R, N, 3)``,

@@ -30,9 +30,7 @@ def trial():
     dataset = open_broad(shipped_file("datasets/broad/trials.json").parent)
     inputs = imu_inputs(dataset.load("07_undisturbed_fast_rotation_B"))
     part = slice(START, START + LENGTH)
-    vectors = tuple(replace(v, body=v.body[part], reference=v.reference[part],
-                            available=v.available[part], variance=v.variance[part])
-                    for v in inputs.sensors.vectors)
+    vectors = tuple(v.steps(part) for v in inputs.sensors.vectors)
     return inputs.scenario, inputs.sensors.omega_meas_radps[part], vectors
 
 
@@ -57,9 +55,7 @@ def test_each_fast_path_gives_the_per_run_estimates_and_rejections(trial, name, 
     # A used object: the fast path resets it first, as run does.
     estimator = build_estimator(name, scenario)
     estimator.run(omega[:10], np.tile([1.0, 0, 0, 0], (10, 1)), np.zeros(10, bool),
-                  vectors=[replace(v, body=v.body[:10], reference=v.reference[:10],
-                                   available=v.available[:10], variance=v.variance[:10])
-                           for v in vectors])
+                  vectors=[v.steps(slice(10)) for v in vectors])
     run = run_recorded(estimator, omega, vectors)
     assert run.path == path
     # Sign-aligned: q and -q are one attitude, and every path keeps the sign its class keeps.
@@ -137,12 +133,8 @@ def test_triad_on_stacked_pairs_is_triad_on_each(pairs):
 def test_triads_batch_anchors_on_the_heavier_reading_as_solve_does(trial):
     scenario, omega, vectors = trial
     heavy_field = scenario.replace(estimator_options={"triad": {"magnetometer_weight": 1e3}})
-    reference, _ = _per_run(build_estimator("triad", heavy_field), omega[:300],
-                            [replace(v, body=v.body[:300], reference=v.reference[:300],
-                                     available=v.available[:300], variance=v.variance[:300])
-                             for v in vectors])
-    part = [replace(v, body=v.body[:300], reference=v.reference[:300],
-                    available=v.available[:300], variance=v.variance[:300]) for v in vectors]
+    part = [v.steps(slice(300)) for v in vectors]
+    reference, _ = _per_run(build_estimator("triad", heavy_field), omega[:300], part)
     run = run_recorded(build_estimator("triad", heavy_field), omega[:300], part)
     light = run_recorded(build_estimator("triad", scenario), omega[:300], part)
     np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-12)

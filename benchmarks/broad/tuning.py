@@ -37,6 +37,7 @@ from benchmarks.broad.case_study import MADGWICK_BETAS
 from benchmarks.broad.inputs import ImuInputs, imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
+from benchmarks.experiments.tuning import keyword_values
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator
 
@@ -134,11 +135,12 @@ def training_sets(trials, mode: str) -> list[tuple[list, list]]:
             for i, fold in enumerate(folds)]
 
 
-def _tune_task(dataset, training, name, gyro_delay_s, sigmas) -> dict:
-    """One tuning (a Dask task): ``name`` on the ``training`` trials."""
+def _tune_task(dataset, training, names, gyro_delay_s, sigmas) -> dict:
+    """The tunings of one training set (a Dask task): each of ``names`` on
+    the ``training`` trials, loaded once for all of them."""
     cases = [TrialCase(trial, imu_inputs(dataset.load(trial), gyro_delay_s, sigmas))
              for trial in training]
-    return tune_on(name, cases)
+    return {name: tune_on(name, cases) for name in names}
 
 
 def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 0.0,
@@ -147,34 +149,41 @@ def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 
     keyword values}``), and the tidy record of every tuning (estimator,
     training trials, trials scored, values, losses, method)."""
     from benchmarks.engine.runner import map_tasks
-    from benchmarks.experiments.tuning import keyword_values
     from benchmarks.progress import progress
     if mode == "none":
         return {}, pd.DataFrame()
     sets = training_sets(trials, mode)
     names = [name for name in estimators if tunes(name)]
-    tasks = [(dataset, training, name, gyro_delay_s, sigmas)
-             for name in names for training, _ in sets]
-    with progress(total=len(tasks), desc=f"tune ({mode})", unit="tuning", quiet=quiet) as bar:
+    tasks = [(dataset, training, names, gyro_delay_s, sigmas) for training, _ in sets]
+    with progress(total=len(tasks), desc=f"tune ({mode})", unit="training set",
+                  quiet=quiet) as bar:
         found = map_tasks(_tune_task, tasks, workers, bar)
     options, rows, scenarios = {trial: {} for trial in trials}, [], {}
-    for (_, training, name, _, _), result, (_, scored) in zip(
-            tasks, found, [s for _ in names for s in sets]):
-        cls = resolve_estimator(name)
-        scaled = any(t.scales for t in cls.tunable if t.name in result["values"])
-        for trial in scored:
-            if scaled and trial not in scenarios:   # a factor finds its default there
-                scenarios[trial] = imu_inputs(dataset.load(trial), gyro_delay_s,
-                                              sigmas).scenario
-            options[trial][name] = (keyword_values(cls, result["values"], scenarios[trial])
-                                    if scaled else dict(result["values"]))
-        rows.append({"estimator": name, "training": ",".join(_number(t) for t in training),
-                     "scored": ",".join(_number(t) for t in scored),
-                     "method": result["method"], "evaluations": result["evaluations"],
-                     "training_loss_default_deg": result["loss_default"],
-                     "training_loss_deg": result["loss"],
-                     **{f"tuned_{key}": value for key, value in result["values"].items()}})
+    for name in names:
+        for (training, scored), results in zip(sets, found):
+            rows.append(_applied(name, results[name], training, scored, options, scenarios,
+                                 dataset, gyro_delay_s, sigmas))
     return options, pd.DataFrame(rows)
+
+
+def _applied(name: str, result: dict, training, scored, options: dict, scenarios: dict, dataset,
+             gyro_delay_s, sigmas) -> dict:
+    """One tuning's settings put into ``options`` for each trial it scores
+    (a scale factor turned into its setting on that trial's scenario, kept
+    in ``scenarios``); its row of the record."""
+    cls = resolve_estimator(name)
+    scaled = any(t.scales for t in cls.tunable if t.name in result["values"])
+    for trial in scored:
+        if scaled and trial not in scenarios:       # a factor finds its default there
+            scenarios[trial] = imu_inputs(dataset.load(trial), gyro_delay_s, sigmas).scenario
+        options[trial][name] = (keyword_values(cls, result["values"], scenarios[trial])
+                                if scaled else dict(result["values"]))
+    return {"estimator": name, "training": ",".join(_number(t) for t in training),
+            "scored": ",".join(_number(t) for t in scored),
+            "method": result["method"], "evaluations": result["evaluations"],
+            "training_loss_default_deg": result["loss_default"],
+            "training_loss_deg": result["loss"],
+            **{f"tuned_{key}": value for key, value in result["values"].items()}}
 
 
 def _number(trial: str) -> str:
