@@ -35,7 +35,10 @@ both::
                      # (``allow_imports``): importing runs its code
 
 Missing keys take the defaults; an unknown key is an error naming its
-section. Then override field by field::
+section. The sections [orbit], [site] and the vector sensors' are off unless
+their switching key is given (``altitude_km`` or ``tle``, ``latitude_deg``,
+``interval_s``): a section given without it is refused, naming that key,
+rather than silently ignored. Then override field by field::
 
     scenario = Scenario.from_toml("scenarios/default.toml").replace(gyro_noise=1e-4)
 
@@ -48,6 +51,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import tomllib
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +60,7 @@ import math
 import numpy as np
 
 from dynamics.validation import (
+    MISSING,
     InvalidParameterError,
     axis_standard_deviations,
     covariance_matrix,
@@ -67,7 +72,7 @@ from dynamics.validation import (
     process_exponent,
     standard_deviation,
 )
-from dynamics.environment import FIELD_MODELS, SHADOW_MODELS
+from dynamics.environment import FIELD_MODELS, SHADOW_MODELS, igrf_date
 from dynamics.orbit import DEFAULT_EPOCH, TLEOrbit, epoch_datetime, make_orbit, tle_lines
 from estimators import ESTIMATORS, resolve_estimator
 from sensors.accelerometer import Accelerometer
@@ -105,6 +110,10 @@ MAX_STAR_NOISE = 10.0
 #: run, but its time does: at about ten million run-steps a second, one run
 #: of this many steps is a quarter of an hour of the whole machine.
 MAX_STEPS = 10**10
+#: An element set is propagated over the run, when the scenario is checked,
+#: at its every step or at this many steps spread over it (SGP4's failures,
+#: a decay, persist once they start).
+ORBIT_CHECK_STEPS = 10_001
 
 
 def _diag(*values):
@@ -183,23 +192,28 @@ class Scenario:
     star_tracker_to_body_quat : (4,) array
         Rotation model: sensor-to-body rotation ([1, 0, 0, 0]).
     epoch : str or None
-        ISO 8601 UTC time of t = 0: the Sun's and the field's epoch. None:
+        ISO 8601 UTC time of t = 0 (in a file, quoted text or a TOML
+        date-time; 1950-2049): the Sun's and the field's epoch. None:
         the element set's epoch with an ``orbit_tle``, else
         :data:`dynamics.orbit.DEFAULT_EPOCH` (the March equinox of 2026).
     magnetic_field_model, shadow_model : str
         "igrf" or "dipole"; "conical" or "cylindrical" (:mod:`dynamics.environment`).
     orbit_altitude_km : float or None
-        A circular orbit's altitude (None: no orbit), with
+        A circular orbit's altitude (None: no orbit; 100 km to
+        :data:`dynamics.orbit.MAX_ALTITUDE_KM`), with
         ``orbit_inclination_deg``, ``orbit_raan_deg`` and
-        ``orbit_argument_of_latitude_deg`` at the epoch; or ``orbit_tle``,
-        a two-line element set propagated with SGP4 (:mod:`dynamics.orbit`).
+        ``orbit_argument_of_latitude_deg`` at the epoch; or, not both,
+        ``orbit_tle``, a two-line element set propagated with SGP4
+        (:mod:`dynamics.orbit`), checked over the run when the scenario is.
     site_latitude_deg : float or None
         A ground IMU's geodetic latitude (None: none), with
         ``site_longitude_deg`` and ``site_altitude_km``: the reference frame
-        is then east-north-up there.
+        is then east-north-up there (at a pole, the limit along the site's
+        meridian, :mod:`dynamics.environment`).
     magnetometer_interval_s, sun_sensor_interval_s, coarse_sun_interval_s,
     accelerometer_interval_s : float or None
-        Each vector sensor's interval (a whole multiple of dt), or None for
+        Each vector sensor's interval (a whole multiple of dt; longer than
+        ``tstop``, a warning: it reads once, at t = 0), or None for
         no such sensor; their noise and geometry in the fields that follow
         each (:mod:`sensors.magnetometer`, :mod:`sensors.sun_sensor`,
         :mod:`sensors.accelerometer`).
@@ -269,9 +283,11 @@ class Scenario:
         if self.tstop < self.dt:
             raise InvalidParameterError("tstop", self.tstop, f"must be >= dt = {self.dt:g}")
         if self.tstop / self.dt >= MAX_STEPS:
+            steps = self.tstop / self.dt
             raise InvalidParameterError(
-                "tstop", self.tstop, f"makes {self.tstop / self.dt:,.0f} steps of dt = "
-                f"{self.dt:g}; at most {MAX_STEPS:,} steps (tstop = {MAX_STEPS * self.dt:,.0f} s)")
+                "tstop", self.tstop, (f"makes {steps:,.0f}" if steps < 1e15 else
+                                      f"makes {steps:.3g}") + f" steps of dt = {self.dt:g}; at "
+                f"most {MAX_STEPS:,} steps (tstop = {MAX_STEPS * self.dt:,.0f} s)")
         set_("inertia_tensor_kg_m2", inertia_tensor("inertia_tensor_kg_m2",
                                                     self.inertia_tensor_kg_m2))
         set_("initial_attitude_quat", nonzero_quaternion("initial_attitude_quat",
@@ -318,6 +334,7 @@ class Scenario:
         set_("star_tracker_dropout_probability", rotation.dropout_probability)
         set_("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
         self._check_environment()
+        self._warn_of_idle_sensors()
         self._derive_estimator_fields()
         set_("pc_exponent", process_exponent("pc_exponent", self.pc_exponent))
         set_("measurement_covariance", covariance_matrix("measurement_covariance",
@@ -377,6 +394,10 @@ class Scenario:
         one_of("environment.magnetic_field_model", self.magnetic_field_model, FIELD_MODELS)
         one_of("environment.shadow_model", self.shadow_model, SHADOW_MODELS)
         set_("orbit_tle", tle_lines("orbit.tle", self.orbit_tle))
+        if self.orbit_tle and self.orbit_altitude_km is not None:
+            raise InvalidParameterError("orbit.altitude_km", self.orbit_altitude_km,
+                                        "cannot be given with orbit.tle: the orbit is a circular "
+                                        "one (altitude_km) or an element set's (tle), not both")
         orbit, site = self.build_orbit(), self.site
         if orbit is not None and site is not None:
             raise InvalidParameterError("site.latitude_deg", self.site_latitude_deg,
@@ -385,7 +406,14 @@ class Scenario:
         if site is not None and self.magnetic_field_model == "dipole":
             raise InvalidParameterError("environment.magnetic_field_model", "dipole",
                                         "is for orbits; a [site] on the ground takes IGRF")
+        if isinstance(orbit, TLEOrbit):
+            # Here, not steps into a run: show-config must refuse a decay too.
+            steps = np.arange(self.n_steps) if self.n_steps <= ORBIT_CHECK_STEPS else \
+                np.unique(np.linspace(0, self.n_steps - 1, ORBIT_CHECK_STEPS).round())
+            orbit.check_propagation(steps * self.dt)
         self._check_sensor_places(orbit, site)
+        if self.has_vector_sensors and (orbit is not None or site is not None):
+            igrf_date(self.epoch_moment)        # warns if the field is held at IGRF's end
 
     def _check_sensor_places(self, orbit, site) -> None:
         """Each vector sensor where it can read; and some attitude sensor."""
@@ -403,6 +431,20 @@ class Scenario:
             raise InvalidParameterError("star_tracker.model", "none", "leaves no attitude "
                                         "sensor: add a vector sensor ([magnetometer], "
                                         "[sun_sensor], …) or choose a star tracker model")
+
+    def _warn_of_idle_sensors(self) -> None:
+        """A sensor whose interval is longer than the run reads once, at t = 0.
+        Said, not refused: shortening a run (``--tstop``) for a quick look
+        is ordinary, and the run is well defined; but it is rarely meant."""
+        intervals = [(f"{sensor.name}.interval_s", sensor.interval_s)
+                     for sensor in self.build_vector_sensors()]
+        if self.star_tracker_model != "none":
+            intervals.insert(0, ("star_tracker.interval_s", self.time_between_measurements))
+        for name, interval in intervals:
+            if interval > self.tstop:
+                warnings.warn(f"{name} = {interval:g} s is longer than the run (tstop = "
+                              f"{self.tstop:g} s): that sensor reads once, at t = 0",
+                              stacklevel=2)
 
     def build_orbit(self):
         """The :class:`~dynamics.orbit.CircularOrbit` or
@@ -562,14 +604,25 @@ class Scenario:
         paths = [path] if isinstance(path, (str, Path)) else list(path)
         if not paths:
             raise InvalidParameterError("scenario", paths, "must name at least one file")
-        flat, options = {}, {}
+        flat, options, present = {}, {}, {}
         for each in paths:
             data = read_toml(each)
             check_import_consent(data, allow_imports)
             layer = flatten_sections(data)
             for name, settings in layer.pop("estimator_options", {}).items():
                 options.setdefault(name, {}).update(settings)
+            for section in SWITCHES:
+                given = _section_keys(data, section)
+                if given is not None:
+                    present.setdefault(section, []).extend(given)
+            # A later file's orbit replaces an earlier's, circular or element set.
+            if "orbit_tle" in layer:
+                for name in CIRCULAR_ORBIT_FIELDS:
+                    flat.pop(name, None)
+            if "orbit_altitude_km" in layer:
+                flat.pop("orbit_tle", None)
             flat.update(layer)
+        _check_switches(present, flat)
         return cls().replace(**flat, **({"estimator_options": options} if options else {}))
 
     def with_estimator_settings(self, path, *, allow_imports=()) -> "Scenario":
@@ -881,6 +934,52 @@ def flatten_sections(data: dict) -> dict:
     if options:
         put("estimator_options", options, "estimators")
     return flat
+
+
+#: The sections that are off unless a key switches them on: that key (for
+#: [orbit], either of two). A section given without it is refused.
+SWITCHES = {"orbit": ("altitude_km", "tle"), "site": ("latitude_deg",),
+            "magnetometer": ("interval_s",), "sun_sensor": ("interval_s",),
+            "coarse_sun_sensors": ("interval_s",), "accelerometer": ("interval_s",)}
+#: A circular orbit's settings: none of them may stand beside an element set.
+CIRCULAR_ORBIT_FIELDS = ("orbit_altitude_km", "orbit_inclination_deg", "orbit_raan_deg",
+                         "orbit_argument_of_latitude_deg")
+
+
+def _section_keys(data: dict, section: str) -> list[str] | None:
+    """The keys a TOML document gives ``section``, in the section or as flat
+    field names (``magnetometer_sigma_nT``); None if it gives it nothing and
+    has no such section."""
+    keys = list(data[section]) if isinstance(data.get(section), dict) else None
+    for setting in SETTINGS:
+        if setting.section == section and setting.field in data:
+            keys = (keys or []) + [setting.key]
+    return keys
+
+
+def _check_switches(present: dict, flat: dict) -> None:
+    """Refuse a section that is given but off (its switching key missing:
+    its other keys would be silently ignored), and a circular orbit's
+    setting beside an element set."""
+    fields = {(setting.section, setting.key): setting.field for setting in SETTINGS}
+    for section, given in present.items():
+        switches = SWITCHES[section]
+        if any(fields[section, key] in flat for key in switches):
+            continue
+        what = ", ".join(dict.fromkeys(given)) or "no keys"
+        needed = " or ".join(switches)
+        raise InvalidParameterError(
+            f"{section}.{switches[0]}", MISSING,
+            f"must be given: [{section}] is in the file ({what}) but without {needed} it is off "
+            f"and its settings would be ignored; give {needed}, or leave the section out")
+    if "orbit_tle" in flat:
+        for name in CIRCULAR_ORBIT_FIELDS:
+            if name in flat:
+                key = name.removeprefix("orbit_")
+                raise InvalidParameterError(
+                    f"orbit.{key}", _plain(flat[name]), "is a circular orbit's setting, and "
+                    "orbit.tle is given: an element set carries its own orbit; give one or the "
+                    "other")
 
 
 def _key(name: str) -> str:

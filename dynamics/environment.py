@@ -41,12 +41,25 @@ option, the tilted dipole of its first three coefficients
           \qquad m = (g_1^1, h_1^1, g_1^0) \ \text{(nT, Earth-fixed)}.
 
 The field's secular variation over a run is neglected: the coefficients are
-those of the epoch (a few nT a year).
+those of the epoch (a few nT a year). IGRF-14 spans 1900-2030 (its last
+five years the predicted secular variation); an epoch outside is held at
+the nearer end, and said so once as a warning (:func:`igrf_date`).
+
+**On the ground** (:func:`local_level_field_nT`) the reference frame is
+east-north-up. At a pole east and north are undefined; this toolkit takes
+the limit along the meridian of the site's longitude λ: north is the
+direction along that meridian (away from λ at the North Pole, towards it at
+the South Pole), east 90° clockwise from it seen from above, up the
+vertical: the frame of a site a hair's breadth from the pole on that meridian.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import warnings
 from datetime import datetime
+from functools import lru_cache
 
 import numpy as np
 
@@ -113,6 +126,45 @@ def illumination(position_km: np.ndarray, sun_km: np.ndarray, model: str = "coni
     return np.where(c <= b - a, 0.0, lit)
 
 
+@lru_cache(maxsize=1)
+def igrf_span() -> tuple[datetime, datetime]:
+    """The first and last dates of the IGRF coefficients ``ppigrf`` ships
+    (IGRF-14: 1900-01-01 to 2030-01-01), naive UTC."""
+    from ppigrf import ppigrf as module
+    g, _ = module.read_shc(module.shc_fn)
+    return g.index[0].to_pydatetime(), g.index[-1].to_pydatetime()
+
+
+def igrf_date(date: datetime) -> datetime:
+    """``date`` (naive UTC) as IGRF takes it: within its span, or held at the
+    nearer end with a warning (the field then is that end's, not the date's).
+    ``ppigrf`` would print its own notice on standard output past the end
+    and give NaN before the start."""
+    day = date.replace(tzinfo=None)
+    first, last = igrf_span()
+    if first <= day <= last:
+        return day
+    end = first if day < first else last
+    # Issued from this one line (not the caller's): Python's filter then says
+    # it once, however many places ask for the same date.
+    warnings.warn(f"the epoch {day:%Y-%m-%d} is outside IGRF's {first:%Y}-{last:%Y}: the "
+                  f"geomagnetic field is that of {end:%Y-%m-%d}, not of the epoch (it drifts "
+                  "by tens of nT a year)", stacklevel=1)
+    return end
+
+
+def _ppigrf(function, *args, **keywords):
+    """A ``ppigrf`` call with its prints kept off standard output (where a
+    command's tables go): anything it prints becomes a warning instead."""
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        result = function(*args, **keywords)
+    text = " ".join(printed.getvalue().split())
+    if text:
+        warnings.warn(f"ppigrf: {text}", stacklevel=3)
+    return result
+
+
 def _igrf_ecef_nT(position_ecef_km: np.ndarray, date: datetime) -> np.ndarray:
     """IGRF in the Earth-fixed frame, nT (``ppigrf.igrf_gc``: geocentric r,
     colatitude, longitude in, (B_r, B_θ, B_φ) out)."""
@@ -121,8 +173,8 @@ def _igrf_ecef_nT(position_ecef_km: np.ndarray, date: datetime) -> np.ndarray:
     r = np.sqrt(x * x + y * y + z * z)
     colatitude = np.arccos(z / r)
     longitude = np.arctan2(y, x)
-    b_r, b_theta, b_phi = (np.ravel(component) for component in ppigrf.igrf_gc(
-        r, np.degrees(colatitude), np.degrees(longitude), date.replace(tzinfo=None)))
+    b_r, b_theta, b_phi = (np.ravel(component) for component in _ppigrf(
+        ppigrf.igrf_gc, r, np.degrees(colatitude), np.degrees(longitude), igrf_date(date)))
     st, ct, sp, cp = np.sin(colatitude), np.cos(colatitude), np.sin(longitude), np.cos(longitude)
     return np.stack([b_r * st * cp + b_theta * ct * cp - b_phi * sp,
                      b_r * st * sp + b_theta * ct * sp + b_phi * cp,
@@ -135,10 +187,9 @@ def dipole_moment_nT(date: datetime) -> np.ndarray:
     1 on the equator (where :math:`B_r = 2 (g_1^1 \\cos\\phi + h_1^1
     \\sin\\phi)` and :math:`B_\\theta = g_1^0`)."""
     import ppigrf
-    day = date.replace(tzinfo=None)
-    b_r, b_theta, _ = (np.ravel(v) for v in ppigrf.igrf_gc(
-        np.full(2, EARTH_RADIUS_KM), np.full(2, 90.0), np.array([0.0, 90.0]), day,
-        max_degree=1))
+    b_r, b_theta, _ = (np.ravel(v) for v in _ppigrf(
+        ppigrf.igrf_gc, np.full(2, EARTH_RADIUS_KM), np.full(2, 90.0), np.array([0.0, 90.0]),
+        igrf_date(date), max_degree=1))
     return np.array([b_r[0] / 2.0, b_r[1] / 2.0, b_theta[0]])
 
 
@@ -167,11 +218,23 @@ def geomagnetic_field_nT(position_km: np.ndarray, jd: np.ndarray, date: datetime
 def local_level_field_nT(latitude_deg: float, longitude_deg: float, altitude_km: float,
                          date: datetime) -> np.ndarray:
     """IGRF at a place on the ground, in the local east-north-up frame, nT
-    (``ppigrf.igrf``, geodetic coordinates)."""
+    (``ppigrf.igrf``, geodetic coordinates); at a pole, in the frame of the
+    limit along the site's meridian (module docstring)."""
     import ppigrf
-    east, north, up = (float(np.ravel(v)[0]) for v in ppigrf.igrf(
-        longitude_deg, latitude_deg, altitude_km, date.replace(tzinfo=None)))
-    return np.array([east, north, up])
+    day = igrf_date(date)
+    if abs(latitude_deg) != 90.0:
+        east, north, up = (float(np.ravel(v)[0]) for v in _ppigrf(
+            ppigrf.igrf, longitude_deg, latitude_deg, altitude_km, day))
+        return np.array([east, north, up])
+    # At the pole ppigrf's east component is 0/0 (B_φ carries 1/sin θ), but
+    # its north and up, along any meridian, are the limits along it. East
+    # along the meridian λ is north along the meridian λ - 90° at the North
+    # Pole, λ + 90° at the South Pole: the same horizontal direction.
+    turned = longitude_deg - math.copysign(90.0, latitude_deg)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        _, north, up = (np.ravel(v) for v in _ppigrf(
+            ppigrf.igrf, np.array([longitude_deg, turned]), latitude_deg, altitude_km, day))
+    return np.array([float(north[1]), float(north[0]), float(up[0])])
 
 
 class References:

@@ -16,6 +16,17 @@ import numpy as np
 MAX_STANDARD_DEVIATION = math.sqrt(sys.float_info.max)
 
 
+class _Missing:
+    """The value of a parameter that was not given (shown as such in a message)."""
+
+    def __repr__(self) -> str:
+        return "(not given)"
+
+
+#: Stands for a value left out, e.g. the key that switches a section on.
+MISSING = _Missing()
+
+
 class InvalidParameterError(ValueError):
     """A parameter broke a rule; ``str(err)`` is a one-line explanation."""
 
@@ -130,6 +141,23 @@ def finite_vector(name: str, value, length: int) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise InvalidParameterError(name, value, "must be finite")
     return array
+
+
+def unit_vector(name: str, value) -> np.ndarray:
+    """``value``, a direction (3 finite numbers, not all zero), as a unit vector.
+
+    Scaled by a power of two near its largest component before it is
+    normalised: the norm of ``[1e300, 0, 0]`` overflows (and that of
+    ``[1e-200, 0, 0]`` underflows) a double, which would make the direction
+    zero or NaN. A power of two scales exactly, so an ordinary vector's unit
+    vector is the same bits as ``v / |v|``."""
+    vector = finite_vector(name, value, 3)
+    largest = float(np.abs(vector).max())
+    if largest == 0.0:
+        raise InvalidParameterError(name, value, "must be a direction: 3 finite numbers, "
+                                    "not all zero")
+    scaled = np.ldexp(vector, -math.frexp(largest)[1])
+    return scaled / np.linalg.norm(scaled)
 
 
 def nonzero_quaternion(name: str, value) -> np.ndarray:

@@ -22,11 +22,16 @@ from __future__ import annotations
 import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
-from dynamics.validation import finite_vector, standard_deviation
+from dynamics.validation import InvalidParameterError, finite_vector, standard_deviation
 from sensors.vector import VectorReadings, VectorSensor, normals, to_body
 
 #: The specific force at rest in the east-north-up frame, m/s².
 GRAVITY_REACTION_ENU_MPS2 = np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
+#: The largest noise σ or bias per axis, m/s² (16 g): the widest full-scale
+#: range of the MEMS accelerometers in IMUs (±16 g: ADXL345, MPU-6050,
+#: BMI160, LSM6DSO). Beyond it a reading saturates; a gravity sensor's
+#: 1 g would be lost in it.
+MAX_SPECIFIC_FORCE_MPS2 = 16.0 * STANDARD_GRAVITY_MPS2
 
 
 class Accelerometer(VectorSensor):
@@ -50,7 +55,15 @@ class Accelerometer(VectorSensor):
         super().__init__(interval_s, dt)
         self.sigma_mps2 = standard_deviation("accelerometer.sigma_mps2", sigma_mps2,
                                              strictly_positive=True)
+        if self.sigma_mps2 > MAX_SPECIFIC_FORCE_MPS2:
+            raise InvalidParameterError("accelerometer.sigma_mps2", sigma_mps2, f"must be at "
+                                        f"most {MAX_SPECIFIC_FORCE_MPS2:g} m/s^2 (16 g, an IMU "
+                                        "accelerometer's widest range)")
         self.bias_mps2 = finite_vector("accelerometer.bias_mps2", bias_mps2, 3)
+        if np.abs(self.bias_mps2).max() > MAX_SPECIFIC_FORCE_MPS2:
+            raise InvalidParameterError("accelerometer.bias_mps2", bias_mps2, f"each component "
+                                        f"must be within ±{MAX_SPECIFIC_FORCE_MPS2:g} m/s^2 "
+                                        "(16 g, an IMU accelerometer's widest range)")
 
     def measure_runs(self, q_true: np.ndarray, references, rngs,
                      first_step: int = 0) -> VectorReadings:

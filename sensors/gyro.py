@@ -74,6 +74,14 @@ from dynamics.validation import InvalidParameterError, finite_number, finite_vec
 #: What a reading's rate is: the true rate at the step's start (the
 #: workshop's), or the average over the step (an integrating gyro's).
 SAMPLINGS = ("sample", "average")
+#: The largest bias (each axis, rad/s, about 570 °/s) and bias instability
+#: σ_b a gyro may have: far beyond any gyro's (a MEMS gyro's is a fraction
+#: of a degree per second), and a hundredth of the ±1000 rad/s an estimator
+#: accepts, so that readings stay readings.
+MAX_BIAS_RADPS = 10.0
+#: The largest bias rate random walk σ_u, rad/s^1.5 (a MEMS gyro's is about
+#: 1e-4; beyond this the bias is noise in a few seconds).
+MAX_BIAS_RANDOM_WALK = 1.0
 
 
 def average_rates(q_true: np.ndarray, dt: float, q_after=None, last_rate=None) -> np.ndarray:
@@ -107,6 +115,13 @@ def equivalent_bias_random_walk(bias_random_walk: float, instability_radps: floa
     if instability_radps == 0.0:
         return bias_random_walk
     return math.sqrt(bias_random_walk ** 2 + 2.0 * instability_radps ** 2 / correlation_time_s)
+
+
+def _check_at_most(name: str, number: float, limit: float, unit: str, given=None) -> None:
+    """Refuse a bias setting beyond what any gyro has (the limits above)."""
+    if number > limit:
+        raise InvalidParameterError(name, number if given is None else given,
+                                    f"must be at most {limit:g} {unit}, beyond any gyro's")
 
 
 def scale_misalignment_matrix(name: str, value) -> np.ndarray | None:
@@ -162,11 +177,17 @@ class Gyro:
         self.bias_random_walk = finite_number("gyro_bias_random_walk", bias_random_walk,
                                               minimum=0.0)
         self.initial_bias_radps = finite_vector("gyro_initial_bias_radps", initial_bias_radps, 3)
+        _check_at_most("gyro_initial_bias_radps", np.abs(self.initial_bias_radps).max(),
+                       MAX_BIAS_RADPS, "rad/s on every axis", initial_bias_radps)
+        _check_at_most("gyro_bias_random_walk", self.bias_random_walk, MAX_BIAS_RANDOM_WALK,
+                       "rad/s^1.5")
         self.scale_misalignment = scale_misalignment_matrix("gyro_scale_misalignment",
                                                             scale_misalignment)
         self.sampling = one_of("gyro_sampling", sampling, SAMPLINGS)
         self.bias_instability_radps = finite_number(
             "gyro_bias_instability_radps", bias_instability_radps, minimum=0.0)
+        _check_at_most("gyro_bias_instability_radps", self.bias_instability_radps,
+                       MAX_BIAS_RADPS, "rad/s")
         self.bias_correlation_time_s = finite_number(
             "gyro_bias_correlation_time_s", bias_correlation_time_s, strictly_positive=True)
         self.std_radps = self.reading_std(self.noise_power, self.dt, self.bias_random_walk)

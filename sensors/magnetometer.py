@@ -23,6 +23,23 @@ from dynamics.validation import (InvalidParameterError, finite_vector, float_arr
                                  standard_deviation)
 from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
 
+#: The largest field a reading may carry, per axis, nT (ten gauss): beyond
+#: the full-scale range of spacecraft and IMU magnetometers (±8 gauss for a
+#: Honeywell HMC5883L, ±800 µT for a PNI RM3100) and fifteen times the
+#: strongest geomagnetic field (about 67,000 nT). A noise σ or a hard-iron
+#: bias beyond it would make every reading saturate, or noise alone.
+MAX_FIELD_NT = 1e6
+#: The soft-iron matrix's largest condition number (the ratio of its
+#: strongest to its weakest axis): beyond it an axis is a million times
+#: weaker than another, dead rather than soft, and a calibration could not
+#: invert the matrix. The ratio is scale-free, as invertibility is: 0.001·I
+#: is as invertible as I (a determinant, 1e-9 there, is not a test of it).
+MAX_SOFT_IRON_CONDITION = 1e6
+#: The soft-iron matrix's largest gain (its largest singular value): soft iron
+#: bends and scales the field by tens of per cent; ten times the strongest
+#: geomagnetic field is still within :data:`MAX_FIELD_NT`.
+MAX_SOFT_IRON_GAIN = 10.0
+
 
 class Magnetometer(VectorSensor):
     """A three-axis magnetometer reading every ``interval_s`` seconds.
@@ -48,13 +65,16 @@ class Magnetometer(VectorSensor):
         super().__init__(interval_s, dt)
         self.sigma_nT = standard_deviation("magnetometer.sigma_nT", sigma_nT,
                                            strictly_positive=True)
+        if self.sigma_nT > MAX_FIELD_NT:
+            raise InvalidParameterError("magnetometer.sigma_nT", sigma_nT, f"must be at most "
+                                        f"{MAX_FIELD_NT:g} nT (10 gauss, beyond any "
+                                        "magnetometer's range): readings would be noise alone")
         self.bias_nT = finite_vector("magnetometer.bias_nT", bias_nT, 3)
-        rule = "must be a finite, invertible 3x3 matrix"
-        matrix = float_array("magnetometer.soft_iron", soft_iron, rule)
-        if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)) or \
-                abs(np.linalg.det(matrix)) < 1e-6:
-            raise InvalidParameterError("magnetometer.soft_iron", matrix.tolist(), rule)
-        self.soft_iron = matrix
+        if np.abs(self.bias_nT).max() > MAX_FIELD_NT:
+            raise InvalidParameterError("magnetometer.bias_nT", bias_nT, f"each component must "
+                                        f"be within ±{MAX_FIELD_NT:g} nT (10 gauss, beyond any "
+                                        "magnetometer's range)")
+        self.soft_iron = _soft_iron(soft_iron)
 
     def measure_runs(self, q_true: np.ndarray, references, rngs,
                      first_step: int = 0) -> VectorReadings:
@@ -69,3 +89,28 @@ class Magnetometer(VectorSensor):
         body = np.zeros((len(rngs), len(q_true), 3))
         body[:, steps] = truth + self.sigma_nT * normals(rngs, (len(steps), 3))
         return self.readings(body, field_nT, available, self.sigma_nT ** 2)
+
+
+def _soft_iron(value) -> np.ndarray:
+    """A soft-iron matrix: finite, 3x3, invertible by its condition number
+    (:data:`MAX_SOFT_IRON_CONDITION`), its gain at most :data:`MAX_SOFT_IRON_GAIN`."""
+    name = "magnetometer.soft_iron"
+    matrix = float_array(name, value, "must be a 3x3 matrix of numbers")
+    if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
+        raise InvalidParameterError(name, matrix.tolist(), "must be a finite 3x3 matrix")
+    # Singular values of a finite matrix of entries up to 1e308 can overflow;
+    # those of its scaled copy cannot, and the ratio does not change.
+    largest = float(np.abs(matrix).max())
+    gains = np.linalg.svd(matrix / largest, compute_uv=False) * largest if largest else \
+        np.zeros(3)
+    if not gains[-1] > 0 or gains[0] / gains[-1] > MAX_SOFT_IRON_CONDITION:
+        condition = gains[0] / gains[-1] if gains[-1] > 0 else float("inf")
+        raise InvalidParameterError(name, matrix.tolist(), f"must be invertible: its "
+                                    f"condition number is {condition:.3g}, at most "
+                                    f"{MAX_SOFT_IRON_CONDITION:g} (its weakest axis a millionth "
+                                    "of its strongest)")
+    if gains[0] > MAX_SOFT_IRON_GAIN:
+        raise InvalidParameterError(name, matrix.tolist(), f"multiplies the field by up to "
+                                    f"{gains[0]:.3g}; at most {MAX_SOFT_IRON_GAIN:g} (soft iron "
+                                    "scales it by tens of per cent)")
+    return matrix

@@ -236,6 +236,10 @@ def outage_windows(name: str, value) -> tuple[tuple[float, float], ...]:
     return tuple(windows)
 
 
+#: The largest error σ of the rotation model, arcsec: 180°.
+MAX_SIGMA_ARCSEC = 648000.0
+
+
 class RotationStarTracker:
     """A star tracker whose error is a small rotation in its own frame.
 
@@ -268,6 +272,10 @@ class RotationStarTracker:
         if np.any(self.sigma_arcsec < 0):
             raise InvalidParameterError("star_tracker_sigma_arcsec", sigma_arcsec,
                                         "must be >= 0 on every axis")
+        if np.any(self.sigma_arcsec > MAX_SIGMA_ARCSEC):
+            raise InvalidParameterError("star_tracker_sigma_arcsec", sigma_arcsec,
+                                        f"must be at most {MAX_SIGMA_ARCSEC:g} arcsec (180°) on "
+                                        "every axis: no rotation is further from another")
         self.dt = finite_number("dt", dt, strictly_positive=True)
         self.time_between_measurements = reading_interval(time_between_measurements, self.dt)
         #: ``m`` with readings every ``m`` steps, or None off the gyro grid.

@@ -40,7 +40,7 @@ import math
 import numpy as np
 
 from dynamics.validation import InvalidParameterError, finite_number, float_array, \
-    standard_deviation
+    standard_deviation, unit_vector
 from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
 
 #: Illumination below which a sun sensor gives no reading (1: full Sun).
@@ -54,6 +54,13 @@ OPPOSITE_COSINE = 0.99
 SPAN_TOLERANCE = 1e-9
 #: The lit faces' normal matrix must be better conditioned than this.
 MAX_CONDITION = 1e6
+#: The largest fine sun sensor σ, degrees: no direction is more than 180°
+#: from another, so an angle's σ beyond it means nothing (long before it,
+#: a reading is noise alone).
+MAX_SIGMA_DEG = 180.0
+#: The largest coarse sun sensor σ_c, a fraction of the full-sun current:
+#: beyond the whole signal, every face reads its noise alone.
+MAX_CURRENT_SIGMA = 1.0
 #: The six faces of a cube, outward normals in the body frame.
 CUBE_FACES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0),
               (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
@@ -87,13 +94,6 @@ def _distinct_rows(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (distinct[:, None] >> np.arange(flags.shape[1]) & 1).astype(bool), which
 
 
-def _unit_vector(name: str, value) -> np.ndarray:
-    vector = float_array(name, value, "must be 3 finite numbers of non-zero length")
-    if vector.shape != (3,) or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) == 0:
-        raise InvalidParameterError(name, value, "must be 3 finite numbers of non-zero length")
-    return vector / np.linalg.norm(vector)
-
-
 class FineSunSensor(VectorSensor):
     """A fine sun sensor (module docstring).
 
@@ -114,14 +114,18 @@ class FineSunSensor(VectorSensor):
     def __init__(self, sigma_deg: float, interval_s: float, dt: float, *, fov_deg: float = 70.0,
                  boresight=(0.0, 0.0, 1.0)):
         super().__init__(interval_s, dt)
-        self.sigma_rad = math.radians(standard_deviation("sun_sensor.sigma_deg", sigma_deg,
-                                                         strictly_positive=True))
+        sigma = standard_deviation("sun_sensor.sigma_deg", sigma_deg, strictly_positive=True)
+        if sigma > MAX_SIGMA_DEG:
+            raise InvalidParameterError("sun_sensor.sigma_deg", sigma_deg, f"must be at most "
+                                        f"{MAX_SIGMA_DEG:g} degrees: no direction is further "
+                                        "than that from another")
+        self.sigma_rad = math.radians(sigma)
         fov = finite_number("sun_sensor.fov_deg", fov_deg, strictly_positive=True)
         if fov > 90.0:
             raise InvalidParameterError("sun_sensor.fov_deg", fov_deg,
                                         "must be at most 90 degrees (a half-angle)")
         self.fov_deg = fov
-        self.boresight = _unit_vector("sun_sensor.boresight", boresight)
+        self.boresight = unit_vector("sun_sensor.boresight", boresight)
 
     def measure_runs(self, q_true: np.ndarray, references, rngs,
                      first_step: int = 0) -> VectorReadings:
@@ -163,17 +167,23 @@ class CoarseSunSensors(VectorSensor):
         super().__init__(interval_s, dt)
         self.sigma = standard_deviation("coarse_sun_sensors.sigma", sigma,
                                         strictly_positive=True)
+        if self.sigma > MAX_CURRENT_SIGMA:
+            raise InvalidParameterError("coarse_sun_sensors.sigma", sigma, f"must be at most "
+                                        f"{MAX_CURRENT_SIGMA:g} (the full-sun current): beyond "
+                                        "it every face reads its noise alone")
         faces = float_array("coarse_sun_sensors.normals", normals,
                             "must be a list of 3-vectors (the faces' outward normals)")
+        rule = ("must be at least three finite 3-vectors of non-zero length (the faces' "
+                "outward normals)")
         if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) < 3 or \
-                not np.all(np.isfinite(faces)) or np.any(np.linalg.norm(faces, axis=1) == 0):
-            raise InvalidParameterError("coarse_sun_sensors.normals", np.asarray(normals).tolist(),
-                                        "must be at least three finite 3-vectors of non-zero "
-                                        "length (the faces' outward normals)")
-        if np.linalg.matrix_rank(faces) < 3:
+                not np.all(np.isfinite(faces)) or np.any(np.abs(faces).max(axis=1) == 0):
+            raise InvalidParameterError("coarse_sun_sensors.normals", faces.tolist(), rule)
+        # Normalised before the rank is taken: [1e300, 0, 0] is a direction too.
+        units = np.array([unit_vector("coarse_sun_sensors.normals", face) for face in faces])
+        if np.linalg.matrix_rank(units) < 3:
             raise InvalidParameterError("coarse_sun_sensors.normals", faces.tolist(),
                                         "must span three dimensions")
-        self.normals = faces / np.linalg.norm(faces, axis=1, keepdims=True)
+        self.normals = units
 
     def _sun_vectors(self, currents: np.ndarray):
         """The least-squares Sun vectors of ``(M, N)`` sets of currents and
