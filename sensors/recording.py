@@ -29,6 +29,12 @@ REQUIRED_KEYS = ("imu_gyr_radps", "opt_quat", "movement", "sampling_rate_hz")
 #: The optional vector channels: the accelerometer (N, 3) m/s², the
 #: magnetometer (N, 3) µT.
 VECTOR_KEYS = ("imu_acc_mps2", "imu_mag_uT")
+#: The largest reading each vector channel may hold, per axis, in its unit:
+#: ten times the widest range of such sensors (a high-g MEMS accelerometer's
+#: ±200 g, about 2,000 m/s²; a MEMS magnetometer's ±4.9 mT, 4,900 µT). A
+#: larger finite reading (1e300) is a corrupt file, and its square, which
+#: every filter and every variance takes, overflows.
+VECTOR_LIMITS = {"imu_acc_mps2": (2e4, "m/s²"), "imu_mag_uT": (5e4, "µT")}
 #: A reference quaternion may be off unit length by this much (rounding of
 #: the recording, not a different convention or scale).
 UNIT_TOLERANCE = 1e-6
@@ -203,6 +209,11 @@ def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:
     bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
     if len(bad):
         refuse(f"{key} must be finite; row {bad[0]} is {array[bad[0]].tolist()}")
+    limit, unit = VECTOR_LIMITS[key]
+    huge = np.flatnonzero(np.abs(array).max(axis=1) > limit)
+    if len(huge):
+        refuse(f"{key} must be within ±{limit:g} {unit} (ten times any such sensor's range); "
+               f"row {huge[0]} is {array[huge[0]].tolist()}")
     return array
 
 

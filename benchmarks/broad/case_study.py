@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.complementary import NWU_TO_ENU
 from dynamics.quaternion import quat_multiply
+from dynamics.validation import InvalidParameterError
+from estimators.complementary import NWU_TO_ENU
 
 #: The authors' grids (``process_data.py``).
 MADGWICK_BETAS = np.round(np.arange(0.01, 0.300001, 0.01), 8)
@@ -28,12 +29,18 @@ RESULT_FILES = {"madgwick-broad": "case_study/results_madgwick_average_rmse.json
                 "mahony": "case_study/results_mahony_average_rmse.json"}
 
 
+#: Where the authors' result files hold their numbers: per trial, at the
+#: chosen setting and at each trial's best.
+RESULT_KINDS = ("tagp_parameters", "minimum_value")
+
+
 def authors_initial_state(acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
     """The authors' ``quatFromAccMag`` (``broad_utils.py``), verbatim, as
     their filters' NWU state, turned to ENU as this toolkit's estimators take
     it. It is exact only for a level sensor with x east or west (BROAD's
     trials start so): :func:`benchmarks.broad.inputs.initial_attitude` is
-    the general one."""
+    the general one. The two readings must be non-zero and not parallel
+    (:func:`start_readings` gives such a pair)."""
     z = np.asarray(acc, dtype=float)
     x = np.cross(np.cross(z, -np.asarray(mag, dtype=float)), z)
     y = np.cross(z, x)
@@ -47,14 +54,58 @@ def authors_initial_state(acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
     return quat_multiply(NWU_TO_ENU, q)
 
 
+def start_readings(recording) -> tuple[np.ndarray, np.ndarray]:
+    """The accelerometer and magnetometer readings the authors' filters
+    start from: the first sample's, as theirs, or where that pair is
+    unusable (a dropout, two parallel readings) the first usable pair of
+    the rest (:func:`benchmarks.broad.inputs.start_sample`)."""
+    from benchmarks.broad.inputs import start_sample
+    first = start_sample(recording)
+    return recording.accelerometer_mps2[first], recording.magnetometer_uT[first]
+
+
 def published_results(folder: Path) -> dict:
-    """``estimator → the authors' JSON`` for the result files present in ``folder``."""
+    """``estimator → the authors' JSON`` for the result files present in
+    ``folder``, each checked (:func:`checked_results`)."""
     found = {}
     for name, relative in RESULT_FILES.items():
         path = Path(folder) / relative
         if path.is_file():
-            found[name] = json.loads(path.read_text())
+            found[name] = checked_results(path, relative)
     return found
+
+
+def checked_results(path: Path, shown: str | None = None) -> dict:
+    """An authors' result file read and checked where it is read: an
+    object whose ``trials`` (if any) map each trial to an object whose
+    :data:`RESULT_KINDS` (if any) map metrics to numbers. Anything else is
+    one line naming the file (as ``shown``, its path in the BROAD folder),
+    the entry and the rule."""
+    def refuse(rule: str):
+        raise InvalidParameterError("case_study", shown or str(path), rule)
+    try:
+        results = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        refuse(f"cannot be read as JSON ({type(err).__name__}: {err})")
+    if not isinstance(results, dict):
+        refuse(f"holds {type(results).__name__}; must be an object with the authors' trials "
+               "({\"trials\": {name: {\"tagp_parameters\": {metric: number}, ...}}})")
+    trials = results.get("trials", {})
+    if not isinstance(trials, dict):
+        refuse(f"trials is {type(trials).__name__}; must be an object of trials by name")
+    for trial, entry in trials.items():
+        if not isinstance(entry, dict):
+            refuse(f"trial {trial} is {type(entry).__name__}; must be an object of "
+                   f"{' and '.join(RESULT_KINDS)}")
+        for kind in RESULT_KINDS:
+            values = entry.get(kind, {})
+            if not isinstance(values, dict):
+                refuse(f"trial {trial}'s {kind} is {type(values).__name__}; must be an object "
+                       "of metrics")
+            for metric, value in values.items():
+                if isinstance(value, bool) or not isinstance(value, (int, float)):
+                    refuse(f"trial {trial}'s {kind} {metric} = {value!r}; must be a number")
+    return results
 
 
 def reproduce(dataset, trials, published: dict, quiet: bool = False) -> "pd.DataFrame":
@@ -73,8 +124,7 @@ def reproduce(dataset, trials, published: dict, quiet: bool = False) -> "pd.Data
         for trial in trials:
             recording = dataset.load(trial)
             sensors = imu_inputs(recording).sensors
-            start = authors_initial_state(recording.accelerometer_mps2[0],
-                                          recording.magnetometer_uT[0])
+            start = authors_initial_state(*start_readings(recording))
             for name, settings in CHOSEN.items():
                 estimator = resolve_estimator(name)(dt=recording.dt, initial_attitude=start,
                                                     **settings)
@@ -110,7 +160,7 @@ def trial_grid(dataset, trial: str, name: str) -> np.ndarray:
     from estimators import resolve_estimator
     recording = dataset.load(trial)
     sensors = imu_inputs(recording).sensors
-    start = authors_initial_state(recording.accelerometer_mps2[0], recording.magnetometer_uT[0])
+    start = authors_initial_state(*start_readings(recording))
     cls, scores = resolve_estimator(name), []
     for point in grid_points(name):
         run = run_recorded(cls(dt=recording.dt, initial_attitude=start, **point),

@@ -5,16 +5,29 @@ ships two of them, ``NN_name.npz`` (:func:`sensors.recording.load_recording`'s
 keys). Where the folder comes from: ``--broad DIR``, else the environment
 variable :data:`ENVIRONMENT_VARIABLE`, else the shipped subset
 ``datasets/broad/`` (trials 02 and 07).
+
+Everything read is checked where it is read, and a folder that breaks a
+rule is one line naming the file, the value and the rule: ``trials.json``
+must be BROAD's index (:func:`open_broad`), a trial must be a readable
+file with the published keys, finite readings within their sensors'
+ranges (:func:`sensors.recording.checked_recording`) and a rest the
+estimators can be configured and started from
+(:func:`benchmarks.broad.inputs.runnable_rule`); the trials asked for must
+be named once each, and at least one of them must have something to score
+(:meth:`BroadDataset.selected`).
 """
 from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
+from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
 from sensors.recording import Recording, checked_recording, load_recording
@@ -64,34 +77,89 @@ class BroadDataset:
         raise InvalidParameterError("trials", text, f"is not a trial of {self.folder} (present: "
                                     f"{', '.join(n.split('_', 1)[0] for n in self.available)})")
 
+    def selected(self, names=None) -> list[str]:
+        """The trials ``names`` (numbers or full names, :meth:`trial_name`;
+        None or empty: every trial present), each loaded once to check it
+        (:meth:`load`), before any is run.
+
+        Refused, in one line: a trial named twice (``02,2``: it would count
+        twice in every mean, and a tuning would score it on settings tuned on
+        itself), any trial :meth:`load` refuses, and a selection with nothing
+        to score (every trial :func:`~benchmarks.broad.metric.unscored_reason`
+        names). A trial with nothing to score beside others that have is
+        run, and left out of the group means by name
+        (:func:`benchmarks.broad.benchmark.group_means`)."""
+        if not names:
+            trials = self.available
+        else:
+            trials, given = [], {}
+            for text in names:
+                name = self.trial_name(str(text).strip())
+                if name in given:
+                    raise InvalidParameterError(
+                        "trials", text, f"names trial {name} a second time (first as "
+                        f"{given[name]!r}); each trial may be named once")
+                given[name] = text
+                trials.append(name)
+        reasons = {name: self.unscored(name) for name in trials}
+        if all(reasons.values()):
+            raise InvalidParameterError(
+                "trials", ",".join(name.split("_", 1)[0] for name in trials),
+                "nothing to score: " + "; ".join(f"{name} {why}" for name, why in
+                                                 reasons.items()))
+        return trials
+
+    def unscored(self, name: str) -> str | None:
+        """Why trial ``name`` has nothing to score, loaded (None: it has)."""
+        recording = self.load(name)
+        return unscored_reason(int(np.count_nonzero(recording.movement)), int(np.count_nonzero(
+            scored_samples(recording.reference_quat, recording.movement))))
+
     def members(self, group: str) -> list[str]:
         """The trials present that belong to ``group``."""
         return [name for name in self.available if group in self.trials[name]["groups"]]
 
     def load(self, name: str) -> Recording:
-        """Trial ``name`` as a checked recording with its accelerometer and magnetometer."""
+        """Trial ``name`` as a checked recording with its accelerometer and
+        magnetometer, and a rest the estimators can be configured and
+        started from (:func:`~benchmarks.broad.inputs.runnable_rule`); a note
+        (a warning) says how many readings are dropouts (exactly zero,
+        left out) and where the start was taken if not at the first sample."""
         path = self.files[name]
-        if path.suffix == ".npz":
-            recording = load_recording(path, name)
-        else:
-            arrays = _read_hdf5(path) if path.suffix == ".hdf5" else _read_mat(path)
+        # The file as the folder holds it: a long path would be cut short in
+        # the message, and the trial's name with it.
+        shown = str(path.relative_to(self.folder))
 
-            def refuse(rule: str):
-                raise InvalidParameterError("trial", str(path), rule)
+        def refuse(rule: str):
+            raise InvalidParameterError("trial", shown, rule)
+        if path.suffix == ".npz":
+            try:
+                recording = load_recording(path, name)
+            except InvalidParameterError as err:
+                refuse(err.rule)
+        else:
+            arrays = (_read_hdf5 if path.suffix == ".hdf5" else _read_mat)(path, refuse)
             missing = [key for key in PUBLISHED_KEYS if key not in arrays]
             if missing:
                 refuse(f"has no key {missing[0]!r}; a BROAD trial holds "
                        f"{', '.join(PUBLISHED_KEYS)}")
             data = {PUBLISHED_KEYS[key]: np.asarray(value) for key, value in arrays.items()
                     if key in PUBLISHED_KEYS}
-            data["movement"] = data["movement"].reshape(-1)
-            data["sampling_rate_hz"] = data["sampling_rate_hz"].reshape(())
-            if "info" in arrays:
-                data["info"] = np.asarray(str(np.asarray(arrays["info"]).reshape(-1)[0]))
+            # MATLAB stores a vector as an (N, 1) matrix and a number as (1, 1);
+            # any other shape is left for checked_recording to name.
+            data["movement"] = _column(data["movement"])
+            if data["sampling_rate_hz"].size == 1:
+                data["sampling_rate_hz"] = data["sampling_rate_hz"].reshape(())
+            info = np.asarray(arrays.get("info", ())).reshape(-1)
+            if info.size and info.dtype.kind in "USO":
+                data["info"] = np.asarray(str(info[0]))
             recording = checked_recording(data, name, refuse)
         if not recording.has_vectors:
-            raise InvalidParameterError("trial", str(path), "has no accelerometer or no "
-                                        "magnetometer channel (imu_acc, imu_mag)")
+            refuse("has no accelerometer or no magnetometer channel (imu_acc, imu_mag)")
+        rule = runnable_rule(recording)
+        if rule:
+            refuse(rule)
+        _note_dropouts(recording, path)
         return recording
 
 
@@ -105,8 +173,8 @@ def broad_folder(given: Path | None = None) -> Path:
 
 
 def open_broad(folder) -> BroadDataset:
-    """The BROAD folder ``folder``, checked: its ``trials.json`` read, its
-    trials found (:data:`LAYOUTS`)."""
+    """The BROAD folder ``folder``, checked: its ``trials.json`` read
+    (:func:`read_index`), its trials found (:data:`LAYOUTS`)."""
     folder = Path(folder)
 
     def refuse(rule: str):
@@ -116,15 +184,7 @@ def open_broad(folder) -> BroadDataset:
     index = folder / "trials.json"
     if not index.is_file():
         refuse("has no trials.json (the dataset's index of trials and groups)")
-    try:
-        described = json.loads(index.read_text())
-        groups = tuple(Group(g["name"], int(g["level"]), g.get("category", ""))
-                       for g in described["groups"])
-        trials = {name: {"description": t.get("description", ""), "groups": list(t["groups"])}
-                  for name, t in described["trials"].items()}
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
-        refuse(f"trials.json is not BROAD's index: needs groups [{{name, level}}] and trials "
-               f"{{name: {{groups}}}} ({type(err).__name__}: {err})")
+    groups, trials = read_index(index, refuse)
     for sub, suffix in LAYOUTS:
         files = {path.stem: path for path in sorted((folder / sub).glob(f"*{suffix}"))
                  if path.stem in trials}
@@ -134,24 +194,113 @@ def open_broad(folder) -> BroadDataset:
            "data_hdf5/*.hdf5 and *.npz)")
 
 
-def _read_mat(path: Path) -> dict:
-    from scipy.io import loadmat
+#: What ``trials.json`` must hold, in words (the published index's layout).
+INDEX_LAYOUT = ('{"groups": [{"name": text, "level": whole number, "category": text}, ...], '
+                '"trials": {name: {"description": text, "groups": [group names]}, ...}}')
+
+
+def read_index(index: Path, refuse) -> tuple[tuple, dict]:
+    """``trials.json``'s groups (:class:`Group`, in its order) and trials
+    (name → description and groups), each field checked: every trial's
+    groups a list of group names the index declares. ``refuse(rule)``
+    raises the error that names the folder."""
     try:
-        return {key: value for key, value in loadmat(path).items() if not key.startswith("__")}
-    except (OSError, ValueError, NotImplementedError) as err:
-        raise InvalidParameterError("trial", str(path), f"cannot be read as a MATLAB file "
-                                    f"({type(err).__name__}: {err})") from None
+        described = json.loads(index.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        refuse(f"trials.json cannot be read as JSON ({type(err).__name__}: {err})")
+
+    def wrong(what: str, value, rule: str):
+        shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+        refuse(f"trials.json: {what} = {shown}: {rule}")
+    if not isinstance(described, dict):
+        refuse(f"trials.json is not BROAD's index, {INDEX_LAYOUT}")
+    declared, groups = set(), []
+    if not isinstance(described.get("groups"), list):
+        wrong("groups", described.get("groups"), "must be a list of groups")
+    for group in described["groups"]:
+        if not isinstance(group, dict):
+            wrong("a group", group, "must be an object with a name and a level")
+        name, level = group.get("name"), group.get("level")
+        category = group.get("category", "")
+        if not isinstance(name, str) or not name:
+            wrong("a group's name", name, "must be text")
+        if name in declared:
+            wrong("a group's name", name, "must be declared once")
+        if isinstance(level, bool) or not isinstance(level, int):
+            wrong(f"group {name}'s level", level, "must be a whole number")
+        if not isinstance(category, str):
+            wrong(f"group {name}'s category", category, "must be text")
+        declared.add(name)
+        groups.append(Group(name, level, category))
+    if not isinstance(described.get("trials"), dict):
+        wrong("trials", described.get("trials"), "must be an object of trials by name")
+    trials = {}
+    for name, trial in described["trials"].items():
+        if not isinstance(trial, dict):
+            wrong(f"trial {name}", trial, "must be an object with its groups")
+        description, members = trial.get("description", ""), trial.get("groups")
+        if not isinstance(description, str):
+            wrong(f"trial {name}'s description", description, "must be text")
+        if not isinstance(members, list) or not all(isinstance(g, str) for g in members):
+            wrong(f"trial {name}'s groups", members, "must be a list of group names")
+        unknown = [g for g in members if g not in declared]
+        if unknown:
+            wrong(f"trial {name}'s group", unknown[0], "must be one of the groups the index "
+                  "declares")
+        if len(set(members)) != len(members):
+            wrong(f"trial {name}'s groups", members, "must name each group once")
+        trials[name] = {"description": description, "groups": list(members)}
+    return tuple(groups), trials
 
 
-def _read_hdf5(path: Path) -> dict:
+def _column(array: np.ndarray) -> np.ndarray:
+    """An ``(N, 1)`` or ``(1, N)`` matrix as ``(N,)``; any other shape as it is."""
+    return array.reshape(-1) if array.ndim == 2 and 1 in array.shape else array
+
+
+_NOTED = set()
+
+
+def _note_dropouts(recording: Recording, path: Path) -> None:
+    """A note for readings that are exactly zero, and for a start taken
+    after the first sample (:mod:`benchmarks.broad.inputs`)."""
+    counts = {name: int(np.count_nonzero(~flags))
+              for name, flags in usable_readings(recording).items()}
+    start = start_sample(recording)
+    if any(counts.values()) or start:
+        dropped = " and ".join(f"{count} {name} reading{'s' * (count > 1)}"
+                               for name, count in counts.items() if count)
+        parts = [f"{dropped} exactly zero (dropouts), left out"] if dropped else []
+        if start:
+            parts.append(f"the start attitude is taken at sample {start}, the first whose two "
+                         "readings are non-zero and not parallel")
+        note = f"trial {recording.name}: {'; '.join(parts)}"
+        if (path, note) not in _NOTED:        # a trial loaded again is not noted again
+            _NOTED.add((path, note))
+            warnings.warn(note, stacklevel=2)
+
+
+def _read_mat(path: Path, refuse) -> dict:
+    """A MATLAB trial's arrays; ``refuse(rule)`` names the file."""
+    from scipy.io import loadmat
+    if path.is_file() and path.stat().st_size == 0:
+        refuse("is empty; a BROAD trial is a MATLAB file with the published keys")
+    try:
+        arrays = loadmat(path)
+    except Exception as err:  # noqa: BLE001 - scipy's reader raises many types on a damaged file
+        refuse(f"cannot be read as a MATLAB file ({type(err).__name__}: {err})")
+    return {key: value for key, value in arrays.items() if not key.startswith("__")}
+
+
+def _read_hdf5(path: Path, refuse) -> dict:
+    """An HDF5 trial's datasets; ``refuse(rule)`` names the file."""
     try:
         import h5py
     except ImportError:
-        raise InvalidParameterError("trial", str(path), "is HDF5, which needs h5py: pip "
-                                    "install 'attitude-bench[hdf5]'") from None
+        refuse("is HDF5, which needs h5py: pip install 'attitude-bench[hdf5]'")
     try:
         with h5py.File(path, "r") as file:
             return {key: (file[key].asstr()[()] if file[key].dtype.kind in "OS" else file[key][()])
                     for key in file.keys() if isinstance(file[key], h5py.Dataset)}
-    except OSError as err:
-        raise InvalidParameterError("trial", str(path), f"cannot be read as HDF5 ({err})") from None
+    except Exception as err:  # noqa: BLE001 - h5py raises many types on a damaged file
+        refuse(f"cannot be read as HDF5 ({type(err).__name__}: {err})")

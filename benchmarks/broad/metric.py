@@ -9,6 +9,10 @@ the vertical, :math:`2\arctan|z/w|`; its inclination part, what is left,
 of the movement phase, samples without a reference (NaN) left out of the
 mean, as ``numpy.nanmean`` leaves them out in the authors' code. A trial's
 group score is the plain mean of its trials' scores.
+
+A trial that never moves, or has no reference during its movement, has no
+sample to score (:func:`unscored_reason`): its scores are NaN, and the
+tables say so and leave it out by name, never by silence.
 """
 from __future__ import annotations
 
@@ -49,6 +53,22 @@ def errors_deg(estimate: np.ndarray, reference: np.ndarray) -> dict:
             "inclination": np.degrees(inclination_error_rad(error))}
 
 
+def scored_samples(reference: np.ndarray, movement: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the samples the metric scores, those of the movement
+    phase with a reference attitude."""
+    return np.asarray(movement, dtype=bool) & np.isfinite(reference).all(axis=1)
+
+
+def unscored_reason(movement_samples: int, scored: int) -> str | None:
+    """Why a trial with ``movement_samples`` samples of movement, ``scored``
+    of them with a reference, has nothing to score (None: it has)."""
+    if movement_samples == 0:
+        return "never moves (no sample of its movement flag is set)"
+    if scored == 0:
+        return f"has no reference during its movement (all {movement_samples} samples)"
+    return None
+
+
 def rmse_deg(estimate: np.ndarray, reference: np.ndarray, movement: np.ndarray) -> dict:
     """:data:`METRICS` of ``estimate`` against ``reference`` over the
     ``movement`` samples (those without a reference left out)."""
@@ -60,7 +80,7 @@ def rmse_of(errors: dict, estimate: np.ndarray, reference: np.ndarray,
     """:func:`rmse_deg` from the :func:`errors_deg` already taken. Only the
     reference's gaps are left out: an estimate that is not finite on a scored
     sample (a diverged filter) makes every score NaN, not a mean of the rest."""
-    scored = np.asarray(movement, dtype=bool) & np.isfinite(reference).all(axis=1)
+    scored = scored_samples(reference, movement)
     if not scored.any() or not np.isfinite(estimate[scored]).all():
         return {metric: float("nan") for metric in METRICS}
     return {f"{key}_rmse_deg": float(np.sqrt(np.mean(error[scored] ** 2)))

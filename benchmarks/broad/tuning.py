@@ -70,6 +70,10 @@ class TrialCase:
     def scenario(self):
         return self.inputs.scenario
 
+    @property
+    def sensors(self):
+        return self.inputs.sensors
+
 
 class TrialsScore:
     """The mean total RMSE (degrees) of estimator ``name`` over ``cases``
@@ -152,6 +156,11 @@ def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 
     from benchmarks.progress import progress
     if mode == "none":
         return {}, pd.DataFrame()
+    for trial in trials:        # a training trial with no score would make every loss infinite
+        reason = dataset.unscored(trial)
+        if reason is not None:
+            raise InvalidParameterError("trials", trial, f"{reason}: it cannot be tuned on or "
+                                        "scored; leave it out of --trials to tune")
     sets = training_sets(trials, mode)
     names = [name for name in estimators if tunes(name)]
     tasks = [(dataset, training, names, gyro_delay_s, sigmas) for training, _ in sets]

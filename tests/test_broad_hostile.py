@@ -1,0 +1,422 @@
+"""``broad`` on hostile folders, and the honesty of its tables (issue 28).
+
+Every folder here is made from the shipped trials (``datasets/broad/``),
+cut to a few thousand samples around the start of their movement so that
+a run takes a moment, and then damaged one way. Bad input must be one line
+naming the parameter, the value and the rule, exit 2 and nothing written;
+a table must never average fewer trials than it names.
+"""
+import json
+import math
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks.broad import benchmark, inputs
+from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.metric import METRICS
+from benchmarks.cli import main
+from benchmarks.shipped import shipped_file
+from dynamics.validation import InvalidParameterError
+
+SHIPPED = shipped_file("datasets/broad/trials.json").parent
+TRIAL_02 = "02_undisturbed_slow_rotation_B"
+TRIAL_07 = "07_undisturbed_fast_rotation_B"
+#: The samples kept of each shipped trial: 1,449 of rest (02) and 1,573 (07)
+#: before the movement, every movement sample with a reference.
+CUTS = {TRIAL_02: slice(10000, 16000), TRIAL_07: slice(6000, 12000)}
+#: The published keys of a .mat trial, by the toolkit's.
+MAT_KEYS = {"imu_gyr_radps": "imu_gyr", "imu_acc_mps2": "imu_acc", "imu_mag_uT": "imu_mag",
+            "opt_quat": "opt_quat", "movement": "movement", "sampling_rate_hz": "sampling_rate"}
+PER_SAMPLE = ("imu_gyr_radps", "imu_acc_mps2", "imu_mag_uT", "opt_quat", "movement")
+
+
+def _arrays(name: str) -> dict:
+    """A shipped trial's arrays, cut to :data:`CUTS`."""
+    with np.load(SHIPPED / f"{name}.npz") as archive:
+        arrays = {key: archive[key] for key in archive.files}
+    for key in PER_SAMPLE:
+        arrays[key] = arrays[key][CUTS[name]]
+    return arrays
+
+
+def _folder(tmp_path, change=None, index=None, layout="npz", names=(TRIAL_02, TRIAL_07)):
+    """A BROAD folder of the cut trials ``names``; ``change(name, arrays)``
+    damages a trial's arrays, ``index(described)`` the trials.json."""
+    folder = tmp_path / "broad"
+    folder.mkdir()
+    described = json.loads((SHIPPED / "trials.json").read_text())
+    if index:
+        index(described)
+    (folder / "trials.json").write_text(json.dumps(described))
+    for name in names:
+        arrays = _arrays(name)
+        if change:
+            change(name, arrays)
+        if layout == "mat":
+            from scipy.io import savemat
+            (folder / "data_mat").mkdir(exist_ok=True)
+            savemat(folder / "data_mat" / f"{name}.mat",
+                    {MAT_KEYS[key]: value for key, value in arrays.items() if key in MAT_KEYS})
+        else:
+            np.savez(folder / f"{name}.npz", **arrays)
+    return folder
+
+
+def _on(trial, change):
+    """``change(arrays)`` applied to ``trial`` only."""
+    return lambda name, arrays: change(arrays) if name == trial else None
+
+
+def _run(tmp_path, capsys, folder, *argv, estimators="madgwick,mekf"):
+    """``broad`` on ``folder``: its exit status, stdout, stderr and output folder."""
+    out = tmp_path / "out"
+    status = main(["broad", "--broad", str(folder), "--estimators", estimators,
+                   "--out", str(out), "--quiet", *argv])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err, out
+
+
+def _refused(tmp_path, capsys, folder, message, *argv, **kw):
+    status, _, err, out = _run(tmp_path, capsys, folder, *argv, **kw)
+    assert status == 2, err
+    assert message in err, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not out.exists() or not any(out.iterdir())
+    return err
+
+
+# --- unreadable and malformed trials ------------------------------------------------
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "is empty; a BROAD trial is a MATLAB file"),
+    (b"not a MATLAB file, just text\n" * 20, "cannot be read as a MATLAB file"),
+    (b"MATLAB 5.0 MAT-file" + bytes(200), "cannot be read as a MATLAB file")])
+def test_a_mat_trial_that_is_empty_or_text_is_one_line(tmp_path, capsys, content, message):
+    folder = _folder(tmp_path, layout="mat")
+    (folder / "data_mat" / f"{TRIAL_02}.mat").write_bytes(content)
+    _refused(tmp_path, capsys, folder, f"{TRIAL_02}.mat': {message}")
+
+
+def test_a_sampling_rate_of_several_values_is_one_line(tmp_path, capsys):
+    folder = _folder(tmp_path, _on(TRIAL_02, lambda a: a.update(
+        sampling_rate_hz=np.array([[285.7, 100.0]]))), layout="mat")
+    _refused(tmp_path, capsys, folder,
+             "sampling_rate_hz = [[285.7, 100.0]] must be one positive number (Hz)")
+
+
+def test_a_mat_trial_reads_as_its_npz(tmp_path):
+    # The (N, 1) movement and the (1, 1) rate MATLAB stores are read as (N,) and a number.
+    mat = open_broad(_folder(tmp_path, layout="mat", names=(TRIAL_02,))).load(TRIAL_02)
+    arrays = _arrays(TRIAL_02)
+    assert np.array_equal(mat.movement, arrays["movement"].astype(bool))
+    assert mat.rate_hz == float(arrays["sampling_rate_hz"])
+    assert np.array_equal(mat.accelerometer_mps2, arrays["imu_acc_mps2"])
+
+
+@pytest.mark.parametrize("key, row, unit", [
+    ("imu_acc_mps2", 0, "±20000 m/s²"), ("imu_mag_uT", 0, "±50000 µT"),
+    ("imu_acc_mps2", 3000, "±20000 m/s²"), ("imu_mag_uT", 3000, "±50000 µT")])
+def test_a_huge_reading_is_refused_before_anything_overflows(tmp_path, capsys, key, row, unit):
+    def huge(arrays):
+        arrays[key][row] = [1e300, -1e300, 1e300]
+    folder = _folder(tmp_path, _on(TRIAL_02, huge))
+    with np.errstate(all="raise"):                  # nothing may overflow on the way
+        _refused(tmp_path, capsys, folder, f"{key} must be within {unit} (ten times any such "
+                 f"sensor's range); row {row} is [1e+300, -1e+300, 1e+300]")
+
+
+def test_a_field_ten_times_stronger_than_earths_is_still_a_reading(tmp_path):
+    # The bound refuses corrupt values, not a magnet near the sensor.
+    def magnet(arrays):
+        arrays["imu_mag_uT"][3000:3100] *= 30.0
+    recording = open_broad(_folder(tmp_path, _on(TRIAL_02, magnet))).load(TRIAL_02)
+    assert np.abs(recording.magnetometer_uT).max() > 1000.0
+
+
+def test_a_two_sample_trial_is_refused_with_the_rule(tmp_path, capsys):
+    def two_samples(arrays):
+        moving = int(np.argmax(arrays["movement"]))
+        for key in PER_SAMPLE:
+            arrays[key] = arrays[key][moving - 1:moving + 1]   # one at rest, one moving
+    folder = _folder(tmp_path, _on(TRIAL_02, two_samples))
+    _refused(tmp_path, capsys, folder, "has 1 usable accelerometer reading at rest before its "
+             f"movement (samples 0 to 0); a trial needs at least {inputs.MIN_REST_SAMPLES}")
+
+
+# --- unusable first samples ----------------------------------------------------------
+
+@pytest.mark.parametrize("damage", ["zero accelerometer", "zero magnetometer", "parallel"])
+def test_an_unusable_first_sample_starts_the_trial_at_the_first_usable_one(tmp_path, damage):
+    def first(arrays):
+        if damage == "parallel":
+            arrays["imu_mag_uT"][0] = 4.0 * arrays["imu_acc_mps2"][0]
+        else:
+            arrays["imu_acc_mps2" if "accelerometer" in damage else "imu_mag_uT"][0] = 0.0
+    with pytest.warns(UserWarning, match="the start attitude is taken at sample 1"):
+        recording = open_broad(_folder(tmp_path, _on(TRIAL_02, first))).load(TRIAL_02)
+    prepared = inputs.imu_inputs(recording)
+    at_one = inputs.initial_attitude(recording.accelerometer_mps2[1],
+                                     recording.magnetometer_uT[1], prepared.references)
+    np.testing.assert_allclose(prepared.scenario.initial_state, at_one, atol=1e-15)
+    # A zero reading is no reading: the filters are not given it.
+    for readings in prepared.sensors.vectors:
+        assert readings.available[0] == (damage == "parallel" or readings.sensor not in damage)
+        assert readings.available[1:].all()
+
+
+def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, capsys):
+    def zero(arrays):
+        arrays["imu_acc_mps2"][0] = 0.0
+        arrays["imu_mag_uT"][:5] = 0.0
+    status, _, err, out = _run(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, zero),
+                                                         names=(TRIAL_02,)))
+    assert status == 0, err
+    assert "note: trial 02_undisturbed_slow_rotation_B: 1 accelerometer reading and 5 " \
+           "magnetometer readings exactly zero (dropouts), left out; the start attitude is " \
+           "taken at sample 5" in err and "Traceback" not in err
+    damaged = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
+    (tmp_path / "intact").mkdir()
+    intact = benchmark.run_trial(open_broad(_folder(tmp_path / "intact", names=(TRIAL_02,))),
+                                 TRIAL_02, ["madgwick", "mekf"])[0]
+    for row in intact:
+        assert damaged.loc[row["estimator"], "total_rmse_deg"] == \
+            pytest.approx(row["total_rmse_deg"], abs=0.01)
+
+
+def test_a_rest_with_no_usable_pair_is_refused_naming_the_samples(tmp_path, capsys):
+    # Every other accelerometer reading a dropout, the others parallel to the field.
+    def no_pair(arrays):
+        moving = int(np.argmax(arrays["movement"]))
+        arrays["imu_acc_mps2"][0:moving:2] = 0.0
+        arrays["imu_mag_uT"][1:moving:2] = 3.0 * arrays["imu_acc_mps2"][1:moving:2]
+    folder = _folder(tmp_path, _on(TRIAL_02, no_pair))
+    _refused(tmp_path, capsys, folder, "no sample of its rest (samples 0 to 1448) has "
+             "accelerometer and magnetometer readings both non-zero and at least 1° apart")
+
+
+def test_a_rest_of_dropouts_is_refused(tmp_path, capsys):
+    def dead(arrays):
+        arrays["imu_acc_mps2"][:int(np.argmax(arrays["movement"]))] = 0.0
+    _refused(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, dead)),
+             "has 0 usable accelerometer readings at rest before its movement")
+
+
+# --- trials.json and the case study's files --------------------------------------------
+
+def _groups_of(trial, value):
+    def change(described):
+        described["trials"][trial]["groups"] = value
+    return change
+
+
+@pytest.mark.parametrize("index, message", [
+    (_groups_of(TRIAL_02, "all_trials"),
+     f"trial {TRIAL_02}'s groups = 'all_trials': must be a list of group names"),
+    (_groups_of(TRIAL_02, ["all_trials", 3]),
+     f"trial {TRIAL_02}'s groups = ['all_trials', 3]: must be a list of group names"),
+    (_groups_of(TRIAL_02, ["all_trials", "rotatoin"]),
+     f"trial {TRIAL_02}'s group = 'rotatoin': must be one of the groups the index declares"),
+    (_groups_of(TRIAL_02, ["all_trials", "all_trials"]), "must name each group once"),
+    (lambda d: d.update(trials=list(d["trials"])), "trials = ['01_undisturbed"),
+    (lambda d: d["groups"][0].update(level="0"), "group all_trials's level = '0': must be "
+                                                 "a whole number"),
+])
+def test_a_malformed_trials_json_is_one_line(tmp_path, capsys, index, message):
+    _refused(tmp_path, capsys, _folder(tmp_path, index=index), message)
+
+
+def test_an_index_that_is_not_an_object_is_one_line(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    (folder / "trials.json").write_text("[1, 2, 3]")
+    _refused(tmp_path, capsys, folder, "trials.json is not BROAD's index")
+    (folder / "trials.json").write_text('{"groups": [')
+    _refused(tmp_path, capsys, folder, "trials.json cannot be read as JSON")
+
+
+@pytest.mark.parametrize("content, message", [
+    ("{not json", "cannot be read as JSON (JSONDecodeError"),
+    ("[1, 2]", "holds list; must be an object with the authors' trials"),
+    ('{"trials": [1]}', "trials is list; must be an object of trials by name"),
+    (json.dumps({"trials": {TRIAL_02: [1.0]}}), f"trial {TRIAL_02} is list"),
+    (json.dumps({"trials": {TRIAL_02: {"tagp_parameters": {"total_rmse_deg": "1.5"}}}}),
+     f"trial {TRIAL_02}'s tagp_parameters total_rmse_deg = '1.5'; must be a number"),
+])
+def test_a_damaged_case_study_file_is_one_line(tmp_path, capsys, content, message):
+    folder = _folder(tmp_path, names=(TRIAL_02,))
+    (folder / "case_study").mkdir()
+    (folder / "case_study" / "results_mahony_average_rmse.json").write_text(content)
+    _refused(tmp_path, capsys, folder, f"results_mahony_average_rmse.json': {message}",
+             "--case-study")
+
+
+# --- the sigmas -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("flag, value, message", [
+    ("--magnetometer-sigma", "1e300", "magnetometer_sigma = 1e+300: must be below 1.34e+154 "
+                                      "so that its square (a variance) is finite"),
+    ("--accelerometer-sigma", "inf", "accelerometer_sigma = inf: must be finite"),
+    ("--accelerometer-sigma", "nan", "accelerometer_sigma"),
+])
+def test_a_sigma_whose_square_is_not_finite_is_one_line(tmp_path, capsys, flag, value, message):
+    _refused(tmp_path, capsys, _folder(tmp_path, names=(TRIAL_02,)), message, flag, value)
+
+
+def test_the_sigmas_are_checked_where_the_filters_take_them():
+    recording = open_broad(SHIPPED).load(TRIAL_02)
+    with pytest.raises(InvalidParameterError, match=r"^magnetometer_sigma = 1e\+200: must be "
+                                                    "below"):
+        inputs.rest_references(recording, {"magnetometer": 1e200})
+    with pytest.raises(InvalidParameterError, match=r"^accelerometer_sigma = 0.0: must be > 0"):
+        inputs.imu_inputs(recording, sigmas={"accelerometer": 0.0})
+    with pytest.raises(InvalidParameterError, match="sigmas = 'gyro': must name one of"):
+        inputs.checked_sigmas({"gyro": 1.0})
+    _, variances = inputs.rest_references(recording, {"accelerometer": 1e100})
+    assert variances["accelerometer"] == 1e200
+
+
+# --- the trials selected -------------------------------------------------------------------
+
+def test_a_trial_named_twice_is_refused_naming_it():
+    dataset = open_broad(SHIPPED)
+    for names in (["02", "2"], ["02", "07", TRIAL_02], [" 2", "002"]):
+        with pytest.raises(InvalidParameterError, match=f"names trial {TRIAL_02} a second "
+                                                        "time"):
+            dataset.selected(names)
+    assert dataset.selected(["07", "2"]) == [TRIAL_07, TRIAL_02]
+    assert dataset.selected(None) == dataset.available == dataset.selected([])
+
+
+@pytest.mark.parametrize("tune", ["none", "per-trial"])
+def test_the_command_refuses_a_trial_named_twice(tmp_path, capsys, tune):
+    err = _refused(tmp_path, capsys, _folder(tmp_path), f"names trial {TRIAL_02} a second time",
+                   "--trials", "02,07,2", "--tune", tune, estimators="madgwick")
+    assert "each trial may be named once" in err
+    with pytest.raises(InvalidParameterError, match="a second time"):
+        benchmark.run_broad(open_broad(SHIPPED), [TRIAL_02, TRIAL_02], ["madgwick"], quiet=True)
+
+
+# --- tables that cannot score everything ---------------------------------------------------
+
+def _no_reference_in_movement(arrays):
+    arrays["opt_quat"][arrays["movement"].astype(bool)] = np.nan
+
+
+def _never_moves(arrays):
+    arrays["movement"][:] = 0
+
+
+def test_a_trial_with_nothing_to_score_is_left_out_by_name(tmp_path, capsys):
+    folder = _folder(tmp_path, _on(TRIAL_02, _no_reference_in_movement))
+    status, printed, err, out = _run(tmp_path, capsys, folder)
+    assert status == 0, err
+    assert "all_trials (1 of 2 scored)" in printed and "slow (0 of 1 scored)" in printed
+    assert "fast (1)" in printed and "Empty DataFrame" not in printed
+    assert f"left out of the means: {TRIAL_02} has no reference during its movement (all " \
+           "4551 samples)" in printed
+    groups = pd.read_csv(out / "broad_groups.csv", keep_default_na=False,
+                         na_values=["NaN", "nan", ""])
+    trials = pd.read_csv(out / "broad_trials.csv")
+    on_07 = trials[trials.trial == TRIAL_07].set_index("estimator")
+    for row in groups[groups.group == "all_trials"].itertuples():
+        assert (row.trials, row.scored_trials) == (2, 1)
+        assert row.left_out.startswith("02 has no reference during its movement")
+        assert row.total_rmse_deg == pytest.approx(on_07.loc[row.estimator, "total_rmse_deg"])
+    slow = groups[groups.group == "slow"]
+    assert slow[list(METRICS)].isna().all().all() and (slow.scored_trials == 0).all()
+    assert (trials[trials.trial == TRIAL_02].scored_samples == 0).all()
+
+
+@pytest.mark.parametrize("damage, why", [
+    (_no_reference_in_movement, "has no reference during its movement"),
+    (_never_moves, "never moves (no sample of its movement flag is set)")])
+def test_a_selection_with_nothing_to_score_is_refused(tmp_path, capsys, damage, why):
+    folder = _folder(tmp_path, _on(TRIAL_02, damage), names=(TRIAL_02,))
+    _refused(tmp_path, capsys, folder, f"trials = '02': nothing to score: {TRIAL_02} {why}")
+    with pytest.raises(InvalidParameterError, match=re.escape(f"nothing to score: {TRIAL_02} "
+                                                              f"{why}")):
+        open_broad(folder).selected(None)          # before anything runs
+
+
+def test_a_group_mean_is_nan_where_an_estimator_has_no_score_on_one_of_its_trials():
+    # Exact: A diverged on 07, B did not; trial 02's scores are the group's.
+    dataset = open_broad(SHIPPED)
+    rows = []
+    for trial, a, b in ((TRIAL_02, 1.0, 2.0), (TRIAL_07, math.nan, 4.0)):
+        for name, value in (("a", a), ("b", b)):
+            rows.append({"trial": trial, "estimator": name, "movement_samples": 10,
+                         "scored_samples": 10, **{metric: value for metric in METRICS}})
+    groups = benchmark.group_means(dataset, pd.DataFrame(rows)).set_index(
+        ["group", "estimator"])
+    assert math.isnan(groups.loc[("all_trials", "a"), "total_rmse_deg"])
+    assert groups.loc[("all_trials", "a"), "nan_on"] == "07"
+    assert groups.loc[("all_trials", "b"), "total_rmse_deg"] == 3.0
+    assert groups.loc[("slow", "a"), "total_rmse_deg"] == 1.0       # 07 is not slow
+    result = benchmark.BroadResult(trials=pd.DataFrame(rows), groups=groups.reset_index(),
+                                   labels={"a": "A", "b": "B"}, curves={}, curve_trial="")
+    text = benchmark.format_groups(result)
+    assert "NaN: a has no score on trial 07 (it diverged there)" in text
+    assert "all_trials (2)" in text
+
+
+# --- what the tables say --------------------------------------------------------------------
+
+def test_the_trial_table_shows_the_share_of_readings_each_filter_rejected(tmp_path, capsys):
+    def dropouts(arrays):
+        arrays["imu_acc_mps2"][2000:2010] = 0.0        # ten readings that are none
+    folder = _folder(tmp_path, _on(TRIAL_07, dropouts), names=(TRIAL_07,))
+    status, printed, err, out = _run(tmp_path, capsys, folder)
+    assert status == 0, err
+    trials = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
+    mekf = trials.loc["mekf"]
+    share = mekf["rejected_accelerometer"] / (mekf["samples"] - 10)
+    assert mekf["rejected_accelerometer_share"] == pytest.approx(share)
+    assert 0.2 < share < 0.9                  # trial 07's movement: the gate is busy
+    assert math.isnan(trials.loc["madgwick", "rejected_accelerometer_share"])
+    header, *lines = printed.splitlines()
+    assert header.rstrip().endswith("rejected acc/mag %")
+    row = next(line for line in lines if " mekf " in line)
+    assert row.split()[-1] == (f"{100 * share:.1f}/"
+                               f"{100 * mekf['rejected_magnetometer_share']:.1f}")
+    assert next(line for line in lines if " madgwick " in line).split()[-1] == "-/-"
+
+
+def test_the_figures_are_readable(tmp_path):
+    folder = _folder(tmp_path, _on(TRIAL_02, _no_reference_in_movement))
+    dataset = open_broad(folder)
+    result = benchmark.run_broad(dataset, dataset.selected(), ["dead-reckoning", "madgwick"],
+                                 quiet=True)
+    # The first trial has nothing to score: the trial figure shows the next.
+    assert result.curve_trial == TRIAL_07
+    figure = benchmark.trial_figure(result)
+    (axis,) = figure.axes
+    assert axis.get_yscale() == "log" and axis.get_legend() is None and figure.legends
+    shaded = [p for p in axis.patches if p.get_label().startswith("movement")]
+    assert len(shaded) == 1                           # one movement phase
+    start = np.argmax(result.curve_movement) / dataset.load(TRIAL_07).rate_hz
+    assert shaded[0].get_x() == pytest.approx(start)
+    figure = benchmark.groups_figure(result)
+    assert all(ax.get_yscale() == "log" for ax in figure.axes) and figure.legends
+    assert all(ax.get_legend() is None for ax in figure.axes)
+    names = [t.get_text() for t in figure.axes[-1].get_xticklabels()]
+    assert "all_trials\n(1 of 2 scored)" in names and "fast\n(1)" in names
+    assert "NaN" in [t.get_text() for t in figure.axes[0].texts]   # slow: nothing scored
+
+
+def test_an_intact_trial_is_configured_exactly_as_before():
+    # Leaving dropouts out must not touch a trial without any: the rest's
+    # means and variances are those of the rest itself, to the last bit
+    # (the scores of the default estimators stay as they were).
+    recording = open_broad(SHIPPED).load(TRIAL_02)
+    rest = recording.rest_samples
+    references, variances = inputs.rest_references(recording)
+    for name, channel in inputs.channels(recording).items():
+        mean = channel[rest].mean(axis=0)
+        assert np.linalg.norm(references[name]) == pytest.approx(np.linalg.norm(mean), rel=1e-15)
+        assert variances[name] == max(float(np.mean(channel[rest].var(axis=0))),
+                                      inputs.MOTION_SIGMAS[name] ** 2)
+    assert references["accelerometer"][2] == np.linalg.norm(
+        recording.accelerometer_mps2[rest].mean(axis=0))
+    assert inputs.start_sample(recording) == 0
