@@ -218,6 +218,10 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         Magnetic disturbance detection: a magnetometer reading whose
         magnitude is off its reference's by more than this fraction is
         rejected (None: no test; :meth:`~estimators.base.KalmanEstimator.passes_norm`).
+    rate_interpolation : {"hold", "trapezoid"}
+        The rate over a step: its reading held (an averaging gyro's), or the
+        mean of the readings at its two ends (a sampled gyro's;
+        :mod:`estimators.sampled_rate`).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
@@ -237,7 +241,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
                  initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
                  initial_bias_sigma_radps=1e-4, output: str = "posterior",
                  gate_probability: float | None = None,
-                 magnetic_norm_tolerance: float | None = None, on_invalid: str = "raise"):
+                 magnetic_norm_tolerance: float | None = None, rate_interpolation: str = "hold",
+                 on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self.gate_probability = gate_probability_setting(gate_probability)
@@ -247,7 +252,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
-                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
+                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output,
+                        rate_interpolation=rate_interpolation)
         self.filter.R = self.R
         self.filter.H = np.hstack([_I3, np.zeros((3, 3))])
         self.reset()
@@ -256,6 +262,7 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         self.q_hat = self.initial_attitude.copy()
         self.beta_hat = self.initial_bias_radps.copy()
         self._reset_filter(np.zeros(6), self.initial_covariance.copy())
+        self._restart_rates()
         self._record()
 
     def _record(self) -> None:

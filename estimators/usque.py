@@ -141,7 +141,8 @@ class USQUE(AttitudeAndBiasEstimator):
     ----------
     dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
-    initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance, on_invalid
+    initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance,
+    rate_interpolation, on_invalid
         As for :class:`~estimators.MultiplicativeEKF`.
     alpha, beta, kappa : float
         The scaled sigma points' spread, prior-knowledge and secondary
@@ -166,7 +167,8 @@ class USQUE(AttitudeAndBiasEstimator):
                  initial_bias_sigma_radps=1e-4, alpha: float = 1.0, beta: float = 2.0,
                  kappa: float = 0.0, output: str = "posterior",
                  gate_probability: float | None = None,
-                 magnetic_norm_tolerance: float | None = None, on_invalid: str = "raise"):
+                 magnetic_norm_tolerance: float | None = None, rate_interpolation: str = "hold",
+                 on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self.gate_probability = gate_probability_setting(gate_probability)
@@ -181,7 +183,8 @@ class USQUE(AttitudeAndBiasEstimator):
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
-                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output)
+                        initial_bias_sigma_radps=initial_bias_sigma_radps, output=output,
+                        rate_interpolation=rate_interpolation)
         self.filter.R = self.R
         self.reset()
 
@@ -193,6 +196,7 @@ class USQUE(AttitudeAndBiasEstimator):
         # which filterpy only draws in predict.
         self.filter.sigmas_f = self.filter.points_fn.sigma_points(self.filter.x, self.filter.P)
         self._updated = False
+        self._restart_rates()
         self._record()
 
     def _record(self) -> None:

@@ -469,6 +469,34 @@ def norm_tolerances(estimators) -> np.ndarray:
                      else float(e.magnetic_norm_tolerance) for e in estimators])
 
 
+def rate_states(estimators) -> dict:
+    """Each run's rate interpolation, read off its per-run filter
+    (:mod:`estimators.sampled_rate`): ``trapezoid`` ``(B,)`` bool, and the
+    last reading each run has taken (``rate_prev`` ``(B, 3)``, ``has_rate``
+    ``(B,)``), which a trapezoidal filter propagates with at the next step."""
+    count = len(estimators)
+    return {"trapezoid": np.array([getattr(e, "rate_interpolation", "hold") == "trapezoid"
+                                   for e in estimators]),
+            "rate_prev": np.zeros((count, 3)), "has_rate": np.zeros(count, dtype=bool)}
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
+    """For a trapezoidal filter (:class:`estimators.sampled_rate.SampledRate`):
+    the mean of the last reading and this one, ``w``, into ``mean``; True if
+    there was a last reading, so that the step just ended is propagated now,
+    before this step's readings. The reading is kept for the next step."""
+    if not trapezoid[run]:
+        return False
+    ready = has_rate[run]
+    for i in range(3):
+        if ready:
+            mean[i] = 0.5 * (rate_prev[run, i] + w[i])
+        rate_prev[run, i] = w[i]
+    has_rate[run] = True
+    return ready
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def passes_norm(body, reference, tolerance):
     """:meth:`estimators.base.KalmanEstimator.passes_norm` of a magnetometer

@@ -17,7 +17,8 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               log_error, mark_diverged, nees_arrays,
                                               norm_tolerances, passes_norm,
                                               quadratic_form, quat_exp, quat_times_normalized,
-                                              record_error, to_body_frame)
+                                              rate_states, record_error, to_body_frame,
+                                              trapezoid_rate)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
 from estimators.mekf import transition_coefficients
@@ -43,6 +44,9 @@ class State(NamedTuple):
     gating: np.ndarray           # (B,) bool: the filter gates its readings
     gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
     magnetic_tolerance: np.ndarray  # (B,) the magnetic norm test's (inf: none)
+    trapezoid: np.ndarray        # (B,) bool: the trapezoidal rate (estimators.sampled_rate)
+    rate_prev: np.ndarray        # (B, 3) the last reading, for it
+    has_rate: np.ndarray         # (B,) bool: there is one
 
 
 def initial_state(estimators) -> State:
@@ -57,7 +61,7 @@ def initial_state(estimators) -> State:
                  beta_last=beta.copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior",
                  magnetic_tolerance=norm_tolerances(estimators),
-                 **gate_thresholds(estimators))
+                 **gate_thresholds(estimators), **rate_states(estimators))
 
 
 def nis_dof(estimators) -> int:
@@ -238,8 +242,9 @@ def advance(block, sensors, state, record, row):
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
     rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
+    trapezoid, rate_prev, has_rate = state.trapezoid, state.rate_prev, state.has_rate
     for run in prange(q_all.shape[0]):
-        w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
+        w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch6 = np.empty((10, 6, 6))
         bits = np.empty(1)
         bits_int = bits.view(np.int64)
@@ -254,6 +259,8 @@ def advance(block, sensors, state, record, row):
                 z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
                 steps_between, star_normals, sigma_rad, mount, canonical, outage,
                 dropout_probability, uniforms)
+            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
+                _mekf_propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq)
             for i in range(4):
                 out[i] = q[i]
             if not posterior:
@@ -294,7 +301,8 @@ def advance(block, sensors, state, record, row):
                             nees_samples, nees_sum, scratch6)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
-            _mekf_propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq)
+            if not trapezoid[run]:
+                _mekf_propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq)
             if not (finite_state(q, 4, P, 6) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:

@@ -35,8 +35,10 @@ from numba import njit, prange
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation,
                                               gate_thresholds, gauss_jordan, keep_output,
-                                              norm_tolerances, passes_norm, mark_diverged, nees_arrays, quadratic_form,
-                                              quat_exp, record_error, to_body_frame)
+                                              norm_tolerances, passes_norm, mark_diverged,
+                                              nees_arrays, quadratic_form, quat_exp,
+                                              rate_states, record_error, to_body_frame,
+                                              trapezoid_rate)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
 from dynamics.quaternion import GRP_A, GRP_F
@@ -70,6 +72,9 @@ class State(NamedTuple):
     gating: np.ndarray           # (B,) bool: the filter gates its readings
     gate: np.ndarray             # (B, 4) the χ² threshold for 1, 2, 3 degrees of freedom
     magnetic_tolerance: np.ndarray  # (B,) the magnetic norm test's (inf: none)
+    trapezoid: np.ndarray        # (B,) bool: the trapezoidal rate (estimators.sampled_rate)
+    rate_prev: np.ndarray        # (B, 3) the last reading, for it
+    has_rate: np.ndarray         # (B,) bool: there is one
 
 
 def _spread(points) -> float:
@@ -98,7 +103,7 @@ def initial_state(estimators) -> State:
                  beta_last=x[:, 3:].copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior",
                  magnetic_tolerance=norm_tolerances(estimators),
-                 **gate_thresholds(estimators))
+                 **gate_thresholds(estimators), **rate_states(estimators))
 
 
 def nis_dof(estimators) -> int:
@@ -411,8 +416,9 @@ def advance(block, sensors, state, record, row):
     beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
     gating, gate = state.gating, state.gate
     rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
+    trapezoid, rate_prev, has_rate = state.trapezoid, state.rate_prev, state.has_rate
     for run in prange(q_all.shape[0]):
-        w, z, dq, out = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
+        w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch = np.empty((6, 6, 6))
         propagated = np.empty((N_SIGMAS, STATE_SIZE))
         R_vector, nis = np.empty((3, 3)), np.empty(1)
@@ -432,6 +438,12 @@ def advance(block, sensors, state, record, row):
             if diverged[run] >= 0:       # the per-run class no longer steps
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
+            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
+                factored = _predict(q, x, P, sigmas, mean, dt, noise[run], bias_rw[run],
+                                    spread[run], Wm, Wc, scratch[0], scratch[1], propagated)
+                if not (factored and finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)):
+                    mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+                    continue
             if not posterior:
                 _output(q, x, out)
                 keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
@@ -457,8 +469,11 @@ def advance(block, sensors, state, record, row):
                             nees_samples, nees_sum, scratch)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
-            factored = _predict(q, x, P, sigmas, w, dt, noise[run], bias_rw[run], spread[run],
-                                Wm, Wc, scratch[0], scratch[1], propagated)
+            if not trapezoid[run]:
+                factored = _predict(q, x, P, sigmas, w, dt, noise[run], bias_rw[run],
+                                    spread[run], Wm, Wc, scratch[0], scratch[1], propagated)
+            else:
+                factored = True
             if not (factored and finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
