@@ -15,7 +15,8 @@ from typing import Callable, NamedTuple
 from benchmarks import experiments
 from benchmarks.experiments import SWEEP_PARAMETERS
 from benchmarks.metrics import STAT_COLUMNS
-from benchmarks.output import check_output_folder, write_figure, write_text
+from benchmarks.output import (check_output_folder, figure_bytes, write_bytes,
+                               write_text)
 from benchmarks.scenario import SETTINGS, Scenario
 from benchmarks.seeds import DEFAULT_TRAINING_SEEDS, format_seeds, parse_seeds
 from benchmarks.divergence import EXIT_DIVERGED, DivergenceReport, report_of
@@ -96,6 +97,14 @@ def importable_from_here() -> None:
     here = str(Path.cwd())
     if here not in sys.path and "" not in sys.path:
         sys.path.append(here)
+
+
+def _module_name(text: str) -> str:
+    """A Python module's dotted name, as ``import`` takes it."""
+    if not all(part.isidentifier() for part in text.split(".")):
+        raise argparse.ArgumentTypeError(f"allow_import = {text!r}: must be a module name "
+                                         "such as myfilters or package.module")
+    return text
 
 
 def _estimator_list(text: str) -> tuple[str, ...]:
@@ -183,6 +192,7 @@ def help_defaults(argv) -> Scenario:
 
 def _add_import_option(parser) -> None:
     parser.add_argument("--allow-import", action="append", default=[], metavar="MODULE",
+                        type=_module_name,
                         help="let the scenario file's [estimators.\"MODULE:Class\"] sections "
                         "import MODULE (its code runs); naming MODULE:Class in --estimators "
                         "allows it too. Repeatable")
@@ -308,6 +318,7 @@ def _parse_broad(commands) -> None:
     broad.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                        help="output folder (default results/)")
     broad.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_divergence_option(broad)
 
 
 def _parse_show_config(commands) -> None:
@@ -317,15 +328,27 @@ def _parse_show_config(commands) -> None:
     show.add_argument("--estimators", type=_estimator_list, default=tuple(ESTIMATORS),
                       metavar="A,B,...", help="any of the registry's or "
                       "package.module:ClassName (default: every registry estimator)")
+    show.add_argument("--out", type=_folder, default=None, metavar="DIR",
+                      help="also write the table as DIR/config.csv (default: print only)")
+    show.add_argument("--quiet", action="store_true", help="accepted, as by every command "
+                      "(show-config shows no progress)")
+    _add_divergence_option(show)
     _add_scenario_options(show, _HELP_DEFAULTS[0])
 
 
 def command_show_config(args, scenario):
-    from benchmarks.experiments.configuration import effective_settings, format_settings
-    rows = [row for name in args.estimators for row in effective_settings(scenario, name)]
+    from benchmarks.experiments.configuration import (effective_settings, format_settings,
+                                                      given_fields)
+    given = given_fields(args.scenario, [name for name in SCENARIO_FLAGS
+                                         if getattr(args, name, None) is not None])
+    rows = [row for name in args.estimators for row in effective_settings(scenario, name, given)]
     print(format_settings(rows))
     print("\n(file: the scenario's [estimators.NAME] section; scenario: a scenario setting "
           "given; derived: from the scenario's sensors; default: left at its default)")
+    if args.out is not None:
+        import pandas as pd
+        write_text(args.out / "config.csv", pd.DataFrame(rows).to_csv(index=False))
+        print(f"wrote {args.out / 'config.csv'}")
     return None
 
 
@@ -350,8 +373,8 @@ def _parse_tune(commands) -> None:
                       "--range NAME=LO:HI)")
     tune.add_argument("--xtol", type=_number, default=0.01, metavar="X",
                       help="x tolerance (default 0.01)")
-    tune.add_argument("--seeds", type=_seed_list, default=(0,), metavar="SPEC",
-                      help="training seeds: 0, 0-19 or 1,5,9 (default 0)")
+    tune.add_argument("--seeds", type=_seed_list, default=None, metavar="SPEC",
+                      help="training seeds: 0, 0-19 or 1,5,9 (default 0; not with --dataset)")
     group = tune.add_argument_group(
         "any estimator (without --estimator: the EKF's pc_exponent, as the workshop tunes it)")
     _estimator_option(group, required=False)
@@ -511,7 +534,6 @@ def _parse_convergence(commands) -> None:
 
 def command_convergence(args, scenario):
     from benchmarks.experiments import convergence
-    from benchmarks.output import write_figure, write_text
     from benchmarks.simulation import build_estimator
     for angle in args.angles:
         if not 0.0 <= angle <= 180.0:
@@ -520,11 +542,13 @@ def command_convergence(args, scenario):
                                                   args.angles)
     print(convergence.summary(table).to_string(index=False))
     labels = {name: build_estimator(name, scenario).label for name in args.estimators}
+    drawn = figure_bytes(args.out / "convergence.png",
+                         convergence.figure(scenario.time_s, curves, labels))
     write_text(args.out / "convergence.csv", table.to_csv(index=False))
-    write_figure(args.out / "convergence.png",
-                 convergence.figure(scenario.time_s, curves, labels))
+    write_bytes(args.out / "convergence.png", drawn)
     print(f"wrote {args.out / 'convergence.csv'} and {args.out / 'convergence.png'}")
-    return None
+    return report_of(scenario.dt, {name: part["diverged_step"].to_numpy()
+                                   for name, part in table.groupby("estimator", sort=False)})
 
 
 def _parse_wahba(commands) -> None:
@@ -537,12 +561,14 @@ def _parse_wahba(commands) -> None:
     wahba.add_argument("--seed", type=_whole("seed", 0), default=0, help="seed (default 0)")
     wahba.add_argument("--out", type=_folder, default=Path("results"), metavar="DIR",
                        help="output folder (default results/)")
+    wahba.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_divergence_option(wahba)
 
 
 def command_wahba(args, _scenario):
     from benchmarks.experiments.wahba_table import format_table, solver_table
     from benchmarks.output import write_text
-    table = solver_table(trials=args.trials, seed=args.seed)
+    table = solver_table(trials=args.trials, seed=args.seed, quiet=args.quiet)
     print(format_table(table))
     write_text(args.out / "wahba.csv", table.to_csv(index=False))
     print(f"wrote {args.out / 'wahba.csv'}")
@@ -607,11 +633,12 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     return scenario
 
 
-#: The settings only some estimators read: setting → those estimators (the
-#: rest read every setting). Users' own estimators may read any of them.
-READ_ONLY_BY = {"star_tracker_noise": ("dead-reckoning-resets", "ekf", "mekf", "usque"),
-                "time_between_measurements": ("dead-reckoning-resets", "ekf", "mekf", "usque"),
-                "pc_exponent": ("ekf",)}
+#: Scenario field → its section (None: a top-level key).
+SECTION_OF = {setting.field: setting.section for setting in SETTINGS}
+#: The sections that configure one attitude sensor: only the estimators that
+#: read that sensor see them, and only where the scenario has it.
+SENSOR_SECTIONS = frozenset({"star_tracker", "magnetometer", "sun_sensor", "coarse_sun_sensors",
+                             "accelerometer"})
 
 
 #: The settings only one star tracker model reads: setting → that model.
@@ -627,16 +654,31 @@ MODEL_IGNORES = {
 
 def ineffective_reason(field_name: str, scenario: Scenario, names) -> str | None:
     """Why setting ``field_name`` cannot change the results of estimators
-    ``names`` on ``scenario`` (None if it can)."""
+    ``names`` on ``scenario`` (None if it can): its sensor is not in the
+    scenario, the chosen star tracker model ignores it, or none of the
+    estimators reads its sensor (:attr:`estimators.AttitudeEstimator.reads`;
+    a user's class may read anything)."""
+    from benchmarks.simulation import scenario_sensors
+    section = SECTION_OF.get(field_name)
+    if section in SENSOR_SECTIONS and section not in scenario_sensors(scenario):
+        why = ("its model is none, or an outage spans the run" if section == "star_tracker"
+               else f"no [{section}] section with an interval_s")
+        return f"has no effect: the scenario has no {section} ({why})"
     reader = READ_BY_MODEL.get(field_name)
     if reader is not None and reader != scenario.star_tracker_model:
         return MODEL_IGNORES[scenario.star_tracker_model]
     if not names and field_name not in ("tstop", "dt"):
         return "has no effect on the truth alone (no estimator is run)"
-    readers = READ_ONLY_BY.get(field_name)
-    if readers is None or any(name in readers or name not in ESTIMATORS for name in names):
-        return None
-    return f"has no effect on {', '.join(names)}; it is read only by {', '.join(readers)}"
+    if section in SENSOR_SECTIONS:
+        if any(name not in ESTIMATORS or section in ESTIMATORS[name].reads for name in names):
+            return None
+        readers = [name for name, cls in ESTIMATORS.items() if section in cls.reads]
+        return (f"has no effect on {', '.join(names)}, which read no {section}; it is read "
+                f"by {', '.join(readers)}")
+    if section == "estimators.ekf" and all(name in ESTIMATORS and name != "ekf"
+                                            for name in names):
+        return f"has no effect on {', '.join(names)}; it is read only by ekf"
+    return None
 
 
 def check_effects(args, scenario: Scenario | None) -> None:
@@ -674,6 +716,7 @@ def format_table(stats: dict, first_column: str = "estimator", columns=STAT_COLU
     lines = [f"{first_column:<{width}}  " + "  ".join(f"{c:>15}" for c in columns)]
     for name, row in stats.items():
         lines.append(f"{str(name):<{width}}  " + "  ".join(f"{row[c]:>15.6f}" for c in columns))
+    lines += [f"note: {name}: {row['note']}" for name, row in stats.items() if row.get("note")]
     return "\n".join(lines)
 
 
@@ -690,7 +733,8 @@ def command_compare(args, scenario):
         scenario = _tuned_scenario(args, scenario, (args.seed,), (args.seed,))
     else:
         _no_tuning_options(args)
-    _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators)
+    _, stats = experiments.compare(scenario, args.seed, args.out, estimators=args.estimators,
+                                   quiet=args.quiet)
     print(format_table(stats))
     print(f"wrote {args.out / 'compare.png'} and {args.out / 'summary.csv'}")
     return report_of(scenario.dt, {name: row["diverged_step"] for name, row in stats.items()})
@@ -709,10 +753,11 @@ def _no_tuning_options(args) -> None:
             raise UsageError(f"{flag} needs --tuned OBJ")
 
 
-def _tuned_scenario(args, scenario, run_seeds, default_test):
+def _tuned_scenario(args, scenario, run_seeds, default_test, before_writing=None):
     """``--tuned``: every estimator tuned on the training seeds, none of them
     among ``run_seeds`` (a range or a tuple: the seeds the command runs), and
-    scored on the test seeds; the scenario with the tuned settings."""
+    scored on the test seeds; the scenario with the tuned settings
+    (``before_writing(tuned scenario)``: a last check before tuned.* are written)."""
     from benchmarks.experiments.objectives import seed_cases
     training_seeds = args.train_seeds or DEFAULT_TRAINING_SEEDS
     shared = [seed for seed in training_seeds if seed in run_seeds]
@@ -721,32 +766,38 @@ def _tuned_scenario(args, scenario, run_seeds, default_test):
                                     "this command runs: it must run on seeds the tuning did "
                                     "not see")
     test_seeds = args.test_seeds or tuple(default_test)
+    check = None if before_writing is None else \
+        (lambda fair: before_writing(fair.scenario(scenario)))
     fair = _fair_comparison(args, seed_cases(scenario, training_seeds),
                             seed_cases(scenario, test_seeds),
                             f"seeds {format_seeds(training_seeds)}",
-                            f"seeds {format_seeds(test_seeds)}")
+                            f"seeds {format_seeds(test_seeds)}", check)
     return fair.scenario(scenario)
 
 
-def _tuned_campaign(args, scenario):
+def _tuned_campaign(args, scenario, before_writing=None):
     """``montecarlo`` and ``consistency``: the scenario tuned on training
     seeds outside the campaign's (``--tuned``), or as it is."""
     if not args.tuned:
         _no_tuning_options(args)
         return scenario
     runs = range(args.seed, args.seed + args.runs)
-    return _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS])
+    return _tuned_scenario(args, scenario, runs, runs[:TUNED_TEST_RUNS], before_writing)
 
 
-def _fair_comparison(args, training, test, trained_on: str, tested_on: str):
+def _fair_comparison(args, training, test, trained_on: str, tested_on: str,
+                     before_writing=None):
     """Tune every estimator of ``args`` on ``training``, score on ``test``,
-    print the table and write tuned.toml and tuned.json."""
+    print the table and write tuned.toml and tuned.json (after
+    ``before_writing(fair)``, a last check, if given)."""
     from benchmarks.experiments import tuning
     from benchmarks.experiments.objectives import checked_objective
     objective = checked_objective(args.tuned)
     fair = tuning.tune_all(args.estimators, objective, training, test, quiet=args.quiet)
     print(f"tuned for {objective} on {trained_on}, tested on {tested_on} (default -> tuned):")
     print(tuning.format_fair_comparison(fair))
+    if before_writing is not None:
+        before_writing(fair)
     write_text(args.out / "tuned.toml", fair.toml())
     experiments.write_json(args.out / "tuned.json", {
         "objective": objective, "training": [c.label for c in training],
@@ -783,7 +834,8 @@ def command_tune(args, scenario):
                              "EKF's pc_exponent as the workshop does)")
     from benchmarks.experiments.tuning import format_iteration_table, tune_pc_exponent
     # tune_pc_exponent checks bounds and xtol before its first evaluation.
-    result = tune_pc_exponent(scenario, args.seeds, args.bounds, args.xtol, quiet=args.quiet)
+    result = tune_pc_exponent(scenario, args.seeds or (0,), args.bounds, args.xtol,
+                              quiet=args.quiet)
     print(format_iteration_table(result.iterations))
     print()
     print(result.message)
@@ -812,14 +864,15 @@ def command_tune_estimator(args, scenario):
     objective = checked_objective(args.objective)
     settings = None
     if args.datasets or args.test_datasets:
-        # A recording's scenario comes from it; a file may set [estimators.NAME] only.
-        if args.scenario and len(args.scenario) > 1:
-            raise UsageError("with --dataset, give at most one --scenario FILE (of "
-                             "[estimators.NAME] sections)")
-        settings = args.scenario[0] if args.scenario else None
+        settings = _recording_settings(args)
+    named = [name for name, _ in args.ranges]
+    if len(set(named)) != len(named):
+        twice = next(name for name in named if named.count(name) > 1)
+        raise UsageError(f"range = {twice!r}: given more than once; give each setting's "
+                         "--range once")
     imports = allowed_imports(args)
-    training = tuning.cases_of(scenario, args.seeds, args.datasets, settings=settings,
-                               allow_imports=imports)
+    training = tuning.cases_of(scenario, args.seeds or (None if args.datasets else (0,)),
+                               args.datasets, settings=settings, allow_imports=imports)
     test = (tuning.cases_of(scenario, args.test_seeds, args.test_datasets, "test",
                             settings=settings, allow_imports=imports)
             if args.test_seeds or args.test_datasets else [])
@@ -853,12 +906,27 @@ def command_tune_estimator(args, scenario):
     for label, chosen in (("default", {}), ("tuned", tuned)):
         curves[f"{args.estimator} ({label})"] = tuning.case_error(args.estimator, figure_case,
                                                                  chosen)
+    drawn = figure_bytes(args.out / "tune.png",
+                         tuning.tuning_figure(result, figure_case.time_s, curves))
     experiments.write_json(args.out / "tune.json", data)
     write_text(args.out / "tuned.toml", tuning.settings_toml(args.estimator, tuned))
-    write_figure(args.out / "tune.png",
-                 tuning.tuning_figure(result, figure_case.time_s, curves))
+    write_bytes(args.out / "tune.png", drawn)
     print(f"wrote {args.out / 'tune.json'}, {args.out / 'tuned.toml'} and {args.out / 'tune.png'}")
     return None
+
+
+def _recording_settings(args):
+    """With ``--dataset``: a recording's scenario comes from it, so a file may
+    set ``[estimators.NAME]`` sections only (the one returned), and no
+    scenario flag applies."""
+    if args.scenario and len(args.scenario) > 1:
+        raise UsageError("with --dataset, give at most one --scenario FILE (of "
+                         "[estimators.NAME] sections)")
+    for name, flag in SCENARIO_FLAGS.items():
+        if getattr(args, name, None) is not None:
+            raise UsageError(f"{name} = {getattr(args, name)!r}: a recording's scenario comes "
+                             f"from it; leave {flag} out with --dataset (from {flag})")
+    return args.scenario[0] if args.scenario else None
 
 
 def command_landscape(args, scenario):
@@ -889,13 +957,21 @@ def _check_seed_range(args) -> None:
 
 def command_montecarlo(args, scenario):
     _check_seed_range(args)
-    from benchmarks.engine.campaign import CAMPAIGN_COLUMNS, Campaign, run_campaign
-    from benchmarks.output import write_csv, write_figure
+    from benchmarks.engine.campaign import (CAMPAIGN_COLUMNS, Campaign, check_campaign_folder,
+                                            check_campaign_out, run_campaign)
+    from benchmarks.output import write_csv
     from benchmarks.figures.plots import distribution_figure
     from benchmarks.progress import progress
-    scenario = _tuned_campaign(args, scenario)
-    campaign = Campaign(scenario=scenario, estimators=args.estimators, runs=args.runs,
+
+    def campaign_of(chosen):
+        return Campaign(scenario=chosen, estimators=args.estimators, runs=args.runs,
                         base_seed=args.seed, chunk_runs=args.chunk_size)
+    # What the folder holds is checked before tuning, and the tuned campaign
+    # against it before tuned.* are written: nothing half-written.
+    check_campaign_folder(args.out, args.resume)
+    scenario = _tuned_campaign(args, scenario, lambda tuned: check_campaign_out(
+        campaign_of(tuned), args.out, args.resume))
+    campaign = campaign_of(scenario)
     try:
         with progress(total=args.runs, desc="montecarlo", unit="run", quiet=args.quiet) as bar:
             frame = run_campaign(campaign, args.out, workers=args.workers or 0,
@@ -904,12 +980,13 @@ def command_montecarlo(args, scenario):
         print(f"{PROG}: interrupted; finished chunks are kept in {args.out}; "
               "rerun with --resume to finish", file=sys.stderr)
         raise SystemExit(130) from None
+    from benchmarks.simulation import resolve_estimator
+    labels = {name: resolve_estimator(name).label for name in args.estimators}
+    drawn = figure_bytes(args.out / "montecarlo.png", distribution_figure(frame, labels))
     write_csv(args.out / "montecarlo.csv", CAMPAIGN_COLUMNS,
               (list(row) for row in frame[list(CAMPAIGN_COLUMNS)].itertuples(index=False)),
               digits=17)
-    from benchmarks.simulation import resolve_estimator
-    labels = {name: resolve_estimator(name).label for name in args.estimators}
-    write_figure(args.out / "montecarlo.png", distribution_figure(frame, labels))
+    write_bytes(args.out / "montecarlo.png", drawn)
     # Diverged runs have NaN statistics: pandas' means and quantiles leave them out.
     summary = frame.groupby("estimator", sort=False)[list(STAT_COLUMNS)].mean()
     report = report_of(scenario.dt, {name: part["diverged_step"].to_numpy()
@@ -942,14 +1019,14 @@ def command_workshop(args, scenario):
 def command_consistency(args, scenario):
     _check_seed_range(args)
     from benchmarks.experiments import consistency
-    from benchmarks.engine.batch import ENGINE_ESTIMATORS
-    from benchmarks.output import write_figure, write_text
+    from benchmarks.engine.batch import ENGINE_ESTIMATORS, engine_limitation
     from benchmarks.progress import progress
     if args.settle is not None and not 0 <= args.settle < scenario.tstop:
         raise UsageError(f"settle = {args.settle!r}: must be >= 0 and below tstop = "
                          f"{scenario.tstop:g}")
     scenario = _tuned_campaign(args, scenario)
-    engine = [name for name in args.estimators if name in ENGINE_ESTIMATORS]
+    engine = [name for name in args.estimators if name in ENGINE_ESTIMATORS
+              and engine_limitation(scenario, None, name) is None]
     total = args.runs * len(engine) + min(args.runs, args.per_run_limit) * (
         len(args.estimators) - len(engine))
     with progress(total=total, desc="consistency", unit="run", quiet=args.quiet) as bar:
@@ -958,8 +1035,9 @@ def command_consistency(args, scenario):
             per_run_limit=args.per_run_limit, workers=args.workers or 0, progress_bar=bar)
     print(consistency.format_summary(result.summary, result.settle_s))
     frame = consistency.consistency_frame(result)
+    drawn = figure_bytes(args.out / "consistency.png", consistency.figure(result))
     write_text(args.out / "consistency.csv", frame.to_csv(index=False))
-    write_figure(args.out / "consistency.png", consistency.figure(result))
+    write_bytes(args.out / "consistency.png", drawn)
     print(f"wrote {args.out / 'consistency.csv'} and {args.out / 'consistency.png'}")
     return report_of(scenario.dt, result.diverged_step)
 
@@ -967,8 +1045,11 @@ def command_consistency(args, scenario):
 def command_replay(args, _scenario):
     from benchmarks.experiments.replay import load_replay, run_replay, write_replay
     from benchmarks.resources import check_memory, per_run_bytes
-    from benchmarks.experiments.replay import DELAY_SEARCH_SAMPLES, likeliest_gyro_delay
-    # The recording, the settings and the memory are checked before any write.
+    from benchmarks.experiments.replay import (DELAY_SEARCH_SAMPLES, REPLAY_SENSORS,
+                                               likeliest_gyro_delay)
+    from benchmarks.simulation import refuse_unreadable
+    # The estimators, the recording, the settings and the memory are checked before any write.
+    refuse_unreadable(args.estimators, REPLAY_SENSORS, "the replay")
     delay = args.gyro_delay
     if delay == "auto":
         delay, log, at_bound = likeliest_gyro_delay(
@@ -1011,6 +1092,7 @@ def _tuned_replay(args, data, delay: float):
     import dataclasses
     from benchmarks.experiments import tuning
     from benchmarks.experiments.objectives import recording_case
+    from benchmarks.experiments.replay import dataset_source
     if not args.train_datasets:
         raise UsageError("--tuned needs at least one --train-dataset NAME_OR_PATH (a "
                          "recording other than --dataset to tune on)")
@@ -1019,17 +1101,24 @@ def _tuned_replay(args, data, delay: float):
               "gyro_delay_s": delay}
     training = tuning.cases_of(None, datasets=args.train_datasets, settings=args.scenario,
                                allow_imports=allowed_imports(args), replay=replay)
-    fair = _fair_comparison(args, training, [recording_case(data, args.dataset)],
-                            ", ".join(args.train_datasets), args.dataset)
+    test = [recording_case(data, args.dataset, dataset_source(args.dataset))]
+    tuning.disjoint(training, test)
+    fair = _fair_comparison(args, training, test, ", ".join(args.train_datasets), args.dataset)
     return dataclasses.replace(data, scenario=fair.scenario(data.scenario))
+
+
+#: What a BROAD trial gives the estimators besides the gyro.
+BROAD_SENSORS = frozenset({"accelerometer", "magnetometer"})
 
 
 def command_broad(args, _scenario):
     from benchmarks.broad import benchmark, case_study, tuning
     from benchmarks.broad.dataset import ATTRIBUTION, broad_folder, open_broad
+    from benchmarks.simulation import refuse_unreadable
+    if not args.case_study:
+        refuse_unreadable(args.estimators, BROAD_SENSORS, "a BROAD trial")
     dataset = open_broad(broad_folder(args.broad))
-    trials = ([dataset.trial_name(text) for text in args.trials] if args.trials
-              else dataset.available)
+    trials = dataset.selected(args.trials)
     if args.grid and not args.case_study:
         raise UsageError("--grid is the case study's grid search: give --case-study with it")
     if args.case_study:
@@ -1057,14 +1146,11 @@ def command_broad(args, _scenario):
         write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
         print(f"wrote {args.out / 'broad_case_study.csv'}\n{ATTRIBUTION}")
         return None
-    sigmas = {}
-    for sensor, value in (("accelerometer", args.accelerometer_sigma),
-                          ("magnetometer", args.magnetometer_sigma)):
-        if value is not None:
-            if not value > 0:
-                raise UsageError(f"{sensor}_sigma = {value!r}: must be > 0 (from "
-                                 f"--{sensor}-sigma)")
-            sigmas[sensor] = value
+    from benchmarks.broad.inputs import checked_sigmas
+    sigmas = {sensor: value for sensor, value in (("accelerometer", args.accelerometer_sigma),
+                                                  ("magnetometer", args.magnetometer_sigma))
+              if value is not None}
+    checked_sigmas(sigmas)
     options, tunings = tuning.tuned_options(dataset, trials, args.estimators, args.tune,
                                             args.gyro_delay, sigmas, args.workers, args.quiet)
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
@@ -1077,10 +1163,12 @@ def command_broad(args, _scenario):
     print(f"\ntotal RMSE (°) per group, mean over its trials (trials run), "
           f"{tuning.MODE_LABELS[args.tune]}:")
     print(benchmark.format_groups(result))
+    drawn = {name: figure_bytes(args.out / name, figure(result)) for name, figure in
+             (("broad.png", benchmark.groups_figure), ("broad_trial.png", benchmark.trial_figure))}
     write_text(args.out / "broad_trials.csv", result.trials.to_csv(index=False))
     write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
-    write_figure(args.out / "broad.png", benchmark.groups_figure(result))
-    write_figure(args.out / "broad_trial.png", benchmark.trial_figure(result))
+    for name, data in drawn.items():
+        write_bytes(args.out / name, data)
     write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
     names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
              "ATTRIBUTION.txt")
@@ -1161,7 +1249,7 @@ COMMAND_TABLE = (
              "ATTRIBUTION.txt"), None),
     Command("workshop", _parse_workshop, command_workshop, ("report.md",),
             _per_run_memory(True)),
-    Command("show-config", _parse_show_config, command_show_config, (), None),
+    Command("show-config", _parse_show_config, command_show_config, ("config.csv",), None),
     Command("convergence", _parse_convergence, command_convergence,
             ("convergence.csv", "convergence.png"), _per_run_memory(False)),
     Command("wahba", _parse_wahba, command_wahba, ("wahba.csv",), None),
@@ -1195,8 +1283,20 @@ def default_estimators(command: str, scenario) -> tuple:
         from benchmarks.broad.benchmark import default_estimators as broad_defaults
         return broad_defaults()
     if scenario is not None and scenario.has_vector_sensors:
-        return VECTOR_DEFAULTS
+        from benchmarks.simulation import scenario_sensors, usable_estimators
+        return usable_estimators(VECTOR_DEFAULTS, scenario_sensors(scenario))
     return STAR_TRACKER_DEFAULTS if command == "consistency" else tuple(WORKSHOP_ESTIMATORS)
+
+
+def check_sensors(args, scenario) -> None:
+    """Refuse an estimator that can use none of the scenario's sensors
+    (:func:`benchmarks.simulation.refuse_unreadable`), before any work."""
+    if scenario is None or args.command in ("show-config", "workshop", "landscape"):
+        return
+    names = getattr(args, "estimators", None) or (
+        (args.estimator,) if getattr(args, "estimator", None) else ())
+    from benchmarks.simulation import refuse_unreadable, scenario_sensors
+    refuse_unreadable(names, scenario_sensors(scenario), "the scenario")
 
 
 def _note(message, category, filename, lineno, file=None, line=None) -> None:
@@ -1211,9 +1311,10 @@ def _main(argv) -> int:
         scenario = scenario_from_args(args)
         if getattr(args, "estimators", "") is None:
             args.estimators = default_estimators(args.command, scenario)
+        check_sensors(args, scenario)
         check_effects(args, scenario)
         command = COMMANDS[args.command]
-        if hasattr(args, "out"):
+        if getattr(args, "out", None) is not None:
             check_output_folder(args.out, command.outputs)
         if command.memory is not None and scenario is not None:
             command.memory(args, scenario)     # refuse what cannot fit, before any work

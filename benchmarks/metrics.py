@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynamics.quaternion import attitude_error_rad
+from dynamics.quaternion import attitude_error_rad, quat_conjugate, quat_multiply
 
 #: Arcseconds per degree.
 ARCSEC_PER_DEG = 3600.0
@@ -31,6 +31,18 @@ STAT_COLUMNS = ("mean_deg", "median_deg", "std_deg", "three_sigma_deg", "rms_deg
 def attitude_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     """The workshop model's sign-invariant attitude error, degrees, for ``(..., 4)`` stacks."""
     return np.degrees(attitude_error_rad(q_true, q_est))
+
+
+def inclination_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    r"""The inclination part of the error, degrees, for ``(N, 4)`` body →
+    reference stacks whose reference frame's z axis is up (a ground site's
+    east-north-up): the error rotation :math:`\hat q \otimes q^{-1}` in the
+    reference frame less its rotation about the vertical,
+    :math:`2\arccos\sqrt{w^2 + z^2}` (Laidig et al. 2021, §4; the BROAD
+    metric's inclination, :mod:`benchmarks.broad.metric`). The score of an
+    estimate with no heading reference (gravity alone)."""
+    error = quat_multiply(q_est, quat_conjugate(q_true))
+    return np.degrees(2.0 * np.arccos(np.clip(np.hypot(error[:, 0], error[:, 3]), 0.0, 1.0)))
 
 
 def error_statistics(error_deg: np.ndarray) -> dict[str, float]:

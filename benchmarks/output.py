@@ -84,10 +84,16 @@ def write_csv(path, header, rows, digits: int = 12) -> None:
 
 def write_figure(path, figure, dpi: int = 120) -> None:
     """Save a matplotlib figure (format from the suffix)."""
-    path = Path(path)
+    _atomic_write_bytes(Path(path), figure_bytes(path, figure, dpi))
+
+
+def figure_bytes(path, figure, dpi: int = 120) -> bytes:
+    """A matplotlib figure rendered as ``path``'s format would hold it: render
+    first, write after, so that a figure that cannot be drawn leaves no
+    other file of its command half-written."""
     buffer = io.BytesIO()
-    figure.savefig(buffer, format=path.suffix.lstrip(".") or "png", dpi=dpi)
-    _atomic_write_bytes(path, buffer.getvalue())
+    figure.savefig(buffer, format=Path(path).suffix.lstrip(".") or "png", dpi=dpi)
+    return buffer.getvalue()
 
 
 @contextlib.contextmanager

@@ -63,6 +63,9 @@ def resolve_estimator(spec: str) -> type:
 def _imported(spec: str, module_name: str):
     try:
         return importlib.import_module(module_name)
+    except SystemExit as err:     # a module that ends the process on import: say so, go on
+        raise InvalidParameterError("estimator", spec, f"cannot import {module_name}: it "
+                                    f"calls sys.exit({err.code!r}) when imported") from None
     except Exception as err:      # the user's module: any import failure is reported
         raise InvalidParameterError("estimator", spec, f"cannot import {module_name} "
                                     f"({type(err).__name__}: {err})") from None

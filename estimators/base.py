@@ -43,6 +43,8 @@ from dynamics.validation import (
     nonzero_quaternion,
     one_of,
 )
+from estimators import sensing
+from estimators.sampled_rate import SampledRate, derived_rate_interpolation
 from estimators.tunable import (GATE_PROBABILITY, GYRO_BIAS_RANDOM_WALK, GYRO_NOISE,
                                 MAGNETIC_NORM_TOLERANCE, MEASUREMENT_SCALE)
 
@@ -56,6 +58,16 @@ OUTPUTS = ("prior", "posterior")
 class InvalidMeasurementError(InvalidParameterError):
     """A measurement an estimator cannot use; the message names the step,
     the value and the rule."""
+
+
+class InvalidEstimateError(InvalidParameterError):
+    """An estimator returned something that is not an attitude (a quaternion
+    off the unit sphere, or not four numbers): a defect of that estimator."""
+
+
+#: How far ``|q|²`` of an estimate may be from 1: far above the rounding of
+#: a normalisation (1e-16), far below any quaternion a filter would output.
+UNIT_NORM_TOLERANCE = 1e-6
 
 
 class AttitudeEstimator:
@@ -85,6 +97,16 @@ class AttitudeEstimator:
     #: None (undeclared, as a user's class is until it says) means it does
     #: not, and :func:`benchmarks.simulation.simulate` warns that it ignores them.
     uses_vector_readings: bool | None = None
+    #: The sensors whose readings it applies, besides the gyro
+    #: (:mod:`estimators.sensing`'s names); None: undeclared (a user's class
+    #: that does not say is never refused for its sensors).
+    reads: frozenset | None = None
+    #: Sets of sensors any one of which gives it an attitude reference; it is
+    #: refused on data with none of them ((): the gyro suffices).
+    needs: tuple = ()
+    #: Whether its output has a heading reference at all (VQF 6D's has not:
+    #: it is scored on its inclination, :func:`estimators.sensing.heading_observed`).
+    has_heading: bool = True
     #: The settings a tuner may vary (:class:`estimators.tunable.Tunable`, one
     #: per constructor keyword): none for an estimator without noise settings.
     tunable: tuple = ()
@@ -104,6 +126,9 @@ class AttitudeEstimator:
         #: ``gate_probability``), and the ``(step, sensor)`` of each.
         self.rejected = {}
         self.rejections = []
+        #: Readings offered to it, by sensor (those it :attr:`reads`): with
+        #: :attr:`rejected`, what :meth:`readings_used` counts.
+        self.offered = {}
         self._last_rate = np.zeros(3)
         #: The step where the estimate or its covariance stopped being finite
         #: (see :meth:`step`), or None.
@@ -156,7 +181,11 @@ class AttitudeEstimator:
         ``"package.module:ClassName"`` spec (so the Python API applies the
         same section the command line does)."""
         options = getattr(scenario, "estimator_options", {}) or {}
-        section = dict(options.get(cls.name, {})) if cls.name != AttitudeEstimator.name else {}
+        # A registry name's section is the registry class's (and its subclasses'),
+        # never a user's class that happens to share its name.
+        registry = _registry_class(cls.name)
+        section = (dict(options.get(cls.name, {}))
+                   if registry is not None and issubclass(cls, registry) else {})
         for key, values in options.items():
             module_name, colon, class_name = key.partition(":")
             module = sys.modules.get(module_name) if colon else None
@@ -259,6 +288,7 @@ class AttitudeEstimator:
         self.step_index += 1
         if self.diverged_step is not None:
             return np.full(4, np.nan)
+        self._count_offered(star_tracker_quat, vectors)
         try:
             if offset_s and star_tracker_quat is not None:
                 offset = self._checked_offset(offset_s)
@@ -277,7 +307,38 @@ class AttitudeEstimator:
         if estimate is None or not (finite_state(estimate) and self.state_is_finite()):
             self.diverged_step = self.step_index - 1
             return np.full(4, np.nan)
+        return self._checked_estimate(estimate)
+
+    def _checked_estimate(self, estimate) -> np.ndarray:
+        """The step's estimate, if it is a unit quaternion: anything else is
+        no attitude (the error metric would clip ``[10, 0, 0, 0]`` to a
+        perfect 0°, and score a zero quaternion 180°), so it is refused,
+        naming the class, the step and the value."""
+        values = np.asarray(estimate, dtype=float).ravel().tolist()
+        norm2 = math.fsum(v * v for v in values) if len(values) == 4 else math.nan
+        if not abs(norm2 - 1.0) <= UNIT_NORM_TOLERANCE:
+            raise InvalidEstimateError(
+                f"{type(self).__name__}'s estimate at step {self.step_index - 1}", values,
+                f"must be a unit quaternion (|q|^2 within {UNIT_NORM_TOLERANCE:g} of 1; "
+                f"this one's is {norm2:.6g}): normalise it before returning it")
         return estimate
+
+    def _count_offered(self, star_tracker_quat, vectors) -> None:
+        """Count the step's readings of the sensors this estimator reads."""
+        reads, offered = self.reads, self.offered
+        if star_tracker_quat is not None and (reads is None or "star_tracker" in reads):
+            offered["star_tracker"] = offered.get("star_tracker", 0) + 1
+        for observation in vectors:
+            sensor = observation.sensor
+            if reads is None or sensor in reads:
+                offered[sensor] = offered.get(sensor, 0) + 1
+
+    def readings_used(self) -> int:
+        """How many of the readings offered since the last reset it applied:
+        those offered (:attr:`offered`) but those gating rejected
+        (:attr:`rejected`). Zero with readings offered means its estimate
+        was the gyro's alone (a static solver that never solved overrides it)."""
+        return sum(self.offered.values()) - sum(self.rejected.values())
 
     def _checked_rate(self, omega_meas_radps) -> np.ndarray:
         """The step's rate, or the last good one under ``on_invalid="skip"``."""
@@ -295,12 +356,19 @@ class AttitudeEstimator:
 
     def _checked_vectors(self, vectors) -> tuple:
         """The step's usable vector readings (a bad one raises, or is skipped and counted)."""
+        if hasattr(vectors, "body"):        # one reading, not a sequence of them
+            raise InvalidMeasurementError(f"vectors at step {self.step_index}", vectors,
+                                          "must be a sequence of VectorObservation (one "
+                                          "reading goes in a list: [observation])")
         kept = []
         for observation in vectors:
             body = _real_array("vector body", getattr(observation, "body", None), strict=False)
             reference = _real_array("vector reference", getattr(observation, "reference", None),
                                     strict=False)
             variance = getattr(observation, "variance", math.nan)
+            if isinstance(variance, (bool, np.bool_)) or \
+                    not isinstance(variance, (int, float, np.integer, np.floating)):
+                variance = math.nan         # text, None: no variance
             if (body.shape == (3,) and reference.shape == (3,)
                     and np.all(np.isfinite(body)) and np.all(np.isfinite(reference))
                     and reference @ reference > 0 and math.isfinite(variance) and variance > 0):
@@ -363,7 +431,7 @@ class AttitudeEstimator:
 
     def run(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
             available: np.ndarray, offset_s: np.ndarray | None = None, *,
-            vectors=None) -> np.ndarray:
+            vectors=None, progress=None) -> np.ndarray:
         """Reset, then step through a whole record; returns ``(N, 4)`` estimates.
 
         Parameters
@@ -376,6 +444,8 @@ class AttitudeEstimator:
             grid; see :meth:`step`); zeros if None.
         vectors : sequence of :class:`sensors.vector.VectorReadings`, optional
             Each vector sensor's readings over the record (``(N, 3)`` rows).
+        progress : a progress bar (``update(n)``), optional
+            Advanced by one per step (every :data:`PROGRESS_EVERY` steps).
         """
         omega, star, available, offsets = self._start_record(
             omega_meas_radps, star_tracker_quat, available, offset_s)
@@ -385,6 +455,7 @@ class AttitudeEstimator:
             for k in range(len(omega)):
                 estimates[k] = self.step(omega[k], star[k] if available[k] else None,
                                          offsets[k], observations_at(vectors, k))
+                _advance(progress, k, len(omega))
         return estimates
 
     def _start_record(self, omega_meas_radps, star_tracker_quat, available, offset_s=None):
@@ -413,7 +484,7 @@ class AttitudeEstimator:
 
     def track(self, omega_meas_radps: np.ndarray, star_tracker_quat: np.ndarray,
               available: np.ndarray, offset_s: np.ndarray | None = None, *,
-              vectors=None) -> "EstimateTrace":
+              vectors=None, progress=None) -> "EstimateTrace":
         """Like :meth:`run`, also collecting the covariance and bias estimate
         of every step (None where the estimator keeps none) and the steps of
         readings rejected by gating."""
@@ -440,6 +511,7 @@ class AttitudeEstimator:
                 self._collect(columns, k, n)
                 if nis is not None and self.diverged_step is not None:
                     nis[k] = np.nan
+                _advance(progress, k, n)
         rejected = {}
         for k, sensor in self.rejections:
             rejected.setdefault(sensor, []).append(k)
@@ -459,6 +531,25 @@ class AttitudeEstimator:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(dt={self.dt!r})"
+
+
+#: A record's progress bar is advanced this many steps at a time.
+PROGRESS_EVERY = 1000
+
+
+def _advance(progress, k: int, n: int) -> None:
+    """Advance ``progress`` after step ``k`` of ``n`` (every
+    :data:`PROGRESS_EVERY` steps and at the last; a bar's update costs
+    microseconds, a step of a filter tens)."""
+    if progress is not None and ((k + 1) % PROGRESS_EVERY == 0 or k + 1 == n):
+        progress.update((k % PROGRESS_EVERY) + 1)
+
+
+def _registry_class(name: str):
+    """The registry's class of that name, or None (imported late: the
+    registry imports this module)."""
+    from estimators import ESTIMATORS
+    return ESTIMATORS.get(name)
 
 
 def _quiet_overflow():
@@ -481,6 +572,10 @@ def _checked_vector_record(vectors, n_steps: int) -> tuple:
     """A record's vector readings: each sensor's arrays one row per step."""
     if vectors is None:
         return ()
+    if hasattr(vectors, "body"):            # one sensor's readings, not a sequence of them
+        raise InvalidMeasurementError("vectors", type(vectors).__name__, "must be a sequence "
+                                      "of VectorReadings, one per sensor (one sensor's go in "
+                                      "a list: [readings])")
     vectors = tuple(vectors)
     for readings in vectors:
         for name, shape in (("body", (n_steps, 3)), ("reference", (n_steps, 3)),
@@ -604,8 +699,11 @@ class KalmanEstimator(AttitudeEstimator):
         f.x_post, f.P_post = x.copy(), P.copy()
 
     #: The filters apply vector readings: one sequential update per vector
-    #: (:meth:`correct_vector`), after the star tracker's.
+    #: (:meth:`correct_vector`), after the star tracker's; any one attitude
+    #: sensor gives them a reference.
     uses_vector_readings = True
+    reads = frozenset(sensing.ATTITUDE_SENSORS)
+    needs = sensing.ANY_ATTITUDE_SENSOR
     #: The χ² probability of innovation gating, or None (off; see :meth:`accepts`).
     gate_probability = None
 
@@ -741,10 +839,12 @@ class KalmanEstimator(AttitudeEstimator):
         return estimate
 
 
-class AttitudeAndBiasEstimator(KalmanEstimator):
+class AttitudeAndBiasEstimator(SampledRate, KalmanEstimator):
     """Base of the six-state filters (attitude error and gyro bias, e.g. the
     MEKF and USQUE): at each output they keep ``_output = (q̂, β̂, P)`` with
-    ``P`` 6x6, its attitude block first, and answer the interface from it."""
+    ``P`` 6x6, its attitude block first, and answer the interface from it.
+    They propagate with the rate held over each step or with the
+    trapezoidal rule (``rate_interpolation``, :mod:`estimators.sampled_rate`)."""
 
     _output: tuple
     #: Both take the gyro's noise model and the star tracker's body-frame
@@ -762,18 +862,29 @@ class AttitudeAndBiasEstimator(KalmanEstimator):
     def settings_from_scenario(cls, scenario) -> dict:
         """The scenario's settings; with a Gauss–Markov bias of σ_b, a bias
         prior of at least σ_b (``√(σ₀² + σ_b²)`` with σ₀ the default): the
-        true bias starts as a draw of that spread."""
+        true bias starts as a draw of that spread. The prior also covers the
+        gyro's declared initial bias: at least ``|b₀|`` on each axis (the
+        filter starts its estimate at zero, so ``b₀`` is its initial error,
+        and a prior narrower than it is overconfident from the start)."""
         settings = super().settings_from_scenario(scenario)
+        sigma = inspect.signature(cls.__init__).parameters["initial_bias_sigma_radps"].default
         sigma_b = getattr(scenario, "gyro_bias_instability_radps", 0.0)
         if sigma_b > 0:
-            default = inspect.signature(cls.__init__).parameters["initial_bias_sigma_radps"]
-            settings["initial_bias_sigma_radps"] = math.hypot(default.default, sigma_b)
+            sigma = math.hypot(sigma, sigma_b)
+        declared = np.abs(np.asarray(getattr(scenario, "gyro_initial_bias_radps", np.zeros(3)),
+                                     dtype=float))
+        if np.any(declared > sigma):
+            settings["initial_bias_sigma_radps"] = np.maximum(declared, sigma)
+        elif sigma_b > 0:
+            settings["initial_bias_sigma_radps"] = sigma
+        settings["rate_interpolation"] = derived_rate_interpolation(scenario)
         return settings
 
     def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,
                    initial_bias_radps, initial_attitude_sigma_rad, initial_bias_sigma_radps,
-                   output) -> None:
+                   output, rate_interpolation="hold") -> None:
         """Validate and keep the settings the six-state filters share."""
+        self._set_rate_interpolation(rate_interpolation)
         self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
         self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
                                                    gyro_bias_random_walk, minimum=0.0)

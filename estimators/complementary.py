@@ -2,7 +2,11 @@ r"""The complementary filters most IMU users run: Madgwick's gradient-descent
 filter and Mahony's explicit complementary filter, with the accelerometer
 (gravity) and the magnetometer, on an earth frame whose x axis is magnetic
 north, y west and z up (NWU), as their authors write them; the estimate
-turned to ENU, the reference frame of this toolkit's recordings.
+turned to ENU, the reference frame of this toolkit's recordings and ground
+sites, and about the vertical by the declination of the field's reference
+vector (:class:`MagneticFrame`: on a recording the field's reference points
+north, so nothing turns; on a simulated site it is the IGRF's declination,
+a few degrees that would otherwise be scored as their error).
 
 * Madgwick, "An efficient orientation filter for inertial and
   inertial/magnetic sensor arrays" (2010), §3–4 (his C code,
@@ -32,8 +36,9 @@ import math
 
 import numpy as np
 
-from dynamics.quaternion import IDENTITY, quat_multiply
+from dynamics.quaternion import IDENTITY, quat_conjugate, quat_multiply
 from dynamics.validation import finite_number
+from estimators import sensing
 from estimators.base import AttitudeEstimator
 from estimators.tunable import Tunable
 
@@ -155,26 +160,93 @@ def acc_mag(vectors):
     return found.get("accelerometer"), found.get("magnetometer")
 
 
-class ComplementaryFilter(AttitudeEstimator):
-    """What Madgwick's and Mahony's filters share: an NWU state started from
-    ``initial_attitude`` (body → ENU), the acc/mag readings of each step, the
-    ENU estimate out."""
+def declination_turn(field_reference) -> np.ndarray | None:
+    r"""The turn about the vertical from the frame these filters (and VQF,
+    Fusion) estimate in — their north is the field's horizontal direction,
+    *magnetic* north — to the reference frame (east-north-up): ``q_ref =
+    turn ⊗ q_magnetic``, a rotation by :math:`-D` about up, :math:`D =
+    \operatorname{atan2}(r_E, r_N)` the declination of the field's reference
+    vector ``field_reference`` (ENU). None where it has no east component
+    (no declination: a recording's field reference points north by
+    construction), so that nothing changes there, bit for bit."""
+    east, north = float(field_reference[0]), float(field_reference[1])
+    if east == 0.0:
+        return None
+    half = -0.5 * math.atan2(east, north)
+    return np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+
+
+def field_reference(vectors):
+    """The magnetometer's reference vector among a step's readings, or None."""
+    return next((v.reference for v in vectors if v.sensor == "magnetometer"), None)
+
+
+class MagneticFrame:
+    """What estimators in the magnetic frame share: the turn to the reference
+    frame, learnt from the first magnetometer reading's reference vector
+    (:func:`declination_turn`), so that they are scored against the north
+    they estimate, not geographic north (on the ground the two differ by the
+    site's declination)."""
+
+    #: The turn, once learnt (None: none, or not yet).
+    _turn = None
+    _turn_learnt = False
+
+    def learn_frame(self, reference) -> bool:
+        """Take the turn from a field reference ``reference`` the first time
+        one comes; True if it turned the frame now."""
+        if self._turn_learnt or reference is None:
+            return False
+        self._turn_learnt, self._turn = True, declination_turn(reference)
+        return self._turn is not None
+
+    def in_reference_frame(self, q: np.ndarray) -> np.ndarray:
+        """An estimate in the magnetic frame, in the reference frame."""
+        return q if self._turn is None else quat_multiply(self._turn, q)
+
+
+class ComplementaryFilter(MagneticFrame, AttitudeEstimator):
+    """What Madgwick's and Mahony's filters share: an NWU state (magnetic
+    north) started from ``initial_attitude`` (body → ENU), the acc/mag
+    readings of each step, the ENU estimate out (turned by the declination,
+    :class:`MagneticFrame`)."""
 
     uses_vector_readings = True
+    #: Their step corrects only with both readings (the MARG update).
+    reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
+    needs = (reads,)
 
     def reset(self) -> None:
-        q = quat_multiply(ENU_TO_NWU, self.initial_attitude)
+        self._turn, self._turn_learnt = None, False
+        self._start_from(self.initial_attitude)
+
+    def _start_from(self, q_reference) -> None:
+        """The NWU state of the estimate ``q_reference`` (body → reference)."""
+        q = q_reference if self._turn is None else \
+            quat_multiply(quat_conjugate(self._turn), q_reference)
+        q = quat_multiply(ENU_TO_NWU, q)
         self.q_nwu = tuple(float(x) for x in q / np.linalg.norm(q))
+
+    def learn_frame(self, reference) -> bool:
+        """:meth:`MagneticFrame.learn_frame`; the state re-expressed in the
+        turned frame, so that the estimate goes on where it was."""
+        estimate = self.attitude
+        if super().learn_frame(reference):
+            self._start_from(estimate)
+            return True
+        return False
 
     @property
     def attitude(self) -> np.ndarray:
-        return quat_multiply(NWU_TO_ENU, np.array(self.q_nwu))
+        return self.in_reference_frame(quat_multiply(NWU_TO_ENU, np.array(self.q_nwu)))
 
     def state_is_finite(self) -> bool:
         return bool(np.isfinite(self.q_nwu).all())
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
         acc, mag = acc_mag(vectors)
+        if mag is not None:
+            self.learn_frame(field_reference(vectors))
         self.update(tuple(float(x) for x in omega_meas_radps), acc or NO_READING,
                     mag or NO_READING)
         return self.attitude

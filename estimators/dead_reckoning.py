@@ -49,6 +49,7 @@ class DeadReckoning(AttitudeEstimator):
 
     #: Dead reckoning integrates the gyro alone (with resets: and the star tracker).
     uses_vector_readings = False
+    reads = frozenset()
     name = "dead-reckoning"
     label = "Dead Reckoning"
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from dynamics.quaternion import IDENTITY
 from dynamics.validation import boolean
+from estimators import sensing
 from estimators.dead_reckoning import DeadReckoning
 from estimators.model import propagate
 
@@ -41,6 +42,8 @@ class DeadReckoningWithResets(DeadReckoning):
 
     name = "dead-reckoning-resets"
     label = "Dead Reckoning w/ Star Tracker Resets"
+    reads = frozenset({sensing.STAR_TRACKER})
+    needs = (frozenset({sensing.STAR_TRACKER}),)
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
                  rate_timing: str = "workshop", align_sign: bool = True,

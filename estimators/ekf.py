@@ -260,11 +260,17 @@ class QuaternionEKF(KalmanEstimator):
 
     def _record(self) -> None:
         # filterpy replaces x and P with new arrays, so keeping references is a snapshot.
-        self._output = (self.filter.x, self.filter.P)
+        x = self.filter.x
+        if self.output == "posterior":
+            # The additive update leaves the unit sphere; the attitude it
+            # estimates is the direction of x (the prior is f's, already unit).
+            x = x / math.sqrt(x @ x)
+        self._output = (x, self.filter.P)
 
     @property
     def attitude(self) -> np.ndarray:
-        """The estimate :meth:`step` last returned, ``(4,)`` (not renormalised)."""
+        """The estimate :meth:`step` last returned, ``(4,)``: the prior as
+        ``f`` gives it (unit), or the posterior normalised."""
         return self._output[0].copy()
 
     @property

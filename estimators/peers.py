@@ -14,8 +14,9 @@ Each needs its package, in the ``peers`` extra (``pip install
   rejection, 5 s rejection timeout; in its NWU convention, turned to ENU
   (imufusion 1.3.3 answered in NWU whichever convention it was given).
 
-All output body → ENU after each sample's update, as the complementary
-filters do (:mod:`estimators.complementary`).
+All output body → ENU after each sample's update, turned by the
+declination of the field's reference, as the complementary filters do
+(:mod:`estimators.complementary`, :class:`~estimators.complementary.MagneticFrame`).
 """
 from __future__ import annotations
 
@@ -25,8 +26,9 @@ import numpy as np
 
 from dynamics.quaternion import IDENTITY, quat_multiply
 from dynamics.validation import InvalidParameterError
+from estimators import sensing
 from estimators.base import AttitudeEstimator
-from estimators.complementary import NWU_TO_ENU, acc_mag
+from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
 
 #: m/s² per g, as Fusion takes the accelerometer.
 STANDARD_GRAVITY = 9.80665
@@ -40,20 +42,36 @@ def _package(estimator: str, module: str):
                                     "install 'attitude-bench[peers]'") from None
 
 
-class PeerFilter(AttitudeEstimator):
+class PeerFilter(MagneticFrame, AttitudeEstimator):
     """What the adapters share: a peer filter made at each reset, fed each
-    step's rate, accelerometer and magnetometer."""
+    step's rate, accelerometer and magnetometer; its estimate (magnetic
+    north) turned to the reference frame by the declination
+    (:class:`~estimators.complementary.MagneticFrame`)."""
 
     uses_vector_readings = True
+    #: Gravity gives them the inclination; the field, where read, the heading.
+    reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
+    needs = (frozenset({sensing.ACCELEROMETER}),)
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self.reset()
 
+    def reset(self) -> None:
+        self._turn, self._turn_learnt = None, False
+        self._new_filter()
+        self._q = self.initial_attitude.copy()
+
+    def _new_filter(self) -> None:
+        """Make the peer's filter afresh (``self.filter``)."""
+        raise NotImplementedError
+
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
         acc, mag = acc_mag(vectors)
+        if mag is not None:
+            self.learn_frame(field_reference(vectors))
         gyro = np.ascontiguousarray(omega_meas_radps, dtype=float)
-        self._q = np.asarray(self.update(gyro, acc, mag), dtype=float)
+        self._q = self.in_reference_frame(np.asarray(self.update(gyro, acc, mag), dtype=float))
         return self._q.copy()
 
     def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
@@ -64,8 +82,10 @@ class PeerFilter(AttitudeEstimator):
         if set(found) != {"accelerometer", "magnetometer"} or len(vectors) != 2 or \
                 not all(np.all(v.available) for v in vectors):
             return None
-        return np.asarray(self.run_readings(omega_meas_radps, found["accelerometer"].body,
-                                            found["magnetometer"].body), dtype=float)
+        estimates = np.asarray(self.run_readings(omega_meas_radps, found["accelerometer"].body,
+                                                 found["magnetometer"].body), dtype=float)
+        self.learn_frame(found["magnetometer"].reference[0])
+        return self.in_reference_frame(estimates)
 
     @property
     def attitude(self) -> np.ndarray:
@@ -80,9 +100,8 @@ class VQF9D(PeerFilter):
     label = "VQF"
     output = "getQuat9D"
 
-    def reset(self) -> None:
+    def _new_filter(self) -> None:
         self.filter = _package(self.name, "vqf").VQF(self.dt)
-        self._q = self.initial_attitude.copy()
 
     def run_readings(self, gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
         """``(N, 4)`` estimates over whole ``(N, 3)`` channels (each sample
@@ -106,13 +125,16 @@ class VQF6D(VQF9D):
     name = "vqf-6d"
     label = "VQF 6D"
     output = "getQuat6D"
+    #: Its output leaves the magnetometer out: its heading is the gyro's.
+    reads = frozenset({sensing.ACCELEROMETER})
+    has_heading = False
 
 
 class Fusion(PeerFilter):
     name = "fusion"
     label = "Fusion"
 
-    def reset(self) -> None:
+    def _new_filter(self) -> None:
         imufusion = _package(self.name, "imufusion")
         rate = 1.0 / self.dt
         self.filter = imufusion.Ahrs()
@@ -120,7 +142,6 @@ class Fusion(PeerFilter):
             sample_rate=rate, convention=imufusion.CONVENTION_NWU, gain=0.5,
             gyroscope_range=2000.0, acceleration_rejection=10.0, magnetic_rejection=10.0,
             rejection_timeout=5.0))
-        self._q = self.initial_attitude.copy()
 
     def run_readings(self, gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
         """``(N, 4)`` estimates over whole ``(N, 3)`` channels (each sample

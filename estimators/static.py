@@ -38,7 +38,7 @@ import numpy as np
 
 from dynamics.quaternion import IDENTITY, quat_from_rotvec, quat_multiply, rotation_matrix
 from dynamics.validation import finite_number, one_of
-from estimators import wahba
+from estimators import sensing, wahba
 from estimators.base import AttitudeEstimator, axis_sigmas, finite_state
 from estimators.tunable import MAGNETOMETER_WEIGHT
 
@@ -70,6 +70,8 @@ class StaticAttitude(AttitudeEstimator):
     """
 
     uses_vector_readings = True
+    reads = frozenset(sensing.VECTOR_SENSORS)
+    needs = sensing.TWO_DIRECTIONS
     tunable = (MAGNETOMETER_WEIGHT,)
     solver = staticmethod(wahba.svd)
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise"}
@@ -98,6 +100,11 @@ class StaticAttitude(AttitudeEstimator):
     @property
     def attitude(self) -> np.ndarray:
         return self.q_hat.copy()
+
+    def readings_used(self) -> int:
+        """The steps it solved at: without one, its estimate is the gyro's
+        from its start (no two separated directions at any one step)."""
+        return self.solutions
 
     @property
     def attitude_covariance(self) -> np.ndarray:

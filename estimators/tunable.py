@@ -54,6 +54,10 @@ class Tunable:
         A fixed default search range, for a setting that may have no default
         (e.g. a gate that is off).
     description : str
+    sensor : str or None
+        The one sensor whose readings it acts on (:mod:`estimators.sensing`'s
+        names): on data without that sensor it changes nothing, and is not
+        tuned. None: it acts on every reading.
     """
 
     name: str
@@ -63,6 +67,7 @@ class Tunable:
     scales: str | None = None
     search: tuple | None = None
     description: str = ""
+    sensor: str | None = None
 
     def coordinate(self, value: float) -> float:
         """The tuner's coordinate of ``value``."""
@@ -133,15 +138,16 @@ GYRO_BIAS_RANDOM_WALK = Tunable("gyro_bias_random_walk", "log", (1e-20, 1e3), sp
                                 description="σ_u, the bias's rate random walk (rad/s^1.5)")
 MEASUREMENT_SCALE = Tunable("measurement_scale", "log", (1e-12, 1e12), span=3.0,
                             scales="measurement_covariance",
-                            description="a factor on the star tracker's covariance R")
+                            description="a factor on the star tracker's covariance R",
+                            sensor="star_tracker")
 GATE_PROBABILITY = Tunable("gate_probability", "log-complement", (1e-6, 1.0 - 1e-12),
                            search=(0.9, 0.999999),
                            description="the χ² probability of innovation gating")
 MAGNETIC_NORM_TOLERANCE = Tunable("magnetic_norm_tolerance", "log", (1e-6, 1e3),
                                   search=(0.01, 1.0),
                                   description="the magnetic disturbance test's tolerance on "
-                                  "the field's magnitude (a fraction)")
+                                  "the field's magnitude (a fraction)", sensor="magnetometer")
 #: A static solver's weight on the magnetometer against the other sensors.
 MAGNETOMETER_WEIGHT = Tunable("magnetometer_weight", "log", (1e-9, 1e9), search=(1e-3, 1e3),
                               description="a factor on the magnetometer's weight σ⁻² in "
-                              "Wahba's loss")
+                              "Wahba's loss", sensor="magnetometer")

@@ -35,9 +35,10 @@ def test_run_writes_trace_csv_and_figure(tmp_path, capsys):
 def test_compare_writes_summary_of_three_estimators(tmp_path):
     assert main(["compare", "--out", str(tmp_path), "--seed", "3", *SHORT]) == 0
     rows = read_csv(tmp_path / "summary.csv")
-    assert tuple(rows[0]) == ("estimator",) + STAT_COLUMNS
+    assert tuple(rows[0]) == ("estimator",) + STAT_COLUMNS + ("note",)
     assert [r[0] for r in rows[1:]] == ["dead-reckoning", "dead-reckoning-resets", "ekf"]
-    values = np.array([r[1:] for r in rows[1:]], dtype=float)
+    assert [r[-1] for r in rows[1:]] == ["", "", ""]      # every number the plain error
+    values = np.array([r[1:-1] for r in rows[1:]], dtype=float)
     assert np.allclose(values[:, 3], 3 * values[:, 2], rtol=1e-9)     # 3σ column
     assert (tmp_path / "compare.png").stat().st_size > 10_000
 

@@ -69,7 +69,11 @@ def test_ekf_step_order_on_hand_computed_case():
 def test_ekf_posterior_output_option_returns_corrected_estimate():
     ekf = QuaternionEKF(pc_exponent=0.0, measurement_covariance=1.0, initial_covariance=1.0,
                         output="posterior")
-    assert np.allclose(ekf.step(np.zeros(3), np.array([0.0, 1, 0, 0])), [0.5, 0.5, 0, 0])
+    # The additive update gives x⁺ = [½, ½, 0, 0], off the unit sphere; the
+    # attitude it estimates, and outputs, is its direction.
+    assert np.allclose(ekf.step(np.zeros(3), np.array([0.0, 1, 0, 0])),
+                       np.array([1, 1, 0, 0]) / math.sqrt(2), atol=1e-15)
+    assert np.allclose(ekf.filter.x_post, [0.5, 0.5, 0, 0])
 
 
 def test_ekf_is_filterpy_with_nonlinear_predict_and_1d_state(rng):

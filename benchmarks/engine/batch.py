@@ -29,10 +29,10 @@ from benchmarks.engine.kernels.sensors import bias_model
 from benchmarks.engine.vectors import VectorStreams, max_block_steps, vector_block, vector_streams
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import SETTINGS, Scenario
-from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
-                                   simulate_truth, truth_and_rate_blocks)
+from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, scenario_sensors,
+                                   sensor_generators, simulate_truth, truth_and_rate_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
-from estimators import ESTIMATORS
+from estimators import ESTIMATORS, sensing
 from sensors.star_tracker import on_gyro_grid, steps_between_readings
 
 #: Steps advanced per kernel call. It bounds the noise buffer (B × 2500 × 3
@@ -118,6 +118,9 @@ def engine_limitation(scenario: Scenario, runs: RunTable | None = None,
     if name is None or name not in KERNELS:
         return None
     module = kernel(name)
+    if scenario.has_vector_sensors and not sensing.heading_observed(
+            ESTIMATORS[name], scenario_sensors(scenario)):
+        return f"an inclination-only score ({name} has no heading reference here)"
     if scenario.has_vector_sensors and ESTIMATORS[name].uses_vector_readings and \
             not getattr(module, "VECTOR_READINGS", False):
         return f"vector sensors (magnetometer, sun sensors, accelerometer) for {name}"

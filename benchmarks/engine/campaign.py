@@ -100,16 +100,15 @@ def _write_chunk(out: Path, start: int, stop: int, arrays: dict) -> None:
     write_bytes(chunk_path(out, start, stop), buffer.getvalue())
 
 
-def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
-    """Check or write ``campaign.json``; True if this call wrote it."""
-    manifest_path = out / MANIFEST
+def check_campaign_out(campaign: Campaign, out: Path, resume: bool) -> None:
+    """Refuse, writing nothing, what :func:`run_campaign` would refuse of
+    ``out``: a campaign there without ``resume``, none there with it, or
+    one made with other settings (so a command can check before work that
+    writes files of its own, such as ``--tuned``'s)."""
+    manifest_path = Path(out) / MANIFEST
     expected = campaign.manifest()
-    manifest_existed = manifest_path.exists()
-    if manifest_existed:
-        if not resume:
-            raise InvalidParameterError(
-                "out", str(out), "already holds a campaign; pass --resume to finish it "
-                "or choose another --out")
+    check_campaign_folder(out, resume)
+    if manifest_path.exists():
         try:
             found = json.loads(manifest_path.read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
@@ -124,10 +123,26 @@ def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
                 raise InvalidParameterError(
                     "resume", str(out), f"the campaign there has {key} = {found.get(key)!r}, "
                     f"not {expected[key]!r}; resume it with its own settings")
+
+
+def check_campaign_folder(out: Path, resume: bool) -> None:
+    """Refuse a folder holding a campaign without ``resume``, or none with it."""
+    if (Path(out) / MANIFEST).exists():
+        if not resume:
+            raise InvalidParameterError(
+                "out", str(out), "already holds a campaign; pass --resume to finish it "
+                "or choose another --out")
     elif resume:
         raise InvalidParameterError("resume", str(out), "holds no campaign to resume")
-    else:
-        write_text(manifest_path, json.dumps(expected, indent=2) + "\n")
+
+
+def _prepare(campaign: Campaign, out: Path, resume: bool) -> bool:
+    """Check or write ``campaign.json``; True if this call wrote it."""
+    manifest_path = out / MANIFEST
+    manifest_existed = manifest_path.exists()
+    check_campaign_out(campaign, out, resume)
+    if not manifest_existed:
+        write_text(manifest_path, json.dumps(campaign.manifest(), indent=2) + "\n")
     # A crash can leave a temporary file beside the chunks: never a result.
     for stale in (out / CHUNKS).glob(".*.tmp*"):
         stale.unlink(missing_ok=True)

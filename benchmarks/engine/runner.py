@@ -27,7 +27,8 @@ from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, PER_RUN_SETT
                                      run_batch, whole_number)
 from benchmarks.metrics import STAT_COLUMNS, error_statistics, nees
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import simulate
+from benchmarks.simulation import (refuse_unreadable, scenario_sensors, simulate,
+                                   warn_unmodelled)
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
 
@@ -55,6 +56,8 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
     if per_run_limit is not None:
         per_run_limit = whole_number("per_run_limit", per_run_limit, 1)
     runs = checked_runs(scenario, runs)
+    refuse_unreadable(estimators, scenario_sensors(scenario), "the scenario")
+    warn_unmodelled(scenario, estimators)
     kept = {"consistency": consistency, "nees_every": nees_every,
             "settle_steps": settle_steps, "keep_traces": keep_traces,
             "error_every": whole_number("error_every", error_every, 0)}
@@ -74,7 +77,7 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
                                       progress_bar))
     for name in estimators:
         if name not in results:
-            limited = per_run_limit is not None and name not in ENGINE_ESTIMATORS
+            limited = per_run_limit is not None      # every estimator on the per-run path
             count = min(len(runs), per_run_limit) if limited else len(runs)
             arguments = [(scenario, runs, i, name, kept) for i in range(count)]
             results[name] = _concatenated(map_tasks(_one_run, arguments, workers, progress_bar))

@@ -26,9 +26,21 @@ SOURCES = ("file", "scenario", "derived", "default")
 _DERIVED_UNLESS_GIVEN = frozenset(f.name for f in dataclasses.fields(Scenario) if f.default is None)
 
 
-def effective_settings(scenario: Scenario, name: str) -> list[dict]:
+def given_fields(paths=(), flags=()) -> frozenset:
+    """The scenario fields a user gave: in the files ``paths`` (in any of a
+    key's units or places) or as the flags ``flags`` (field names). A value
+    given is ``scenario``, even where it equals the default."""
+    from benchmarks.scenario import flatten_sections, read_toml
+    given = set(flags)
+    for path in paths or ():
+        given.update(key for key in flatten_sections(read_toml(path)) if key != "estimator_options")
+    return frozenset(given)
+
+
+def effective_settings(scenario: Scenario, name: str, given=frozenset()) -> list[dict]:
     """Rows ``{estimator, setting, value, source, from}`` for each constructor
-    keyword of estimator ``name`` as ``scenario`` builds it."""
+    keyword of estimator ``name`` as ``scenario`` builds it (``given``: the
+    fields the user gave, :func:`given_fields`)."""
     cls = resolve_estimator(name)
     section = cls.scenario_section(scenario)
     scenario_values = cls.settings_from_scenario(scenario)
@@ -42,7 +54,7 @@ def effective_settings(scenario: Scenario, name: str) -> list[dict]:
             value, source, origin = section[keyword], "file", f"[estimators.{name}]"
         elif keyword in scenario_values:
             value = scenario_values[keyword]
-            source, origin = _scenario_source(scenario, defaults, field)
+            source, origin = _scenario_source(scenario, defaults, field, given)
         else:
             value, source, origin = parameter.default, "default", cls.__name__
         if keyword in ("initial_state",) and value is None:
@@ -52,8 +64,10 @@ def effective_settings(scenario: Scenario, name: str) -> list[dict]:
     return rows
 
 
-def _scenario_source(scenario: Scenario, defaults: Scenario, field: str | None):
+def _scenario_source(scenario: Scenario, defaults: Scenario, field: str | None, given):
     """Where a keyword taken from the scenario came from."""
+    if field in given:
+        return "scenario", f"scenario {field}"
     if field is None:
         return "derived", "the scenario's sensors"
     if field not in field_names():

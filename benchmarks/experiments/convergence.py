@@ -70,7 +70,8 @@ def convergence_study(scenario, estimators=("mekf", "usque"), seeds=range(5),
                 error = result.error_deg[name]
                 rows.append({"start": label, "estimator": name, "seed": int(seed),
                              "converged_min": convergence_time_s(result.time_s, error) / 60.0,
-                             "final_deg": float(error[-1])})
+                             "final_deg": float(error[-1]),
+                             "diverged_step": result.diverged_step[name]})
                 if seed == seeds[0]:
                     curves[(label, name)] = error
     return pd.DataFrame(rows), curves

@@ -39,7 +39,8 @@ from benchmarks.engine import ENGINE_ESTIMATORS, make_runs, run_many
 from benchmarks.engine.batch import engine_limitation
 from benchmarks.metrics import attitude_error_deg, error_statistics, nees
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import SensorData, vectors_for, simulate_sensors, simulate_truth
+from benchmarks.simulation import (SensorData, present_sensors, refuse_unreadable, simulate_sensors,
+                                   simulate_truth, vectors_for)
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator
@@ -72,6 +73,10 @@ class Case:
     q_reference: np.ndarray      # (N, 4)
     scored: np.ndarray           # (N,) bool
     seed: int | None = None      # a simulated case's seed
+    #: What the case is made of, by content: ``("seed", n)`` or
+    #: ``("recording", digest)`` (:func:`benchmarks.experiments.replay.dataset_source`),
+    #: so that a test set is kept apart from a training set by what it holds.
+    source: tuple = ()
 
     @property
     def has_reference(self) -> bool:
@@ -88,14 +93,15 @@ def seed_cases(scenario: Scenario, seeds) -> list[Case]:
     truth = simulate_truth(scenario)
     scored = np.ones(scenario.n_steps, dtype=bool)
     return [Case(f"seed {seed}", scenario, simulate_sensors(scenario, truth, int(seed)),
-                 truth.q_true, scored, int(seed)) for seed in seeds]
+                 truth.q_true, scored, int(seed), ("seed", int(seed))) for seed in seeds]
 
 
-def recording_case(data, label: str) -> Case:
-    """A recording made ready by :func:`benchmarks.experiments.replay.load_replay`."""
+def recording_case(data, label: str, source: tuple = ()) -> Case:
+    """A recording made ready by :func:`benchmarks.experiments.replay.load_replay`
+    (``source``: what it is made of, :attr:`Case.source`)."""
     recording = data.recording
     return Case(label, data.scenario, data.sensors, data.truth.q_true,
-                recording.has_reference & recording.movement)
+                recording.has_reference & recording.movement, source=source)
 
 
 def with_settings(scenario: Scenario, name: str, settings: dict) -> Scenario:
@@ -121,6 +127,8 @@ class Objective:
     def __init__(self, name: str, objective: str, cases: list[Case], *, threads=None):
         self.name, self.objective, self.cases = name, checked_objective(objective), cases
         self.threads = threads
+        for case in cases:
+            refuse_unreadable([name], present_sensors(case.sensors), case.label)
         if objective in NEEDS_TRUTH:
             for case in cases:
                 if not case.has_reference:

@@ -38,7 +38,8 @@ from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.shipped import shipped_file
-from benchmarks.simulation import RunResult, SensorData, build_estimator, sensor_generators
+from benchmarks.simulation import (RunResult, SensorData, build_estimator, refuse_unreadable,
+                                   sensor_generators)
 from dynamics.rigid_body import RigidBodyTruth
 from dynamics.validation import InvalidParameterError, finite_number
 from sensors.recording import Recording, load_recording
@@ -77,6 +78,22 @@ def open_dataset(dataset: str) -> tuple[Recording, str | None]:
         raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)} "
                                     "or a path to a .npz recording")
     return load_recording(dataset), None
+
+
+def dataset_source(dataset: str) -> tuple:
+    """``("recording", digest)``: what the recording ``dataset`` names holds
+    (a SHA-256 of its file), so that one file named two ways (``broad-02``
+    and its path, a copy) is known for one recording."""
+    import hashlib
+    if dataset not in DATASETS and not str(dataset).endswith(".npz"):
+        open_dataset(dataset)           # its refusal, one line
+    try:
+        path = shipped_file(DATASETS[dataset]) if dataset in DATASETS else Path(dataset)
+        digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as err:
+        raise InvalidParameterError("dataset", dataset, f"cannot be read "
+                                    f"({err.strerror or err})") from None
+    return ("recording", digest)
 
 
 #: The largest σ of the pseudo star tracker per axis, degrees.
@@ -146,6 +163,10 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
         measurement_covariance=(sigma_rad / 2) ** 2 * np.eye(4),
         pc_exponent=math.log(max(q_variance, 1e-300)),
         estimator_options={"mekf": dict(six_state), "usque": dict(six_state)})
+
+
+#: What a replay gives the estimators: the gyro, and the pseudo star tracker.
+REPLAY_SENSORS = frozenset({"star_tracker"})
 
 
 def pseudo_star_tracker(recording: Recording, scenario: Scenario, seed: int):
@@ -284,6 +305,7 @@ def run_replay(data: ReplayData, estimators=DEFAULT_ESTIMATORS, seed: int = 0,
                quiet: bool = True) -> Replay:
     """Run ``estimators`` on data from :func:`load_replay` (made with ``seed``)."""
     sensors = data.sensors
+    refuse_unreadable(estimators, REPLAY_SENSORS, "the replay")
     estimates, errors, labels, traces, diverged = {}, {}, {}, {}, {}
     for name in progress(estimators, desc="replay", unit="estimator", quiet=quiet):
         estimator = build_estimator(name, data.scenario)

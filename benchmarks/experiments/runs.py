@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
-from benchmarks.output import write_csv, write_figure, write_text
+from benchmarks.output import figure_bytes, write_bytes, write_csv, write_text
 from benchmarks.figures.plots import comparison_figure, flight_figure
 from benchmarks.progress import progress
 from benchmarks.scenario import SECTIONS, SETTINGS, Scenario
@@ -61,10 +61,12 @@ SWEEP_COLUMNS = ("param", "value") + STAT_COLUMNS
 
 
 def run_statistics(result: RunResult, name: str) -> dict:
-    """``name``'s error statistics in ``result`` (NaN if it diverged), and
-    ``diverged_step`` (-1 if it did not)."""
+    """``name``'s error statistics in ``result`` (NaN if it diverged),
+    ``diverged_step`` (-1 if it did not) and its ``note`` ("" when its
+    numbers are the plain attitude error of a working estimator;
+    :attr:`~benchmarks.simulation.RunResult.notes`)."""
     return {**error_statistics(result.error_deg[name]),
-            "diverged_step": result.diverged_step[name]}
+            "diverged_step": result.diverged_step[name], "note": result.notes.get(name, "")}
 
 
 def run_one(scenario: Scenario, estimator: str, seed: int, out: Path) -> dict:
@@ -73,15 +75,16 @@ def run_one(scenario: Scenario, estimator: str, seed: int, out: Path) -> dict:
     error = result.error_deg[estimator]
     q_true, q_est = result.truth.q_true, result.estimates[estimator]
     table = np.column_stack([result.time_s, q_true, q_est, error])
+    drawn = figure_bytes(out / f"{estimator}.png",
+                         comparison_figure(result.time_s, {result.labels[estimator]: error}))
     write_csv(out / f"{estimator}.csv", TRACE_COLUMNS, (list(map(float, row)) for row in table))
-    write_figure(out / f"{estimator}.png",
-                 comparison_figure(result.time_s, {result.labels[estimator]: error}))
+    write_bytes(out / f"{estimator}.png", drawn)
     return run_statistics(result, estimator)
 
 
 def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMATORS,
             figure_name: str = "compare.png",
-            summary_name: str | None = "summary.csv") -> tuple[RunResult, dict]:
+            summary_name: str | None = "summary.csv", quiet: bool = True) -> tuple[RunResult, dict]:
     """Run several estimators on the same data; write the comparison figure and
     (unless ``summary_name`` is None) the summary table.
 
@@ -91,16 +94,19 @@ def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMA
     with each filter's ±3σ envelope, and the bias estimates against the truth.
     """
     workshop = scenario.is_workshop_sensors
-    result = simulate(scenario, estimators, seed=seed, traces=not workshop)
+    with progress(total=scenario.n_steps * len(estimators), desc="compare", unit="step",
+                  quiet=quiet) as bar:
+        result = simulate(scenario, estimators, seed=seed, traces=not workshop, progress_bar=bar)
     stats = {name: run_statistics(result, name) for name in result.error_deg}
-    if summary_name:
-        write_summary(out / summary_name, stats)
     if workshop:
         curves = {result.labels[name]: error for name, error in result.error_deg.items()}
         figure = comparison_figure(result.time_s, curves)
     else:
         figure = flight_comparison_figure(result)
-    write_figure(out / figure_name, figure)
+    drawn = figure_bytes(out / figure_name, figure)      # drawn before anything is written
+    if summary_name:
+        write_summary(out / summary_name, stats)
+    write_bytes(out / figure_name, drawn)
     return result, stats
 
 
@@ -131,9 +137,13 @@ def reading_window(scenario) -> int:
     return int(np.ceil(scenario.time_between_measurements / scenario.dt - 1e-9)) + 1
 
 
+#: ``summary.csv``'s columns: the statistics, and what they are where not plain.
+SUMMARY_COLUMNS = ("estimator",) + STAT_COLUMNS + ("note",)
+
+
 def write_summary(path: Path, stats: dict) -> None:
-    write_csv(path, ("estimator",) + STAT_COLUMNS,
-              ([name, *(row[c] for c in STAT_COLUMNS)] for name, row in stats.items()))
+    write_csv(path, SUMMARY_COLUMNS, ([name, *(row[c] for c in STAT_COLUMNS),
+                                       row.get("note", "")] for name, row in stats.items()))
 
 
 def sweep_scenarios(scenario: Scenario, param: str, values) -> list[Scenario]:
@@ -167,10 +177,11 @@ def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out
         legend = spec.legend.format(value=value, label=result.labels[estimator])
         curves[f"{legend} {spec.unit}".rstrip()] = error
         time_s, label = result.time_s, result.labels[estimator]
-    write_csv(out / "sweep.csv", SWEEP_COLUMNS, ([row[c] for c in SWEEP_COLUMNS] for row in rows))
-    write_figure(out / "sweep.png", comparison_figure(
+    drawn = figure_bytes(out / "sweep.png", comparison_figure(
         time_s, curves, ekf_labels=(), title=f"{label}: attitude error as {param} varies "
         f"(seed {seed})"))
+    write_csv(out / "sweep.csv", SWEEP_COLUMNS, ([row[c] for c in SWEEP_COLUMNS] for row in rows))
+    write_bytes(out / "sweep.png", drawn)
     return rows
 
 

@@ -55,7 +55,7 @@ def minimize_bounded(func, bounds=DEFAULT_BOUNDS, xtol: float = DEFAULT_XTOL) ->
     iteration table and scipy's termination message.
     """
     low, high = validate_bounds(bounds)
-    xtol = finite_number("xtol", xtol, strictly_positive=True)
+    xtol = checked_xtol(xtol, high - low)
     evaluations = []
 
     def recorded(x):
@@ -77,6 +77,18 @@ def minimize_bounded(func, bounds=DEFAULT_BOUNDS, xtol: float = DEFAULT_XTOL) ->
     return MinimizationLog(x=float(result.x), fun=float(result.fun),
                            evaluations=len(evaluations), iterations=iterations,
                            message=message or str(result.message))
+
+
+def checked_xtol(xtol, width: float) -> float:
+    """A search's tolerance: finite, > 0 and below the width of the search
+    interval (in the searched coordinate), where it would end the search at
+    its first evaluation."""
+    xtol = finite_number("xtol", xtol, strictly_positive=True)
+    if not xtol < width:
+        raise InvalidParameterError("xtol", xtol, f"must be below the search interval's width "
+                                    f"({width:g} in the searched coordinate): the search would "
+                                    "stop at its first evaluation")
+    return xtol
 
 
 def validate_bounds(bounds) -> tuple[float, float]:
@@ -220,23 +232,17 @@ class EstimatorTuning:
         return data
 
 
-def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None) -> list:
+def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None,
+                present=None) -> list:
     """``[(tunable, default, (low, high))]`` for the settings to tune:
     ``parameters`` (names, default: every declared one with a default and
     no fixed search range, and any given a range), each over its range in
     ``ranges`` (name → (low, high)) or its default search range. Unknown names, reversed ranges and
-    ranges outside a setting's declared limits are refused, one line each."""
-    from estimators.tunable import tunables
-    declared = tunables(estimator_class)
-    if not declared:
-        raise InvalidParameterError("estimator", estimator_class.name,
-                                    "has no tunable settings (it declares none)")
+    ranges outside a setting's declared limits are refused, one line each;
+    with ``present`` (the data's sensors), so is a setting of a sensor the
+    data lacks (:attr:`estimators.tunable.Tunable.sensor`): it changes nothing."""
+    declared = _effective_tunables(estimator_class, present, parameters, ranges)
     ranges = dict(ranges or {})
-    for name in list(parameters or ()) + list(ranges):
-        if name not in declared:
-            raise InvalidParameterError("parameters", name, f"is not tunable for "
-                                        f"{estimator_class.name}; its tunable settings: "
-                                        f"{', '.join(declared)}")
     if parameters is None:      # those with a default, and any given a range
         parameters = [name for name, t in declared.items() if t.search is None
                       and t.default(settings) not in (None, 0.0)] or list(declared)[:1]
@@ -260,6 +266,40 @@ def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None) -
                                         "must be above 0 on a log scale")
         plan.append((tunable, default, bounds))
     return plan
+
+
+def _effective_tunables(estimator_class, present, parameters, ranges) -> dict:
+    """``name → Tunable`` of the class's tunable settings that act on the
+    ``present`` sensors (all, if None); a name asked for that is not one of
+    them is refused, saying why."""
+    from estimators.tunable import tunables
+    declared = tunables(estimator_class)
+    if not declared:
+        raise InvalidParameterError("estimator", estimator_class.name,
+                                    "has no tunable settings (it declares none)")
+    effective = {name: t for name, t in declared.items()
+                 if present is None or t.sensor is None or t.sensor in present}
+    for name in list(parameters or ()) + list(ranges or ()):
+        if name in declared and name not in effective:
+            raise InvalidParameterError("parameters", name, f"acts on the {declared[name].sensor}'s "
+                                        "readings, and the data has none: tuning it would "
+                                        "change nothing")
+        if name not in declared:
+            raise InvalidParameterError("parameters", name, f"is not tunable for "
+                                        f"{estimator_class.name}; its tunable settings: "
+                                        f"{', '.join(declared)}")
+    if not effective:
+        raise InvalidParameterError("estimator", estimator_class.name, "has no tunable "
+                                    "setting that acts on the data's sensors")
+    return effective
+
+
+def cases_sensors(cases):
+    """The sensors that read in any of ``cases`` (None if a case carries no sensor data)."""
+    from benchmarks.simulation import present_sensors
+    if not all(hasattr(case, "sensors") for case in cases):
+        return None
+    return frozenset().union(*(present_sensors(case.sensors) for case in cases))
 
 
 def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=None, *,
@@ -286,10 +326,12 @@ def tune_estimator(name: str, cases, objective: str, parameters=None, ranges=Non
     cls = resolve_estimator(name)
     # What the estimator runs with: the scenario's settings over its constructor's defaults.
     plan = tuning_plan(cls, {**cls.constructor_defaults(),
-                             **cls.configured_settings(cases[0].scenario)}, parameters, ranges)
+                             **cls.configured_settings(cases[0].scenario)}, parameters, ranges,
+                       cases_sensors(cases))
     score = Objective(name, objective, cases) if score is None else score
     ends = np.array([[t.coordinate(b[0]), t.coordinate(b[1])] for t, _, b in plan])
     low, high = ends.min(axis=1), ends.max(axis=1)   # log10(1 − p) runs backwards
+    xatol = checked_xtol(xatol, float(np.min(high - low)))
     start = np.array([t.coordinate(d) if d is not None and (t.scale != "log" or d > 0)
                       else 0.5 * (lo + hi) for (t, d, _), lo, hi in zip(plan, low, high)])
     start = np.clip(start, low, high)
@@ -378,19 +420,39 @@ def cases_of(scenario: Scenario | None, seeds=None, datasets=None, what: str = "
     :func:`~benchmarks.experiments.replay.load_replay`: the pseudo star
     tracker, the gyro delay), else simulated ``seeds`` of ``scenario``."""
     from benchmarks.experiments.objectives import recording_case, seed_cases
-    from benchmarks.experiments.replay import load_replay
+    from benchmarks.experiments.replay import dataset_source, load_replay
+    if datasets and seeds:
+        raise InvalidParameterError(f"{what} seeds", list(seeds), "are simulated, and the "
+                                    f"{what} recordings named beside them are real: give one "
+                                    "kind (--dataset files read no --seeds)")
     if datasets:
-        if len(set(datasets)) != len(datasets):
-            raise InvalidParameterError(f"{what} datasets", list(datasets), "must each be named once")
+        sources = [dataset_source(name) for name in datasets]
+        for i, source in enumerate(sources):
+            if source in sources[:i]:
+                twin = datasets[sources.index(source)]
+                raise InvalidParameterError(f"{what} datasets", datasets[i], f"holds the same "
+                                            f"recording as {twin}: name each recording once")
         return [recording_case(load_replay(name, settings=settings, allow_imports=allow_imports,
-                                           **(replay or {})), name)
-                for name in datasets]
+                                           **(replay or {})), name, source)
+                for name, source in zip(datasets, sources)]
     return seed_cases(scenario, seeds)
 
 
 def disjoint(training: list, test: list) -> None:
-    """Refuse a test set that shares a seed or a recording with the training set."""
-    shared = sorted({case.label for case in training} & {case.label for case in test})
+    """Refuse a test set that shares a seed or a recording (by content: a
+    file named twice, by its name and by a path, is one recording) with the
+    training set, or that is of the other kind (a tuning on recordings
+    scored on simulated seeds, or the reverse, tests nothing of it)."""
+    kinds = ({case.source[0] for case in training if case.source},
+             {case.source[0] for case in test if case.source})
+    if all(kinds) and kinds[0] != kinds[1]:
+        raise InvalidParameterError("test set", [case.label for case in test],
+                                    f"must be of the training set's kind ({', '.join(kinds[0])}"
+                                    "s): a tuning on one kind scored on the other is no test of "
+                                    "it")
+    trained = {case.source or case.label: case.label for case in training}
+    shared = sorted({trained[case.source or case.label] for case in test
+                     if (case.source or case.label) in trained})
     if shared:
         raise InvalidParameterError("test set", shared, "must share no seed or recording "
                                     "with the training set (a score on tuned-on data is not a test)")

@@ -3,6 +3,7 @@
 form), then the nonlinear predict with the exact Jacobian."""
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -158,14 +159,15 @@ def advance(block, sensors, state, record, row):
                     nis_sum[run] += nis
                     nis_count[run] += 1
                     fold_innovation(run, nis, determinant, likelihood)
-            if posterior:
+            if posterior:    # its direction, as QuaternionEKF._record outputs it
+                norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
                 for i in range(4):
-                    prior[i] = x[i]
+                    prior[i] = x[i] / norm
                 if streaming or keep_traces:
-                    projected_covariance(x, P, projected)
+                    projected_covariance(prior, P, projected)
                     keep_variances(run, k, projected, variances, keep_traces)
                 if streaming:
-                    fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every,
+                    fold_nees(run, k, nees(q_true[j], prior, projected, scratch6), nees_every,
                               settle, nees_samples, nees_sum)
             record_error(run, k, q_true[j], prior, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
