@@ -658,7 +658,7 @@ def ineffective_reason(field_name: str, scenario: Scenario, names) -> str | None
     scenario, the chosen star tracker model ignores it, or none of the
     estimators reads its sensor (:attr:`estimators.AttitudeEstimator.reads`;
     a user's class may read anything)."""
-    from benchmarks.simulation import scenario_sensors
+    from benchmarks.sensor_use import scenario_sensors
     section = SECTION_OF.get(field_name)
     if section in SENSOR_SECTIONS and section not in scenario_sensors(scenario):
         why = ("its model is none, or an outage spans the run" if section == "star_tracker"
@@ -980,8 +980,11 @@ def command_montecarlo(args, scenario):
         print(f"{PROG}: interrupted; finished chunks are kept in {args.out}; "
               "rerun with --resume to finish", file=sys.stderr)
         raise SystemExit(130) from None
+    from benchmarks.sensor_use import Usage, tagged_label
     from benchmarks.simulation import resolve_estimator
-    labels = {name: resolve_estimator(name).label for name in args.estimators}
+    usage = frame.attrs.get("usage", {})
+    labels = {name: tagged_label(resolve_estimator(name).label,
+                                 usage.get(name, Usage()).note()) for name in args.estimators}
     drawn = figure_bytes(args.out / "montecarlo.png", distribution_figure(frame, labels))
     write_csv(args.out / "montecarlo.csv", CAMPAIGN_COLUMNS,
               (list(row) for row in frame[list(CAMPAIGN_COLUMNS)].itertuples(index=False)),
@@ -999,6 +1002,9 @@ def command_montecarlo(args, scenario):
     for name in args.estimators:
         p5, p50, p95 = spread[name].tolist()
         print(f"{name}: error std over runs 5% {p5:.4f}, 50% {p50:.4f}, 95% {p95:.4f} deg")
+    for name, usage in frame.attrs.get("usage", {}).items():
+        if usage.note():
+            print(f"note: {name}: {usage.note()}")
     print(f"wrote {args.out / 'montecarlo.csv'} and {args.out / 'montecarlo.png'}")
     return report
 
@@ -1047,7 +1053,7 @@ def command_replay(args, _scenario):
     from benchmarks.resources import check_memory, per_run_bytes
     from benchmarks.experiments.replay import (DELAY_SEARCH_SAMPLES, REPLAY_SENSORS,
                                                likeliest_gyro_delay)
-    from benchmarks.simulation import refuse_unreadable
+    from benchmarks.sensor_use import refuse_unreadable
     # The estimators, the recording, the settings and the memory are checked before any write.
     refuse_unreadable(args.estimators, REPLAY_SENSORS, "the replay")
     delay = args.gyro_delay
@@ -1114,7 +1120,7 @@ BROAD_SENSORS = frozenset({"accelerometer", "magnetometer"})
 def command_broad(args, _scenario):
     from benchmarks.broad import benchmark, case_study, tuning
     from benchmarks.broad.dataset import ATTRIBUTION, broad_folder, open_broad
-    from benchmarks.simulation import refuse_unreadable
+    from benchmarks.sensor_use import refuse_unreadable
     if not args.case_study:
         refuse_unreadable(args.estimators, BROAD_SENSORS, "a BROAD trial")
     dataset = open_broad(broad_folder(args.broad))
@@ -1283,7 +1289,7 @@ def default_estimators(command: str, scenario) -> tuple:
         from benchmarks.broad.benchmark import default_estimators as broad_defaults
         return broad_defaults()
     if scenario is not None and scenario.has_vector_sensors:
-        from benchmarks.simulation import scenario_sensors, usable_estimators
+        from benchmarks.sensor_use import scenario_sensors, usable_estimators
         return usable_estimators(VECTOR_DEFAULTS, scenario_sensors(scenario))
     return STAR_TRACKER_DEFAULTS if command == "consistency" else tuple(WORKSHOP_ESTIMATORS)
 
@@ -1295,7 +1301,7 @@ def check_sensors(args, scenario) -> None:
         return
     names = getattr(args, "estimators", None) or (
         (args.estimator,) if getattr(args, "estimator", None) else ())
-    from benchmarks.simulation import refuse_unreadable, scenario_sensors
+    from benchmarks.sensor_use import refuse_unreadable, scenario_sensors
     refuse_unreadable(names, scenario_sensors(scenario), "the scenario")
 
 

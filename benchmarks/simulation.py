@@ -24,7 +24,9 @@ from benchmarks.resources import TRUTH_CACHE_STEPS, check_memory, engine_bytes, 
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
 from dynamics.validation import InvalidParameterError, seed_values
-from estimators import AttitudeEstimator, resolve_estimator, sensing
+from benchmarks.sensor_use import (Usage, present_sensors, refuse_unreadable, tagged_label,
+                                   warn_unmodelled)
+from estimators import AttitudeEstimator, resolve_estimator
 
 #: The workshop's estimators in the order it introduces them.
 WORKSHOP_ESTIMATORS = ("dead-reckoning", "dead-reckoning-resets", "ekf")
@@ -91,8 +93,10 @@ class RunResult:
     diverged_step: dict | None = None
     #: ``notes[name]``: what its numbers are where they are not the plain
     #: attitude error of a working estimator (scored on its inclination; it
-    #: used none of its readings), for every table and figure to say.
+    #: used none of its readings; it rejected some), for every table and
+    #: figure to say; from ``usage[name]`` (:class:`benchmarks.sensor_use.Usage`).
     notes: dict = field(default_factory=dict)
+    usage: dict = field(default_factory=dict)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -247,105 +251,6 @@ def _reading_truth_cached(inertia, q0, omega0, times) -> np.ndarray:
     return q_true
 
 
-def present_sensors(sensors: SensorData) -> frozenset:
-    """The attitude sensors that took at least one reading in ``sensors``
-    (:mod:`estimators.sensing`'s names; the gyro aside)."""
-    names = {readings.sensor for readings in sensors.vectors if np.any(readings.available)}
-    if np.any(sensors.available):
-        names.add(sensing.STAR_TRACKER)
-    return frozenset(names)
-
-
-def scenario_sensors(scenario: Scenario) -> frozenset:
-    """The attitude sensors ``scenario`` declares: its vector sensors, and its
-    star tracker unless its model is ``"none"`` or an outage spans the run."""
-    names = {sensor.name for sensor in scenario.build_vector_sensors()}
-    out_throughout = any(start <= 0.0 and stop >= scenario.tstop
-                         for start, stop in scenario.star_tracker_outages_s)
-    if scenario.star_tracker_model != "none" and not out_throughout:
-        names.add(sensing.STAR_TRACKER)
-    return frozenset(names)
-
-
-def refuse_unreadable(estimators, present, where: str = "the data") -> None:
-    """Refuse (one line) an estimator that can use none of the sensors
-    ``present``: it would dead-reckon from its start under its own name
-    (:func:`estimators.sensing.unusable_reason`)."""
-    for item in estimators:
-        cls = resolve_estimator(item) if isinstance(item, str) else type(item)
-        reason = sensing.unusable_reason(cls, present)
-        if reason:
-            key = item if isinstance(item, str) else cls.name
-            raise InvalidParameterError("estimator", key, reason.replace("the data", where))
-
-
-def warn_unmodelled(scenario: Scenario, estimators, references=None) -> None:
-    """Say (a warning, once) what the scenario's truth has that no estimator
-    among ``estimators`` models: a magnetometer's hard or soft iron. Its
-    error is then in every magnetometer reading, and in the estimates by
-    about the hard iron over the field (a ``|b| / |B|`` rad tilt of the
-    field's direction)."""
-    if scenario.magnetometer_interval_s is None:
-        return
-    readers = [item for item in estimators if sensing.MAGNETOMETER in (
-        getattr(resolve_estimator(item) if isinstance(item, str) else type(item), "reads", None)
-        or ())]
-    hard = np.asarray(scenario.magnetometer_bias_nT, dtype=float)
-    soft = np.asarray(scenario.magnetometer_soft_iron, dtype=float)
-    if not readers or (not np.any(hard) and np.array_equal(soft, np.eye(3))):
-        return
-    what = " and ".join(part for part, present in (
-        (f"hard iron (bias_nT = {hard.tolist()})", np.any(hard)),
-        (f"soft iron (soft_iron = {soft.tolist()})", not np.array_equal(soft, np.eye(3))))
-        if present)
-    size = ""
-    if np.any(hard) and references is not None and references.magnetic_field_nT is not None:
-        strength = float(np.median(np.linalg.norm(references.magnetic_field_nT, axis=1)))
-        size = (f"; the hard iron against the field ({strength:,.0f} nT) is about "
-                f"{np.degrees(np.linalg.norm(hard) / strength):.2g}°")
-    warnings.warn(f"the magnetometer's {what} is in the simulated readings but in no "
-                  f"estimator's model ({', '.join(map(str, readers))}): its error is in their "
-                  f"estimates{size}", stacklevel=3)
-
-
-def usable_estimators(estimators, present) -> tuple:
-    """The estimators of ``estimators`` that can use the sensors ``present``
-    (for default lists: those that cannot are left out, not refused)."""
-    return tuple(name for name in estimators
-                 if sensing.unusable_reason(resolve_estimator(name), present) is None)
-
-
-#: The short form of each note, for figure legends.
-NOTE_TAGS = {"inclination only": "inclination only", "used none": "no reading used"}
-
-
-def run_note(estimator, present) -> str:
-    """What a run's numbers are, where they are not plain: scored on the
-    inclination, or made without any of its readings ("" when plain)."""
-    notes = []
-    if not sensing.heading_observed(type(estimator), present):
-        notes.append("inclination only: no heading reference")
-    offered = sum(getattr(estimator, "offered", {}).values())
-    if getattr(estimator, "needs", ()) and offered and estimator.readings_used() == 0:
-        notes.append(f"used none of its {offered} readings: the gyro's estimate from its start")
-    notes += rejected_shares(getattr(estimator, "rejected", {}), getattr(estimator, "offered", {}))
-    return "; ".join(notes)
-
-
-def rejected_shares(rejected: dict, offered: dict) -> list:
-    """``"rejected 62% of 53,612 accelerometer readings"`` for each sensor
-    whose readings gating rejected (by sensor: counts rejected and offered)."""
-    return [f"rejected {100.0 * count / offered[sensor]:.3g}% of {offered[sensor]:,} {sensor} "
-            "readings" for sensor, count in rejected.items() if count and offered.get(sensor)]
-
-
-def tagged_label(label: str, note: str) -> str:
-    """``label`` with the short form of ``note`` (:data:`NOTE_TAGS`), so that
-    a figure's legend says what the curve is."""
-    tags = [tag for start, tag in NOTE_TAGS.items() if start in note]
-    return f"{label} [{', '.join(tags)}]" if tags else label
-
-
 def build_estimator(name: str, scenario: Scenario) -> AttitudeEstimator:
     """The estimator ``name`` names (see :func:`estimators.resolve_estimator`),
     built from ``scenario`` (its ``from_scenario``, which also applies a
@@ -399,7 +304,7 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
     present = present_sensors(sensors)
     refuse_unreadable(estimators, present, "the scenario")
     warn_unmodelled(scenario, estimators, sensors.references)
-    estimates, errors, labels, kept, diverged, notes = {}, {}, {}, {}, {}, {}
+    estimates, errors, labels, kept, diverged, usage = {}, {}, {}, {}, {}, {}
     for item in estimators:
         estimator = build_estimator(item, scenario) if isinstance(item, str) else item
         key = item if isinstance(item, str) else estimator.name
@@ -417,15 +322,14 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         else:
             q_est = estimator.run(*record, vectors=vectors, **shown)
         estimates[key] = q_est
-        heading = sensing.heading_observed(type(estimator), present)
-        errors[key] = (attitude_error_deg if heading else inclination_error_deg)(truth.q_true,
-                                                                                 q_est)
+        usage[key] = Usage.of(estimator, present)
+        errors[key] = (attitude_error_deg if usage[key].heading
+                       else inclination_error_deg)(truth.q_true, q_est)
         step = getattr(estimator, "diverged_step", None)
         diverged[key] = -1 if step is None else int(step)
-        notes[key] = run_note(estimator, present)
-        labels[key] = tagged_label(estimator.label, notes[key])
+        labels[key] = tagged_label(estimator.label, usage[key].note())
     return RunResult(scenario=scenario, seed=seed, truth=truth, sensors=sensors,
                      estimates=estimates, error_deg=errors, labels=labels,
                      traces=kept if traces else None, diverged_step=diverged,
-                     notes={key: note for key, note in notes.items() if note})
+                     notes={key: u.note() for key, u in usage.items() if u.note()}, usage=usage)
 

@@ -9,8 +9,8 @@ import pytest
 
 from benchmarks.cli import main
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import (present_sensors, refuse_unreadable, scenario_sensors,
-                                   simulate)
+from benchmarks.sensor_use import present_sensors, refuse_unreadable, scenario_sensors
+from benchmarks.simulation import simulate
 from dynamics.validation import InvalidParameterError
 from estimators import ESTIMATORS, sensing
 from estimators.base import InvalidEstimateError
@@ -262,3 +262,17 @@ def test_magnetic_north_filters_are_scored_in_the_frame_they_estimate(name, tmp_
     assert 3.0 < declination < 5.0
     settled = result.error_deg[name][-1000:]
     assert settled.mean() < declination / 4      # was the declination itself
+
+
+def test_campaigns_say_what_their_runs_made_of_their_readings(tmp_path, capsys):
+    """montecarlo and consistency print the notes a single run's table prints,
+    summed over their runs (engine and per-run paths alike)."""
+    never = tmp_path / "never.toml"
+    never.write_text("[estimators.triad]\nmin_separation_deg = 95.0\n")
+    common = ["--scenario", CUBESAT, "--scenario", str(never), "--estimators", "triad,mekf",
+              "--runs", "3", "--tstop", "60", "--quiet"]
+    assert main(["montecarlo", *common, "--out", str(tmp_path / "m")]) == 0
+    assert ("note: triad: used none of its readings in 3 of 3 runs"
+            in capsys.readouterr().out)
+    assert main(["consistency", *common, "--out", str(tmp_path / "k")]) == 0
+    assert "note: triad: used none of its readings in 3 of 3 runs" in capsys.readouterr().out

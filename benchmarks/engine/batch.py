@@ -29,8 +29,9 @@ from benchmarks.engine.kernels.sensors import bias_model
 from benchmarks.engine.vectors import VectorStreams, max_block_steps, vector_block, vector_streams
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
 from benchmarks.scenario import SETTINGS, Scenario
-from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, scenario_sensors,
-                                   sensor_generators, simulate_truth, truth_and_rate_blocks)
+from benchmarks.sensor_use import scenario_sensors
+from benchmarks.simulation import (TRUTH_CACHE_STEPS, WORKSHOP_ESTIMATORS, sensor_generators,
+                                   simulate_truth, truth_and_rate_blocks)
 from dynamics.validation import InvalidParameterError, seed_values
 from estimators import ESTIMATORS, sensing
 from sensors.star_tracker import on_gyro_grid, steps_between_readings
@@ -224,6 +225,9 @@ class BatchResult:
     #: Per estimator whose kernel gates (``GATING``): ``(B, S)``, each run's
     #: vector readings rejected by gating, per sensor in the scenario's order.
     rejected: dict | None = None
+    #: From :func:`benchmarks.engine.runner.run_many`: per estimator, what its
+    #: runs made of their readings (:class:`benchmarks.sensor_use.Usage`).
+    usage: dict | None = None
 
     def frame(self) -> pd.DataFrame:
         """Tidy: one row per (run, estimator) with the run's settings and statistics."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import dataclasses
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,7 @@ from benchmarks.engine.runner import dask_client, run_many
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_bytes, write_text
 from benchmarks.scenario import Scenario
+from benchmarks.sensor_use import Usage
 from dynamics.validation import InvalidParameterError
 
 MANIFEST = "campaign.json"
@@ -91,6 +93,8 @@ def compute_chunk(scenario: Scenario, estimators, base_seed: int, start: int, st
         for column in STAT_COLUMNS:
             arrays[f"{name}/{column}"] = batch.statistics[name][column]
         arrays[f"{name}/diverged_step"] = batch.diverged_step[name]
+        # What its runs made of their readings, as text (a chunk holds no pickles).
+        arrays[f"{name}/usage"] = np.array(json.dumps(dataclasses.asdict(batch.usage[name])))
     return arrays
 
 
@@ -257,7 +261,7 @@ def _chunk_ok(campaign: Campaign, path: Path, runs: int) -> bool:
 
 def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
     """The finished chunks joined in run order: one row per (run, estimator)."""
-    parts = []
+    parts, usages = [], {name: [] for name in campaign.estimators}
     for start, stop in campaign.chunks():
         with np.load(chunk_path(out, start, stop)) as data:
             for name in campaign.estimators:
@@ -266,8 +270,14 @@ def load_campaign(campaign: Campaign, out) -> pd.DataFrame:
                 for column in CHUNK_COLUMNS:
                     part[column] = data[f"{name}/{column}"]
                 parts.append(part)
+                if f"{name}/usage" in data.files:      # chunks of older campaigns have none
+                    usages[name].append(Usage(**json.loads(str(data[f"{name}/usage"]))))
     frame = pd.concat(parts, ignore_index=True)
     order = {name: i for i, name in enumerate(campaign.estimators)}
     frame["_order"] = frame["estimator"].map(order)
-    return (frame.sort_values(["_order", "run"], kind="stable").drop(columns="_order")
-            .reset_index(drop=True))
+    frame = (frame.sort_values(["_order", "run"], kind="stable").drop(columns="_order")
+             .reset_index(drop=True))
+    #: estimator → what its runs made of their readings (benchmarks.sensor_use.Usage)
+    frame.attrs["usage"] = {name: Usage.combined(found) for name, found in usages.items()
+                            if found}
+    return frame

@@ -27,8 +27,8 @@ from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, PER_RUN_SETT
                                      run_batch, whole_number)
 from benchmarks.metrics import STAT_COLUMNS, error_statistics, nees
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import (refuse_unreadable, scenario_sensors, simulate,
-                                   warn_unmodelled)
+from benchmarks.sensor_use import Usage, refuse_unreadable, scenario_sensors, warn_unmodelled
+from benchmarks.simulation import simulate
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
 
@@ -85,6 +85,8 @@ def run_many(scenario: Scenario, runs: RunTable, estimators, *, per_run_limit: i
     def each(key):
         return {name: results[name][key] for name in estimators if key in results[name]}
     return BatchResult(runs=runs, estimators=tuple(estimators), statistics=each("statistics"),
+                       usage={name: Usage.combined(results[name]["usage"])
+                              for name in estimators},
                        diverged_step=each("diverged_step"),
                        estimates=each("estimates") if keep_traces else None,
                        attitude_variances=each("variances") if keep_traces else None,
@@ -110,13 +112,16 @@ def _on_the_engine(scenario, runs, names, kept: dict, threads, chunk_runs,
         parts.append(part)
         if progress_bar is not None:
             progress_bar.update(len(part.runs) * len(names))
-    records = [{name: _engine_record(part, name) for name in names} for part in parts]
+    sensors = [sensor.name for sensor in scenario.build_vector_sensors()]
+    records = [{name: _engine_record(part, name, sensors) for name in names} for part in parts]
     return {name: _concatenated([record[name] for record in records]) for name in names}
 
 
-def _engine_record(part: BatchResult, name: str) -> dict:
-    """One estimator's arrays in one engine batch, as :func:`_one_run` gives them."""
-    record = {"statistics": part.statistics[name], "diverged_step": part.diverged_step[name]}
+def _engine_record(part: BatchResult, name: str, sensors=()) -> dict:
+    """One estimator's arrays in one engine batch, as :func:`_one_run` gives
+    them (``sensors``: the names of the scenario's vector sensors, in order)."""
+    record = {"statistics": part.statistics[name], "diverged_step": part.diverged_step[name],
+              "usage": _engine_usage((part.rejected or {}).get(name), sensors, len(part.runs))}
     if part.error_samples is not None:
         record["error_samples"] = part.error_samples[name]
     if part.estimates is not None:
@@ -126,6 +131,15 @@ def _engine_record(part: BatchResult, name: str) -> dict:
     if part.consistency and name in part.consistency:
         record["consistency"] = part.consistency[name]
     return record
+
+
+def _engine_usage(rejected, sensors, runs: int) -> list:
+    """The engine's runs' usage: the vector readings each rejected (the engine
+    does not count those offered, nor the star tracker's)."""
+    if rejected is None:
+        return [Usage(runs=runs, offered=None)]
+    return [Usage(runs=runs, offered=None,
+                  rejected={sensor: int(rejected[:, s].sum()) for s, sensor in enumerate(sensors)})]
 
 
 def _one_run(scenario: Scenario, runs: RunTable, i: int, name: str, kept: dict) -> dict:
@@ -138,7 +152,8 @@ def _one_run(scenario: Scenario, runs: RunTable, i: int, name: str, kept: dict) 
     result = simulate(case, [name], seed=int(runs.seeds[i]), traces=traced)
     record = {"statistics": {column: np.array([value]) for column, value in
                              error_statistics(result.error_deg[name]).items()},
-              "diverged_step": np.array([result.diverged_step[name]], dtype=np.int64)}
+              "diverged_step": np.array([result.diverged_step[name]], dtype=np.int64),
+              "usage": [result.usage[name]]}
     if kept["error_every"]:
         record["error_samples"] = result.error_deg[name][::kept["error_every"]][None]
     if not traced:
@@ -175,6 +190,7 @@ def _concatenated(records: list) -> dict:
                              for column in STAT_COLUMNS}}
     joined.update({key: np.concatenate([r[key] for r in records])
                    for key in _PER_RUN_ARRAYS if key in first})
+    joined["usage"] = [usage for r in records for usage in r["usage"]]
     if first.get("consistency"):
         checked = first["consistency"]
         joined["consistency"] = {key: np.concatenate([r["consistency"][key] for r in records])

@@ -113,6 +113,7 @@ def traced_runs(scenario, estimators, seed: int) -> dict:
     (:func:`benchmarks.engine.runner.run_many` with its traces kept)."""
     from benchmarks.engine.batch import make_runs
     from benchmarks.engine.runner import run_many
+    from benchmarks.sensor_use import tagged_label
     from benchmarks.simulation import build_estimator, simulate_truth
     truth = simulate_truth(scenario)
     batch = run_many(scenario, make_runs(scenario, [seed]), estimators, keep_traces=True)
@@ -120,7 +121,8 @@ def traced_runs(scenario, estimators, seed: int) -> dict:
     for name in estimators:
         variances = batch.attitude_variances.get(name)
         traced[name] = TracedRun(
-            label=build_estimator(name, scenario).label, time_s=truth.time_s,
+            label=tagged_label(build_estimator(name, scenario).label, batch.usage[name].note()),
+            time_s=truth.time_s,
             error_deg=np.degrees(attitude_error_vector_rad(truth.q_true,
                                                            batch.estimates[name][0])),
             sigma_deg=None if variances is None else np.degrees(np.sqrt(variances[0])))
@@ -167,6 +169,7 @@ def run_consistency(scenario, estimators, runs: int, base_seed: int = 0,
         bound_rms = bound.rms_deg(output, start=settle_steps)
         summary[name], anees[name] = _summary_row(per_run[name], bound_rms, level)
         summary[name]["output"] = output
+        summary[name]["note"] = batch.usage[name].note()
     # One traced run (the base seed) of each estimator for the per-axis figure.
     samples = traced_runs(scenario, estimators, base_seed)
     time_s = bound.time_s[::every]
@@ -254,6 +257,8 @@ def format_summary(summary: dict, settle_s: float | None = None) -> str:
     if settle_s is not None:
         lines.append(f"(RMS, bound and ANEES from t = {settle_s:g} s on; each bound before or "
                      "after the step's reading as its estimator outputs)")
+    lines += [f"note: {name}: {row['note']}" for name, row in summary.items()
+              if row.get("note")]
     return "\n".join(lines)
 
 
@@ -288,7 +293,11 @@ def figure(result: ConsistencyResult):
     bands = {name: (row["anees_low"], row["anees_high"]) for name, row in result.summary.items()}
     from benchmarks.experiments.runs import reading_window
     runs = {name: row["runs"] for name, row in result.summary.items()}
+    # The table's time averages and verdicts, so that the figure and the table agree.
+    averages = {name: (row["anees"], row["verdict"]) for name, row in result.summary.items()
+                if np.isfinite(row["anees"])}
     level = next(iter(result.summary.values()), {}).get("band_level", BAND_LEVEL)
     return consistency_figure(result.time_s, result.anees, bands, errors, sigmas, bound_sigma,
                               time_s, labels, runs=runs,
-                              envelope_steps=reading_window(result.scenario), level=level)
+                              envelope_steps=reading_window(result.scenario), level=level,
+                              settle_s=result.settle_s, averages=averages)

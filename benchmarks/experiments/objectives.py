@@ -39,8 +39,8 @@ from benchmarks.engine import ENGINE_ESTIMATORS, make_runs, run_many
 from benchmarks.engine.batch import engine_limitation
 from benchmarks.metrics import attitude_error_deg, error_statistics, nees
 from benchmarks.scenario import Scenario
-from benchmarks.simulation import (SensorData, present_sensors, refuse_unreadable, simulate_sensors,
-                                   simulate_truth, vectors_for)
+from benchmarks.sensor_use import present_sensors, refuse_unreadable
+from benchmarks.simulation import SensorData, simulate_sensors, simulate_truth, vectors_for
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator

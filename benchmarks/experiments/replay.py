@@ -38,8 +38,8 @@ from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.progress import progress
 from benchmarks.scenario import Scenario
 from benchmarks.shipped import shipped_file
-from benchmarks.simulation import (RunResult, SensorData, build_estimator, refuse_unreadable,
-                                   sensor_generators)
+from benchmarks.sensor_use import refuse_unreadable
+from benchmarks.simulation import RunResult, SensorData, build_estimator, sensor_generators
 from dynamics.rigid_body import RigidBodyTruth
 from dynamics.validation import InvalidParameterError, finite_number
 from sensors.recording import Recording, load_recording

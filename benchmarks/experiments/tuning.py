@@ -296,7 +296,7 @@ def _effective_tunables(estimator_class, present, parameters, ranges) -> dict:
 
 def cases_sensors(cases):
     """The sensors that read in any of ``cases`` (None if a case carries no sensor data)."""
-    from benchmarks.simulation import present_sensors
+    from benchmarks.sensor_use import present_sensors
     if not all(hasattr(case, "sensors") for case in cases):
         return None
     return frozenset().union(*(present_sensors(case.sensors) for case in cases))
@@ -502,27 +502,59 @@ def _toml_value(array: np.ndarray) -> str:
 
 
 def tuning_figure(tuning: EstimatorTuning, time_s, curves: dict):
-    """The loss at each evaluation (and the best so far), and the error of
-    the default and tuned settings over time on one case."""
+    """The loss at each evaluation, the best so far and the default's loss,
+    and the error of the default and tuned settings over time on one case.
+
+    Every evaluation lies inside the loss axis: a log axis when every loss is
+    positive (the first wild guesses and the last refinements both read), a
+    linear one holding them all otherwise; an evaluation that diverged
+    (infinite loss) is drawn at the top edge and named so."""
     from benchmarks.figures.plots import new_figure, plot_errors
-    figure, (left, right) = new_figure(ncols=2, width=6.5)
+    from benchmarks.figures.style import legend_outside, log_axis
+    figure, (left, right) = new_figure(ncols=2, width=6.5, height=5.0)
     losses = np.array([row["loss"] for row in tuning.evaluations], dtype=float)
-    shown = np.where(np.isfinite(losses), losses, np.nan)
     count = np.arange(1, len(losses) + 1)
-    left.plot(count, shown, "o", markersize=3, color="0.6", label="evaluation")
-    left.plot(count, np.fmin.accumulate(np.where(np.isnan(shown), np.inf, shown)),
-              color="black", label="best so far")
-    finite = shown[np.isfinite(shown)]
-    if finite.size:         # the first wild guesses would flatten the rest
-        low, high = finite.min(), np.percentile(finite, 80)
-        margin = 0.1 * (high - low) or 0.1 * abs(low) or 1.0
-        left.set_ylim(low - margin, high + margin)
+    finite = np.isfinite(losses)
+    default = tuning.loss_default
+    default = default if default is not None and math.isfinite(default) else None
+    known = np.concatenate([losses[finite], [default] if default is not None else []])
+    low, high = (known.min(), known.max()) if known.size else (1.0, 1.0)
+    logarithmic = low > 0
+    if logarithmic:         # the top edge (for diverged ones), then a margin beyond it
+        pad = max((high / low) ** 0.06, 1.05)
+        edge, bottom = high * pad, low / pad
+        top = edge * pad
+    else:
+        pad = 0.06 * ((high - low) or abs(low) or 1.0)
+        edge, bottom = high + pad, low - pad
+        top = edge + pad
+    left.plot(count[finite], losses[finite], "o", markersize=3.5, color="0.45",
+              label="evaluation", gid="evaluations")
+    if not finite.all():
+        left.plot(count[~finite], np.full((~finite).sum(), edge), "^", markersize=6,
+                  color="tab:red", label="diverged (infinite loss), at the top edge",
+                  gid="diverged")
+    best = np.fmin.accumulate(np.where(finite, losses, np.inf))
+    left.step(count, np.where(np.isfinite(best), best, np.nan), where="post", color="black",
+              linewidth=1.2, label="best so far")
+    if default is not None:
+        left.axhline(default, color="C0", linestyle="--", linewidth=1.2, gid="default",
+                     label=f"default settings: {default:.4g}")
+    if math.isfinite(tuning.loss):
+        left.plot(int(np.argmin(np.where(finite, losses, np.inf))) + 1, tuning.loss, "*",
+                  markersize=13, color="C1", zorder=5, label=f"tuned: {tuning.loss:.4g}")
+    if logarithmic:
+        log_axis(left, bottom, top)
+    else:
+        left.set_ylim(bottom, top)
+    left.set_xlim(0, len(losses) + 1)
     left.set_xlabel("evaluation")
-    left.set_ylabel(f"{tuning.objective} loss")
-    left.set_title(f"Tuning {tuning.estimator} ({tuning.method})")
-    left.legend(loc="upper right")
+    left.set_ylabel(f"{tuning.objective} loss{' (log scale)' if logarithmic else ''}")
+    left.set_title(f"Tuning {tuning.estimator} ({tuning.method}): every evaluation")
     plot_errors(right, time_s, curves, ekf_labels=())
+    right.get_legend().remove()
     right.set_title(f"{tuning.estimator}: default and tuned, {tuning.cases[0]}")
+    legend_outside(figure, [left, right], columns=4)
     return figure
 
 
