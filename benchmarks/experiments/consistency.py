@@ -279,7 +279,9 @@ def consistency_frame(result: ConsistencyResult) -> pd.DataFrame:
 
 
 def figure(result: ConsistencyResult):
-    """The consistency figure of a campaign (see :func:`benchmarks.figures.plots.consistency_figure`)."""
+    """The consistency figure of a campaign: each estimator's ANEES from its
+    summary's runs, the settle time where its averages start, and one run's
+    errors (see :func:`benchmarks.figures.plots.consistency_figure`)."""
     from benchmarks.figures.plots import consistency_figure
     errors, sigmas, labels, time_s = {}, {}, {}, None
     for name, sample in result.samples.items():

@@ -12,14 +12,15 @@ import numpy as np
 import seaborn as sns
 
 from benchmarks.figures.style import (COINCIDE_FRACTION, coincidence_note, coinciding,
-                                      estimator_styles, legend_outside, symlog_axis,
-                                      finite_max, round_values, upper_envelope,
+                                      estimator_styles, finite_max, legend_outside, log_axis,
+                                      round_values, symlog_axis, upper_envelope,
                                       with_coincidences)
 from benchmarks.metrics import angle_unit
 from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+from matplotlib.patches import Patch
+from matplotlib.ticker import FixedLocator, FuncFormatter
 from PIL import Image
 
 TITLE = "Absolute Attitude Error"
@@ -157,13 +158,43 @@ class BlittingPillowWriter(PillowWriter):
 #: which would clash with a star tracker's roll about its own boresight).
 AXIS_NAMES = ("Body x", "Body y", "Body z")
 _UNIT_SYMBOLS = {"arcsec": "″", "deg": "°"}
+#: Heights (inches) of the per-axis figures' rows: the panel comparing every
+#: estimator, each estimator's own row, the bias row, and room for the legend.
+COMPARISON_HEIGHT = 2.6
+ESTIMATOR_ROW_HEIGHT = 1.55
+BIAS_ROW_HEIGHT = 2.2
+LEGEND_HEIGHT = 0.9
+#: Spans over which the comparison panel takes each estimator's RMS error: a
+#: static solution's step-to-step noise drawn point by point fills a band
+#: that hides every curve beneath it; its RMS over a span is one line.
+COMPARISON_BINS = 300
+#: Decades labelled on each side of zero in an estimator's row (a short panel).
+ROW_DECADES = 2
+ERROR_WIDTH = 0.7
+#: Shading of a filter's ±3σ band, in its colour.
+ENVELOPE_ALPHA = 0.25
+#: Curves closer than this (in decades, on a log axis) or this fraction of a
+#: panel's range (on a linear one) look like one: the later is drawn dashed
+#: over the earlier and the pair named, whatever the tolerance of
+#: :data:`~benchmarks.figures.style.COINCIDE_FRACTION` says.
+LOOK_ALIKE_DECADES = 0.01
+LOOK_ALIKE_FRACTION = 0.01
+REJECTED_LABEL = "reading rejected by gating (✕ on the filter's curve)"
+ENVELOPE_LABEL = "±3σ: each filter's own, shaded in its colour"
 
 
 def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_deg_per_hr,
                   bias_estimates: dict, labels: dict, envelope_steps: int = 1,
                   eclipse=None, rejected: dict | None = None) -> Figure:
-    """Per-axis attitude error with ±3σ envelopes (left), bias estimates against
-    the true bias (right; no bias column when no estimator has a bias).
+    """Every estimator's attitude error, one row each, beside the others.
+
+    The top panel compares them all: each one's total error (the rotation
+    angle), as its RMS over short spans, on a log axis. Below it each
+    estimator has its own row, one panel per body axis, with its error and
+    its own ±3σ envelope; the rows share one symmetric-log scale, so a glance
+    down a column compares them. The last row (when any estimator has a
+    bias) holds the gyro bias estimates against the true bias, one panel per
+    axis.
 
     Parameters
     ----------
@@ -181,142 +212,227 @@ def flight_figure(time_s, error_vectors_deg: dict, sigmas_deg: dict, bias_true_d
         The steps in the Earth's shadow, shaded grey in every panel.
     rejected : {name: (steps,)}, optional
         Each filter's readings rejected by innovation gating, marked ✕ on its
-        error curve.
+        error curve in its row.
 
-    The error axes are symmetric-log: linear within the best filter's
-    steady-state 3σ, logarithmic beyond, so a converged filter, a drifting
-    dead reckoning and a start tens of degrees off are all readable. The unit
-    (arcsec or degrees) follows the size of the steady-state errors. Curves
-    that coincide are drawn in their own line styles and named below the
-    legend; one legend, outside the panels, lists every curve and band.
+    The symmetric-log scale is linear within the best filter's steady-state
+    3σ and logarithmic beyond, so a converged filter, a drifting dead
+    reckoning and a start tens of degrees off are all readable. The unit
+    (arcsec or degrees) follows the size of the steady-state errors.
+    Estimators whose errors coincide are drawn dashed over solid in the
+    comparison panel and named, with their largest difference, in the
+    legend's title; one legend, below the panels, lists every curve.
     """
-    columns = 2 if bias_estimates else 1
+    names = list(error_vectors_deg)
+    styles = estimator_styles(names)
+    typical_deg = _steady_three_sigma(time_s, error_vectors_deg, sigmas_deg)
+    scale, unit = angle_unit(typical_deg)
+    scaled = {name: error * scale for name, error in error_vectors_deg.items()}
+    under = coinciding(scaled, COINCIDE_FRACTION * typical_deg * scale)
+    envelopes = {name: None if sigmas_deg.get(name) is None
+                 else upper_envelope(3 * sigmas_deg[name] * scale, envelope_steps)
+                 for name in names}
+    heights = ([COMPARISON_HEIGHT] + [ESTIMATOR_ROW_HEIGHT] * len(names)
+               + ([BIAS_ROW_HEIGHT] if bias_estimates else []))
     with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(14.0 if columns == 2 else 9.0, 9.5), layout="constrained")
-        axes = figure.subplots(3, columns, sharex=True, squeeze=False)
-    styles = estimator_styles(error_vectors_deg)
+        figure = Figure(figsize=(14.0, sum(heights) + LEGEND_HEIGHT), layout="constrained")
+        grid = figure.add_gridspec(len(heights), 3, height_ratios=heights)
+        total_ax = figure.add_subplot(grid[0, :])
+        cells = _cell_grid(figure, grid, range(1, len(names) + 1), range(3), sharex=total_ax)
+        bias_axes = [figure.add_subplot(grid[-1, axis], sharex=total_ax)
+                     for axis in range(3)] if bias_estimates else []
+    for ax in [total_ax, *cells.ravel(), *bias_axes]:
+        _shade_eclipses(ax, time_s, eclipse)
+    alike = {**_total_panel(total_ax, time_s, scaled, styles, labels, unit), **under}
+    rejected = rejected or {}
+    for row, name in enumerate(names):
+        for axis, ax in enumerate(cells[row]):
+            _error_cell(ax, time_s, scaled[name][:, axis], envelopes[name], axis,
+                        styles[name]["color"], gid=f"error {name} {axis}")
+            steps = rejected.get(name, ())
+            if len(steps):
+                ax.plot(time_s[steps], scaled[name][steps, axis], linestyle="none",
+                        marker="x", markersize=4, markeredgewidth=0.8, color="black",
+                        zorder=4, label=REJECTED_LABEL)
+        _row_label(cells[row, 0], labels, name, under, unit, styles[name]["color"])
+    symlog_axis(cells[0, 0], typical_deg * scale, finite_max(scaled.values()),
+                most_decades=ROW_DECADES)
+    for axis, ax in enumerate(cells[0]):
+        ax.set_title(f"{AXIS_NAMES[axis]} error and the filter's ±3σ ({unit})",
+                     fontsize="medium")
+    if bias_estimates:
+        for axis, ax in enumerate(bias_axes):
+            _bias_panel(ax, time_s, bias_true_deg_per_hr[:, axis],
+                        {name: (estimate[:, axis], sigma[:, axis])
+                         for name, (estimate, sigma) in bias_estimates.items()},
+                        styles, labels, axis)
+            ax.set_title(f"{AXIS_NAMES[axis]} gyro bias: estimate (±3σ) and truth",
+                         fontsize="medium")
+        bias_axes[0].set_ylabel("Gyro bias (deg/h)")
+    for ax in bias_axes or cells[-1]:
+        ax.set_xlabel(X_LABEL)
+    total_ax.set_xlim(time_s[0], time_s[-1])
+    extra = [(Patch(color="0.45", alpha=2 * ENVELOPE_ALPHA, linewidth=0), ENVELOPE_LABEL)]
+    legend_outside(figure, [total_ax, *cells.ravel(), *bias_axes], columns=5,
+                   note=coincidence_note(alike, labels, _UNIT_SYMBOLS[unit]), extra=extra)
+    return figure
+
+
+def _steady_three_sigma(time_s, error_vectors_deg: dict, sigmas_deg: dict) -> float:
+    """The best filter's steady-state 3σ (median over the second half of the
+    run), degrees; without any σ, the smallest median absolute error."""
     second_half = slice(len(time_s) // 2, None)
     steady = [3 * np.nanmedian(sigma[second_half]) for sigma in sigmas_deg.values()
               if sigma is not None and np.isfinite(sigma[second_half]).any()]
     if not steady:
         steady = [np.nanmedian(np.abs(e[second_half])) for e in error_vectors_deg.values()
                   if np.isfinite(e[second_half]).any()] or [1.0]
-    typical_deg = max(min(steady), 1e-12)
-    scale, unit = angle_unit(typical_deg)
-    scaled = {name: error * scale for name, error in error_vectors_deg.items()}
-    under = coinciding(scaled, COINCIDE_FRACTION * typical_deg * scale)
-    largest = finite_max(scaled.values())
-    envelopes = {name: None if sigma is None else upper_envelope(3 * sigma * scale,
-                                                                   envelope_steps)
-                 for name, sigma in sigmas_deg.items()}
-    styles = layered(styles, scaled)
-    for axis in range(3):
-        _error_panel(axes[axis, 0], time_s, scaled, envelopes, axis, styles, under, labels)
-        _events(axes[axis, 0], time_s, scaled, axis, styles, labels, eclipse, rejected or {})
-        symlog_axis(axes[axis, 0], typical_deg * scale, largest)
-        axes[axis, 0].set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
-        axes[axis, 0].set_xlim(time_s[0], time_s[-1])
-        if bias_estimates:
-            _bias_panel(axes[axis, 1], time_s, bias_true_deg_per_hr[:, axis],
-                        {name: (estimate[:, axis], sigma[:, axis])
-                         for name, (estimate, sigma) in bias_estimates.items()},
-                        styles, under, labels)
-            axes[axis, 1].set_ylabel(f"{AXIS_NAMES[axis]} gyro bias (deg/h)")
-    axes[0, 0].set_title("Attitude error per body axis (symmetric log scale)")
-    axes[2, 0].set_xlabel(X_LABEL)
-    if bias_estimates:
-        axes[0, 1].set_title("Gyro bias: estimate against the truth, from the start")
-        axes[2, 1].set_xlabel(X_LABEL)
-    legend_outside(figure, axes, note=coincidence_note(under, labels, _UNIT_SYMBOLS[unit]))
-    return figure
+    return max(min(steady), 1e-12)
 
 
-def _error_panel(ax, time_s, scaled: dict, envelopes: dict, axis: int, styles: dict,
-                 under: dict, labels: dict) -> None:
-    """One body axis's errors and each filter's ±3σ band (its edges drawn in
-    the filter's line style, so that overlapping bands stay legible)."""
+def _cell_grid(figure, grid, rows, columns, sharex=None) -> np.ndarray:
+    """``(rows, columns)`` panels of ``grid`` sharing one y axis (and the x
+    axis of ``sharex``, or of the first panel); tick labels only on the
+    outer edges."""
+    rows, columns = list(rows), list(columns)
+    cells = np.empty((len(rows), len(columns)), dtype=object)
+    for i, row in enumerate(rows):
+        for j, column in enumerate(columns):
+            first = cells[0, 0] if i or j else None
+            cells[i, j] = figure.add_subplot(grid[row, column], sharex=sharex or first,
+                                             sharey=first)
+    for ax in cells[:, 1:].ravel():
+        ax.tick_params(labelleft=False)
+    for ax in cells[:-1].ravel():
+        ax.tick_params(labelbottom=False)
+    return cells
+
+
+def _error_cell(ax, time_s, error, envelope, axis: int, color, gid: str) -> None:
+    """One estimator's error on one body axis over its own ±3σ band (shaded,
+    without edge lines: a static solution's σ changes at every step, and
+    edges drawn through it would fill the panel and hide the error)."""
+    if envelope is not None:
+        band = envelope[:, axis]
+        ax.fill_between(time_s, -band, band, color=color, alpha=ENVELOPE_ALPHA, linewidth=0,
+                        zorder=1)
+    ax.plot(time_s, error, color=color, linewidth=ERROR_WIDTH, zorder=3, gid=gid)
+
+
+def _row_label(ax, labels: dict, name: str, under: dict, unit: str, color) -> None:
+    """The estimator a row belongs to, in its colour, as the row's y label;
+    one whose errors coincide with another's says so."""
+    lines = [textwrap.fill(labels[name], 16)]
+    if name in under:
+        lines.append(f"(as {labels[under[name][0]]})")
+    ax.set_ylabel("\n".join([*lines, unit]), color=color, fontsize="small")
+
+
+def _total_panel(ax, time_s, scaled: dict, styles: dict, labels: dict, unit: str) -> dict:
+    """Every estimator's total error (the rotation angle), its RMS over each
+    of :data:`COMPARISON_BINS` spans, on a log axis, the smallest on top.
+    Returns ``{later: (earlier, largest difference of their per-axis
+    errors)}`` for the curves that look alike (within
+    :data:`LOOK_ALIKE_DECADES`): the later drawn dashed over the earlier."""
+    bins = min(COMPARISON_BINS, len(time_s))
+    curves = {name: binned_rms(time_s, np.linalg.norm(error, axis=1), bins)
+              for name, error in scaled.items()}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alike = coinciding({name: np.log10(rms) for name, (_, rms) in curves.items()},
+                           LOOK_ALIKE_DECADES)
+    under = {later: (earlier, finite_max([scaled[later] - scaled[earlier]]))
+             for later, (earlier, _) in alike.items()}
+    typical = {name: float(np.nanmedian(rms)) if np.isfinite(rms).any() else math.inf
+               for name, (_, rms) in curves.items()}
+    order = {name: 2 + rank for rank, name in
+             enumerate(sorted(curves, key=typical.get, reverse=True))}
+    for later, (earlier, _) in under.items():
+        order[later] = order[earlier] + 0.5          # over the one it hides
     styles = with_coincidences(styles, under)
-    for name, error in scaled.items():
+    for name, (centres, rms) in curves.items():
         style = styles[name]
-        ax.plot(time_s, error[:, axis], color=style["color"], linestyle=style["linestyle"],
-                linewidth=style.get("linewidth", 0.9), label=labels[name],
-                zorder=style.get("zorder", 2), alpha=style.get("alpha", 1.0))
-        envelope = envelopes.get(name)
-        if envelope is None or name in under:
-            continue
-        envelope = envelope[:, axis]
-        ax.fill_between(time_s, -envelope, envelope, color=style["color"], alpha=0.10,
-                        linewidth=0, zorder=style.get("zorder", 2) - 0.5)
-        for sign, label in ((1, f"{labels[name]} ±3σ"), (-1, None)):
-            ax.plot(time_s, sign * envelope, color=style["color"],
-                    linestyle=style["linestyle"], linewidth=1.6, alpha=0.9, label=label,
-                    zorder=style.get("zorder", 2) + 0.1)
+        ax.plot(centres, rms, color=style["color"], linestyle=style["linestyle"],
+                linewidth=style.get("linewidth", 1.6), zorder=order[name],
+                label=labels[name], gid=f"total {name}")
+    values = np.concatenate([rms for _, rms in curves.values()])
+    values = values[np.isfinite(values) & (values > 0)]
+    low, high = (values.min() / 1.5, values.max() * 1.5) if values.size else (0.1, 10.0)
+    log_axis(ax, low, high)
+    span_s = (time_s[-1] - time_s[0]) / bins
+    ax.set_ylabel(unit)
+    ax.set_title(f"Total attitude error of every estimator: its RMS over each {span_s:.2g} s "
+                 f"({unit}, log scale)", fontsize="medium")
+    return under
 
 
-#: An estimator whose typical error exceeds the best one's this many times is
-#: drawn faint and beneath the others, so that it does not hide them.
-FAINT_ABOVE = 5.0
+def binned_rms(time_s, values, bins: int):
+    """``(centres, rms)`` of ``values`` over ``bins`` equal spans of
+    ``time_s``; NaN where a span holds no finite value (a diverged run's
+    curve stops)."""
+    values = np.asarray(values, dtype=float)
+    edges = np.linspace(time_s[0], time_s[-1], bins + 1)
+    index = np.clip(np.searchsorted(edges, time_s, side="right") - 1, 0, bins - 1)
+    finite = np.isfinite(values)
+    counts = np.bincount(index[finite], minlength=bins)
+    sums = np.bincount(index[finite], weights=values[finite] ** 2, minlength=bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(sums / counts)
+    return 0.5 * (edges[:-1] + edges[1:]), np.where(counts > 0, rms, np.nan)
 
 
-def layered(styles: dict, scaled: dict) -> dict:
-    """``styles`` with the curves stacked by their typical error, the
-    smallest on top, and those :data:`FAINT_ABOVE` times the best drawn
-    faint and thin (static solutions beside filters, dead reckoning's drift)."""
-    typical = {name: float(np.nanmedian(np.linalg.norm(error, axis=1)))
-               if np.isfinite(error).any() else math.inf for name, error in scaled.items()}
-    best = min(typical.values())
-    styles = {name: dict(style) for name, style in styles.items()}
-    for rank, name in enumerate(sorted(typical, key=typical.get, reverse=True)):
-        styles[name].setdefault("zorder", 2 + rank)
-        if typical[name] > FAINT_ABOVE * best:
-            styles[name].update(alpha=0.45, linewidth=0.6)
-    return styles
+def _shade_eclipses(ax, time_s, eclipse) -> None:
+    """The Earth's shadow, shaded grey."""
+    if eclipse is None or not np.any(eclipse):
+        return
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(eclipse).astype(int), [0]])))
+    for first, (start, stop) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(time_s[start], time_s[min(stop, len(time_s) - 1)], color="0.55",
+                   alpha=0.18, linewidth=0, zorder=0, label="Eclipse" if first == 0 else None)
 
 
-def _events(ax, time_s, scaled: dict, axis: int, styles: dict, labels: dict, eclipse,
-            rejected: dict) -> None:
-    """Eclipses shaded grey; readings rejected by gating marked on each filter's curve."""
-    if eclipse is not None and np.any(eclipse):
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], eclipse.astype(int), [0]])))
-        for first, (start, stop) in enumerate(zip(edges[::2], edges[1::2])):
-            ax.axvspan(time_s[start], time_s[min(stop, len(time_s) - 1)], color="0.55",
-                       alpha=0.18, linewidth=0, label="Eclipse" if first == 0 else None)
-    for name, steps in rejected.items():
-        if name in scaled and len(steps):
-            ax.plot(time_s[steps], scaled[name][steps, axis], linestyle="none", marker="x",
-                    markersize=6, color=styles[name]["color"],
-                    label=f"{labels[name]}: reading rejected by gating")
-
-
-def _bias_panel(ax, time_s, truth, estimates: dict, styles: dict, under: dict,
-                labels: dict) -> None:
+def _bias_panel(ax, time_s, truth, estimates: dict, styles: dict, labels: dict,
+                axis: int) -> None:
     """One axis's bias estimates (±3σ) against the truth, the y range holding
-    every estimate over the whole run (its initial transient included)."""
+    every estimate over the whole run (its initial transient included); an
+    estimate that looks like another (within :data:`LOOK_ALIKE_FRACTION` of
+    the range) drawn dashed over it."""
+    values = np.hstack([truth, *(estimate for estimate, _ in estimates.values())])
+    values = values[np.isfinite(values)]
+    low, high = (float(values.min()), float(values.max())) if values.size else (-1.0, 1.0)
+    under = coinciding({name: estimate for name, (estimate, _) in estimates.items()},
+                       LOOK_ALIKE_FRACTION * (high - low))
+    styles = with_coincidences(styles, under)
     ax.plot(time_s, truth, color="black", linestyle="--", linewidth=1.5, label="True bias")
-    values = [truth]
-    for name, (estimate, sigma) in estimates.items():
+    # Each estimate thinner than the one before and drawn over it: estimates
+    # that nearly agree show as a thin line with its predecessor's edges.
+    widths = np.linspace(2.6, 1.0, len(estimates)) if len(estimates) > 1 else [1.4]
+    for rank, (name, (estimate, sigma)) in enumerate(estimates.items()):
         style = styles[name]
         ax.plot(time_s, estimate, color=style["color"], linestyle=style["linestyle"],
-                linewidth=1.2, label=labels[name])
-        values.append(estimate)
+                linewidth=style.get("linewidth", widths[rank]), zorder=3 + rank,
+                label=labels[name], gid=f"bias {name} {axis}")
         if name not in under:
             ax.fill_between(time_s, estimate - 3 * sigma, estimate + 3 * sigma,
                             color=style["color"], alpha=0.12, linewidth=0)
-    values = np.hstack(values)
-    values = values[np.isfinite(values)]
-    if values.size:                  # (a diverged estimate is NaN from its step on)
-        low, high = float(values.min()), float(values.max())
-        margin = max(0.08 * (high - low), 0.05 * max(abs(low), abs(high)), 1e-6)
-        ax.set_ylim(low - margin, high + margin)
+    # (a diverged estimate is NaN from its step on)
+    margin = max(0.08 * (high - low), 0.05 * max(abs(low), abs(high)), 1e-6)
+    ax.set_ylim(low - margin, high + margin)
+
+
+#: The height (inches) of each estimator's row in the consistency figure.
+CONSISTENCY_ROW_HEIGHT = 1.8
+#: An ANEES panel spans at least the band shrunk and stretched by this
+#: factor, and always the whole of the estimator's ANEES.
+ANEES_MARGIN = 2.5
 
 
 def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict,
                        sample_sigmas_deg: dict, bound_sigma_deg: np.ndarray, sample_time_s,
                        labels: dict, runs: dict | None = None, envelope_steps: int = 1,
-                       level: float = 0.95) -> Figure:
-    """ANEES over time against its χ² band per estimator (top left), and the
-    per-axis error of a sample run with each filter's ±3σ and the bound's ±3σ
-    ("best achievable", dashed) on the other three panels.
+                       level: float = 0.95, *, settle_s: float | None = None,
+                       averages: dict | None = None) -> Figure:
+    """One row per estimator with a covariance: its ANEES over time against
+    its χ² band (left), and one run's error per body axis with the filter's
+    ±3σ and the bound's ±3σ ("best achievable", dashed).
 
     Parameters
     ----------
@@ -324,81 +440,112 @@ def consistency_figure(time_s, anees: dict, bands: dict, sample_errors_deg: dict
     anees : {name: (S,) or None}; bands : {name: (low, high)}
     sample_errors_deg : {name: (N, 3)}; sample_sigmas_deg : {name: (N, 3) or None}
     bound_sigma_deg : (N, 3) the bound's 1σ per axis; sample_time_s : (N,)
-    runs : {name: runs}: the ANEES axis is scaled to the band of the
-        estimator with the most runs; one outside it is marked at the edge
-        with its time-averaged value, never hidden
+    labels : {name: label}, every estimator of the campaign (those without a
+        covariance are named in the legend's title)
+    runs : {name: runs} behind each ANEES
     envelope_steps : the bound's ±3σ is drawn through its peaks over this
         many steps (one reading interval), not as a sawtooth
+    settle_s : the start of the time averages, marked on every ANEES panel
+    averages : {name: (time-averaged ANEES, verdict)} as the campaign's
+        table gives them (default: the mean of ``anees`` from ``settle_s`` on)
+
+    Each ANEES panel is a log axis holding the band and the whole of the
+    estimator's ANEES (an estimator far off its band is drawn, not clipped),
+    its value and verdict written above it; the error panels share one
+    symmetric-log scale.
     """
-    with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(14.0, 9.0), layout="constrained")
-        axes = figure.subplots(2, 2, squeeze=False).ravel()
+    runs, averages = runs or {}, averages or {}
+    rows = [name for name in labels
+            if anees.get(name) is not None or name in sample_errors_deg]
+    if not rows:
+        figure, (ax,) = new_figure()
+        ax.text(0.5, 0.5, "no estimator reports a covariance", ha="center",
+                transform=ax.transAxes)
+        return figure
     styles = estimator_styles(labels)
     steady = max(3 * float(np.median(bound_sigma_deg[len(bound_sigma_deg) // 2:])), 1e-12)
     scale, unit = angle_unit(steady)
     scaled = {name: error * scale for name, error in sample_errors_deg.items()}
     under = coinciding(scaled, COINCIDE_FRACTION * steady * scale)
-    _anees_panel(axes[0], time_s, anees, bands, with_coincidences(styles, under), labels,
-                 runs or {}, level)
-    envelopes = {name: None if sigma is None else upper_envelope(3 * sigma * scale,
-                                                                   envelope_steps)
-                 for name, sigma in sample_sigmas_deg.items()}
+    envelopes = {name: None if sample_sigmas_deg.get(name) is None
+                 else upper_envelope(3 * sample_sigmas_deg[name] * scale, envelope_steps)
+                 for name in scaled}
     bound = upper_envelope(3 * bound_sigma_deg * scale, envelope_steps)
-    largest = finite_max([*scaled.values(), bound])
-    for axis, ax in enumerate(axes[1:]):
-        _error_panel(ax, sample_time_s, scaled, envelopes, axis, styles, under, labels)
-        ax.plot(sample_time_s, bound[:, axis], color="black", linestyle="--", linewidth=1.2,
-                label="best achievable ±3σ (the bound)")
-        ax.plot(sample_time_s, -bound[:, axis], color="black", linestyle="--", linewidth=1.2)
-        symlog_axis(ax, steady * scale, largest)
-        ax.set_xlim(sample_time_s[0], sample_time_s[-1])
+    with sns.axes_style("whitegrid"):
+        figure = Figure(figsize=(16.0, CONSISTENCY_ROW_HEIGHT * len(rows) + 1.9),
+                        layout="constrained")
+        grid = figure.add_gridspec(len(rows), 4, width_ratios=(1.3, 1, 1, 1))
+        cells = _cell_grid(figure, grid, range(len(rows)), range(1, 4))
+        anees_axes = [figure.add_subplot(grid[row, 0], sharex=cells[0, 0])
+                      for row in range(len(rows))]
+    for ax in anees_axes[:-1]:
+        ax.tick_params(labelbottom=False)
+    for row, name in enumerate(rows):
+        color = styles[name]["color"]
+        _anees_strip(anees_axes[row], time_s, anees.get(name), bands.get(name), name,
+                     labels[name], color, runs.get(name), averages.get(name), settle_s)
+        for axis, ax in enumerate(cells[row]):
+            if name in scaled:
+                _error_cell(ax, sample_time_s, scaled[name][:, axis], envelopes[name], axis,
+                            color, gid=f"error {name} {axis}")
+            else:
+                ax.text(0.5, 0.5, "no sample run", ha="center", transform=ax.transAxes)
+            for sign, label in ((1, "best achievable ±3σ (the bound)"), (-1, None)):
+                ax.plot(sample_time_s, sign * bound[:, axis], color="black", linestyle="--",
+                        linewidth=1.0, zorder=4, label=label)
+        _row_label(anees_axes[row], labels, name, under, "ANEES", color)
+        cells[row, 0].set_ylabel(unit, fontsize="small")
+    symlog_axis(cells[0, 0], steady * scale, finite_max([*scaled.values(), bound]),
+                most_decades=ROW_DECADES)
+    cells[0, 0].set_xlim(sample_time_s[0], sample_time_s[-1])
+    for axis, ax in enumerate(cells[0]):
+        ax.set_title(f"One run: {AXIS_NAMES[axis]} error and ±3σ ({unit})", fontsize="medium")
+    for ax in [anees_axes[-1], *cells[-1]]:
         ax.set_xlabel(X_LABEL)
-        ax.set_ylabel(f"{AXIS_NAMES[axis]} error ({unit})")
-        ax.set_title(f"One run's {AXIS_NAMES[axis]} error, each filter's ±3σ", fontsize="medium")
-    legend_outside(figure, axes, note=coincidence_note(under, labels, _UNIT_SYMBOLS[unit]))
+    counts = sorted({runs[name] for name in rows if name in runs})
+    figure.suptitle("Does each filter know its own error? Its average NEES over "
+                    f"{' / '.join(map(str, counts)) or 'its'} runs (left) and one run's error "
+                    "against its own ±3σ and the bound's")
+    without = [labels[name] for name in labels if name not in rows]
+    notes = [coincidence_note(under, labels, _UNIT_SYMBOLS[unit])]
+    if without:
+        notes.append(f"no covariance, so no ANEES and no ±3σ: {', '.join(without)}")
+    extra = [(Patch(color="0.45", alpha=0.3, linewidth=0),
+              f"{100 * level:.0f} % χ² band of a consistent filter's ANEES"),
+             (Patch(color="0.45", alpha=2 * ENVELOPE_ALPHA, linewidth=0), ENVELOPE_LABEL)]
+    legend_outside(figure, [*anees_axes, *cells.ravel()], columns=3,
+                   note="\n".join(note for note in notes if note), extra=extra)
     return figure
 
 
-def _anees_panel(ax, time_s, anees: dict, bands: dict, styles: dict, labels: dict,
-                 runs: dict, level: float) -> None:
-    """The ANEES of each estimator over time, its band (in the legend); the
-    axis holds the band of the estimator with the most runs, and an
-    estimator whose ANEES lies outside is marked at the edge with its value."""
-    shown = [name for name, series in anees.items() if series is not None]
-    if not shown:
-        ax.text(0.5, 0.5, "no estimator reports a covariance", ha="center",
-                transform=ax.transAxes)
+def _anees_strip(ax, time_s, series, band, name: str, label: str, color, runs,
+                 average, settle_s) -> None:
+    """One estimator's ANEES over time on a log axis holding its band and all
+    of its values; its time average and verdict above it; the settle time,
+    where the averages start, marked."""
+    if settle_s is not None:
+        ax.axvline(settle_s, color="0.2", linestyle="-.", linewidth=1.2, zorder=4,
+                   label=f"settle time ({settle_s:g} s): the averages start", gid="settle")
+    if series is None or band is None or not np.all(np.isfinite(band)):
+        ax.text(0.5, 0.5, "no ANEES", ha="center", va="center", transform=ax.transAxes)
+        ax.set_yticks([])
         return
-    main = max(shown, key=lambda name: (runs.get(name, 0), -shown.index(name)))
-    low, high = bands[main]
-    bottom, top = low / 2.5, high * 2.5
-    for name in shown:
-        style = styles[name]
-        series = np.asarray(anees[name], dtype=float)
-        ax.plot(time_s, np.clip(series, bottom, top), color=style["color"],
-                linestyle=style["linestyle"], linewidth=style.get("linewidth", 1.0),
-                zorder=style.get("zorder", 2), label=f"{labels[name]} ANEES")
-        band = bands[name]
-        ax.axhspan(*band, color=style["color"], alpha=0.15, linewidth=0,
-                   label=f"{labels[name]}: {100 * level:.0f} % band "
-                   f"[{band[0]:.2f}, {band[1]:.2f}], {runs.get(name, '?')} runs")
-        average = float(np.nanmean(series))
-        if not bottom <= average <= top:
-            edge = top if average > top else bottom
-            ax.annotate(f"{labels[name]}: {average:.3g} {'↑' if average > top else '↓'}",
-                        xy=(time_s[-1], edge), xytext=(-6, -12 if average > top else 6),
-                        textcoords="offset points", ha="right", color=style["color"],
-                        fontsize="small")
-    ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", label="3 (a consistent mean)")
-    ax.set_yscale("log")
-    ax.set_ylim(bottom, top)
-    ax.yaxis.set_major_locator(FixedLocator(round_values(bottom, top, (1, 2, 3, 5))))
-    ax.yaxis.set_minor_locator(NullLocator())
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
-    ax.set_xlim(time_s[0], time_s[-1])
-    ax.set_xlabel(X_LABEL)
-    ax.set_ylabel("ANEES (3 degrees of freedom)")
-    ax.set_title(f"Average NEES over runs, with each estimator's {100 * level:.0f} % χ² band")
+    series = np.asarray(series, dtype=float)
+    ax.axhspan(*band, color=color, alpha=0.18, linewidth=0, zorder=1)
+    ax.axhline(3.0, color="black", linewidth=0.8, linestyle=":", zorder=2,
+               label="3 (a consistent filter's mean)")
+    ax.plot(time_s, series, color=color, linewidth=0.9, zorder=3, gid=f"anees {name}")
+    positive = series[np.isfinite(series) & (series > 0)]
+    low = min(band[0] / ANEES_MARGIN, positive.min() / 1.3 if positive.size else math.inf)
+    high = max(band[1] * ANEES_MARGIN, positive.max() * 1.3 if positive.size else 0.0)
+    log_axis(ax, low, high, most_ticks=5)
+    if average is None:
+        after = series[time_s >= (settle_s or 0.0)]
+        average = (float(np.nanmean(after)) if np.isfinite(after).any() else math.nan, "")
+    value, verdict = average
+    ax.set_title(f"{label}: ANEES {value:.3g}{', ' + verdict if verdict else ''} "
+                 f"(band [{band[0]:.2f}, {band[1]:.2f}], {runs if runs else '?'} runs)",
+                 fontsize="small", loc="left", color=color)
 
 
 #: Bins of the replay's error range: a 285 Hz record drawn point by point is a solid block.

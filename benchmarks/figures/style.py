@@ -66,28 +66,66 @@ def with_coincidences(styles: dict, under: dict) -> dict:
 
 
 def coincidence_note(under: dict, labels: dict, unit: str) -> str:
-    """One line naming the curves drawn under others, and by how much they differ."""
+    """One line naming the curves drawn under others, and by how much at most
+    they differ (rounded up to one significant digit)."""
     return "; ".join(f"{labels[later]} under {labels[earlier]}: differ by < "
-                     f"{max(difference, 1e-300):.1g} {unit}"
+                     f"{_round_up(difference):g}{unit}"
                      for later, (earlier, difference) in under.items())
 
 
-def symlog_axis(ax, linthresh: float, largest: float) -> None:
+def _round_up(value: float) -> float:
+    """``value`` rounded up to one significant digit (a bound stays a bound)."""
+    value = max(float(value), 1e-300)
+    power = 10.0 ** math.floor(math.log10(value))
+    return math.ceil(value / power * (1 - 1e-12)) * power
+
+
+def symlog_axis(ax, linthresh: float, largest: float, *, most_decades: int = 4) -> None:
     """A symmetric-log y axis, linear within ``±linthresh`` (rounded down to a
     power of ten), with ticks at 0 and at powers of ten out to ``largest``:
-    every decade, or every other when there are more than four, so that no
-    two labels crowd (in particular none beside the 0)."""
+    every decade, or every second, third, … so that at most ``most_decades``
+    are labelled on each side, and no two labels crowd (in particular none
+    beside the 0; a short panel asks for fewer)."""
     threshold = 10.0 ** math.floor(math.log10(max(linthresh, 1e-300)))
     ax.set_yscale("symlog", linthresh=threshold, linscale=1.0)
     top = max(largest, threshold * 10) if math.isfinite(largest) else threshold * 10
     decades = list(range(int(math.log10(threshold)), int(math.ceil(math.log10(top))) + 1))
-    stride = 1 if len(decades) <= 4 else 2
+    stride = max(1, math.ceil(len(decades) / max(most_decades, 1)))
     kept = decades[::stride]
     ticks = [0.0] + [sign * 10.0 ** d for d in kept for sign in (1, -1)]
     ax.yaxis.set_major_locator(FixedLocator(sorted(ticks)))
     ax.yaxis.set_minor_locator(NullLocator())
     ax.yaxis.set_major_formatter(FuncFormatter(_power_label))
     ax.set_ylim(-top * 1.2, top * 1.2)
+
+
+def log_axis(ax, low: float, high: float, *, most_ticks: int = 7) -> None:
+    """A log y axis from ``low`` to ``high`` (both > 0) with round tick values
+    (:func:`round_values`) written out plainly: every 1, 2, 5 per decade, or
+    finer on a range of less than a decade, or coarser on a wide one, so that
+    at most about ``most_ticks`` labels show."""
+    ax.set_yscale("log")
+    ax.set_ylim(low, high)
+    for mantissas in ((1, 1.5, 2, 3, 4, 5, 6, 7, 8, 9), (1, 2, 3, 5), (1, 2, 5), (1, 3), (1,)):
+        ticks = round_values(low, high, mantissas)
+        if len(ticks) <= most_ticks:
+            break
+    if len(ticks) > most_ticks:                      # many decades: every second, third, …
+        ticks = ticks[::math.ceil(len(ticks) / most_ticks)]
+    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(_plain_label))
+
+
+def _plain_label(value: float, _position=None) -> str:
+    if value == 0:
+        return "0"
+    exponent = math.floor(math.log10(abs(value)))
+    if -3 <= exponent <= 4:
+        return f"{value:g}"
+    mantissa = value / 10.0 ** exponent
+    return (f"$10^{{{exponent}}}$" if math.isclose(mantissa, 1.0)
+            else f"${mantissa:g}\\times10^{{{exponent}}}$")
 
 
 def finite_max(arrays) -> float:
@@ -117,16 +155,17 @@ def _power_label(value: float, _position=None) -> str:
 
 
 def legend_outside(figure, axes, columns: int = 4, note: str = "",
-                   where: str = "lower center") -> None:
-    """One legend for ``axes`` (their labelled artists, each label once)
-    outside the panels (below them, or ``where``), off the data; ``note``
-    as its title."""
+                   where: str = "lower center", extra=()) -> None:
+    """One legend for ``axes`` (their labelled artists, each label once, then
+    the ``(handle, label)`` pairs of ``extra``: entries that stand for many
+    artists) outside the panels (below them, or ``where``), off the data;
+    ``note`` as its title."""
     handles, labels = [], []
-    for ax in np.ravel(axes):
-        for handle, label in zip(*ax.get_legend_handles_labels()):
-            if label not in labels and not label.startswith("_"):
-                handles.append(handle)
-                labels.append(label)
+    pairs = [pair for ax in np.ravel(axes) for pair in zip(*ax.get_legend_handles_labels())]
+    for handle, label in [*pairs, *extra]:
+        if label not in labels and not label.startswith("_"):
+            handles.append(handle)
+            labels.append(label)
     if handles:
         figure.legend(handles, labels, loc=f"outside {where}", ncols=columns,
                       fontsize="small", title=note or None, title_fontsize="small")
