@@ -961,7 +961,7 @@ def command_montecarlo(args, scenario):
                                             check_campaign_out, run_campaign)
     from benchmarks.output import write_csv
     from benchmarks.figures.plots import distribution_figure
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
 
     def campaign_of(chosen):
         return Campaign(scenario=chosen, estimators=args.estimators, runs=args.runs,
@@ -1026,7 +1026,7 @@ def command_consistency(args, scenario):
     _check_seed_range(args)
     from benchmarks.experiments import consistency
     from benchmarks.engine.batch import ENGINE_ESTIMATORS, engine_limitation
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
     if args.settle is not None and not 0 <= args.settle < scenario.tstop:
         raise UsageError(f"settle = {args.settle!r}: must be >= 0 and below tstop = "
                          f"{scenario.tstop:g}")

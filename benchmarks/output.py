@@ -1,4 +1,4 @@
-"""Writing results: every file appears whole or not at all.
+"""Writing results: every file appears whole or not at all; progress on the terminal.
 
 Each writer renders to a temporary file in the destination folder and
 renames it into place (``os.replace`` is atomic on one file system), so an
@@ -12,6 +12,8 @@ import io
 import os
 import tempfile
 from pathlib import Path
+
+from tqdm import tqdm
 
 
 def _umask() -> int:
@@ -114,3 +116,13 @@ def atomic_path(path):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temporary)
         raise
+
+
+def progress(iterable=None, *, total=None, desc: str = "", quiet: bool = False, unit="it"):
+    """``iterable`` wrapped in a progress bar (or a bar to ``update`` by hand).
+
+    tqdm's ``disable=None`` already hides the bar when stderr is not a terminal;
+    ``quiet`` hides it everywhere.
+    """
+    return tqdm(iterable, total=total, desc=desc, unit=unit, leave=False,
+                disable=True if quiet else None, dynamic_ncols=True)

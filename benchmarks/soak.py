@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 
 #: A filter's error counts as stationary when its mean square error over the

@@ -265,7 +265,7 @@ def test_the_consistency_samples_see_every_phase_of_the_reading_cycle():
 
 def test_a_gauss_markov_bias_that_overflows_is_refused_by_name(tmp_path, capsys):
     for body, name in (("bias_instability_radps = 1e160", "gyro_bias_instability_radps"),
-                       ("bias_instability_radps = 1e100\nbias_correlation_time_s = 1e-300",
+                       ("bias_instability_radps = 10\nbias_correlation_time_s = 1e-307",
                         "gyro_bias_correlation_time_s")):
         path = tmp_path / "gm.toml"
         path.write_text(f"[gyro]\n{body}\n")

@@ -30,7 +30,7 @@ from benchmarks.broad.metric import METRICS, errors_deg, rmse_of, scored_samples
     unscored_reason
 from dynamics.validation import InvalidParameterError
 from benchmarks.engine.recorded import path_of, run_recorded
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from estimators import resolve_estimator, sensing
 
 #: ``broad`` without ``--estimators``: the textbook filter, a static

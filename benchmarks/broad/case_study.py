@@ -116,7 +116,7 @@ def reproduce(dataset, trials, published: dict, quiet: bool = False) -> "pd.Data
     from benchmarks.broad.metric import METRICS, rmse_deg
     from benchmarks.broad.inputs import imu_inputs
     from benchmarks.engine.recorded import run_recorded
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
     from estimators import resolve_estimator
     rows = []
     with progress(total=len(trials) * len(CHOSEN), desc="case study", unit="run",
@@ -179,7 +179,7 @@ def grid_study(dataset, trials, published: dict, workers: int = 0, quiet: bool =
     import pandas as pd
     from benchmarks.broad.metric import METRICS
     from benchmarks.engine.runner import map_tasks
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
     chosen, rows = {}, []
     for name in CHOSEN:
         with progress(total=len(trials), desc=f"grid {name}", unit="trial",

@@ -153,7 +153,7 @@ def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 
     keyword values}``), and the tidy record of every tuning (estimator,
     training trials, trials scored, values, losses, method)."""
     from benchmarks.engine.runner import map_tasks
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
     if mode == "none":
         return {}, pd.DataFrame()
     for trial in trials:        # a training trial with no score would make every loss infinite

@@ -23,7 +23,7 @@ from benchmarks.experiments import consistency
 from benchmarks.bounds import posterior_crb
 from benchmarks.engine import make_runs, run_batch
 from benchmarks.output import write_figure, write_text
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import build_estimator, simulate, simulate_sensors, simulate_truth
 

@@ -19,7 +19,7 @@ from benchmarks.engine import make_runs, run_many
 from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import atomic_path, write_csv, write_figure
 from benchmarks.figures.plots import BlittingPillowWriter, freeze_layout, new_figure, plot_errors
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import simulate_truth
 from dynamics.validation import InvalidParameterError, finite_number

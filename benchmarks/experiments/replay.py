@@ -35,7 +35,7 @@ import pandas as pd
 
 from benchmarks.metrics import attitude_error_deg
 from benchmarks.output import write_csv, write_figure, write_text
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.shipped import shipped_file
 from benchmarks.sensor_use import refuse_unreadable

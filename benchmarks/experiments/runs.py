@@ -16,7 +16,7 @@ import numpy as np
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import figure_bytes, write_bytes, write_csv, write_text
 from benchmarks.figures.plots import comparison_figure, flight_figure
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import SECTIONS, SETTINGS, Scenario
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
 from dynamics.quaternion import attitude_error_vector_rad

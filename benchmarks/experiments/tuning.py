@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.engine import make_runs, run_many
 from dynamics.validation import InvalidParameterError, finite_number, process_exponent

@@ -80,7 +80,7 @@ def solver_table(trials: int = 1000, seed: int = 0, timing_calls: int = 200,
     maximum excess over the q-method (µrad), the fallbacks to the q-method
     (trials), and the median time per call (µs); a progress bar over the
     cases unless ``quiet``."""
-    from benchmarks.progress import progress
+    from benchmarks.output import progress
     rng = np.random.default_rng(seed)
     rows = []
     for case in progress(CASES, desc="wahba", unit="case", quiet=quiet):

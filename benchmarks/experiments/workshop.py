@@ -17,7 +17,7 @@ from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_l
 from benchmarks.metrics import STAT_COLUMNS
 from benchmarks.output import write_text
 from benchmarks.bounds import check_bound_inputs
-from benchmarks.progress import progress
+from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.experiments.tuning import (
     DEFAULT_BOUNDS,
