@@ -1152,6 +1152,7 @@ def command_broad(args, _scenario):
         write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
         print(f"wrote {args.out / 'broad_case_study.csv'}\n{ATTRIBUTION}")
         return None
+    from benchmarks.broad import inputs
     from benchmarks.broad.inputs import checked_sigmas
     sigmas = {sensor: value for sensor, value in (("accelerometer", args.accelerometer_sigma),
                                                   ("magnetometer", args.magnetometer_sigma))
@@ -1162,6 +1163,7 @@ def command_broad(args, _scenario):
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
                                  quiet=args.quiet, workers=args.workers, options=options,
                                  tuning=args.tune)
+    print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
     print(benchmark.format_trials(result))
     if len(tunings):
         print("\ntuned (training loss: mean total RMSE over the training trials, °):")

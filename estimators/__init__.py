@@ -8,13 +8,15 @@ name                           class
 ``ekf``                        :class:`QuaternionEKF` (filterpy EKF)
 ``mekf``                       :class:`MultiplicativeEKF` (filterpy KF)
 ``usque``                      :class:`USQUE` (filterpy UKF)
+``mekf-smoother``              :class:`MekfSmoother` (offline: the MEKF
+                               forward and backward, fused)
 ``triad``, ``q-method``,       the static solutions of Wahba's problem
 ``quest``, ``esoq2``,          (:mod:`estimators.static`, solvers in
 ``foam``, ``svd``              :mod:`estimators.wahba`)
 ``madgwick``, ``mahony``       the complementary filters
 ``madgwick-broad``             (:mod:`estimators.complementary`)
 ``vqf``, ``vqf-6d``,           other libraries' filters, through adapters
-``fusion``                     (:mod:`estimators.peers`, the ``peers`` extra)
+``vqf-offline``, ``fusion``    (:mod:`estimators.peers`, the ``peers`` extra)
 =============================  ==========================================
 
 Each takes keyword-only settings, steps on 1-D arrays and returns ``(4,)``
@@ -30,13 +32,14 @@ from estimators.dead_reckoning_resets import DeadReckoningWithResets
 from estimators.ekf import QuaternionEKF
 from estimators.mekf import MultiplicativeEKF
 from estimators.peers import PEER_ESTIMATORS
+from estimators.smoother import MekfSmoother
 from estimators.static import STATIC_ESTIMATORS
 from estimators.usque import USQUE
 
 #: Command-line name → class: the workshop's three in the order it introduces
 #: them, then the flight filters. Adding an estimator is one line here.
 ESTIMATORS = {cls.name: cls for cls in (DeadReckoning, DeadReckoningWithResets, QuaternionEKF,
-                                        MultiplicativeEKF, USQUE, *STATIC_ESTIMATORS,
+                                        MultiplicativeEKF, USQUE, MekfSmoother, *STATIC_ESTIMATORS,
                                         Madgwick, MadgwickBROAD, Mahony, *PEER_ESTIMATORS)}
 
 #: What a concrete estimator must override: the base class's raise NotImplementedError.
@@ -89,4 +92,5 @@ def _checked_class(spec: str, module, class_name: str) -> type:
     return cls
 
 __all__ = ["ESTIMATORS", "AttitudeEstimator", "DeadReckoning", "DeadReckoningWithResets",
-           "EstimateTrace", "MultiplicativeEKF", "QuaternionEKF", "USQUE", "resolve_estimator"]
+           "EstimateTrace", "MekfSmoother", "MultiplicativeEKF", "QuaternionEKF", "USQUE",
+           "resolve_estimator"]

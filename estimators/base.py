@@ -85,6 +85,9 @@ class AttitudeEstimator:
 
     name = "estimator"
     label = "Estimator"
+    #: "online" (each estimate from the readings up to its step) or
+    #: "offline" (from the whole record: a smoother), as tables say.
+    mode = "online"
     #: Constructor keyword → the scenario attribute its default comes from.
     scenario_defaults = {"initial_attitude": "initial_state"}
     #: Keywords of :attr:`scenario_defaults` whose scenario field belongs to
@@ -449,9 +452,9 @@ class AttitudeEstimator:
         """
         omega, star, available, offsets = self._start_record(
             omega_meas_radps, star_tracker_quat, available, offset_s)
-        vectors = _checked_vector_record(vectors, len(omega))
+        vectors = checked_vector_record(vectors, len(omega))
         estimates = np.empty((len(omega), 4))
-        with _quiet_overflow():
+        with quiet_overflow():
             for k in range(len(omega)):
                 estimates[k] = self.step(omega[k], star[k] if available[k] else None,
                                          offsets[k], observations_at(vectors, k))
@@ -490,12 +493,12 @@ class AttitudeEstimator:
         readings rejected by gating."""
         omega, star, available, offsets = self._start_record(
             omega_meas_radps, star_tracker_quat, available, offset_s)
-        vectors = _checked_vector_record(vectors, len(omega))
+        vectors = checked_vector_record(vectors, len(omega))
         n = len(omega)
         quat = np.empty((n, 4))
         columns = {"attitude_covariance": None, "bias_radps": None, "bias_covariance": None}
         nis, nis_dof = None, None
-        with _quiet_overflow():
+        with quiet_overflow():
             for k in range(n):
                 skipped, rejections = self.skipped["reading"], len(self.rejections)
                 quat[k] = self.step(omega[k], star[k] if available[k] else None, offsets[k],
@@ -552,7 +555,7 @@ def _registry_class(name: str):
     return ESTIMATORS.get(name)
 
 
-def _quiet_overflow():
+def quiet_overflow():
     """No numpy warnings over a record: overflow on the way to divergence is
     what :meth:`AttitudeEstimator.step` detects and reports, once (entered per
     record, not per step: it costs about 1.5 µs)."""
@@ -568,7 +571,7 @@ def observations_at(vectors, k: int) -> tuple:
     return tuple(readings.observation(k) for readings in vectors if readings.available[k])
 
 
-def _checked_vector_record(vectors, n_steps: int) -> tuple:
+def checked_vector_record(vectors, n_steps: int) -> tuple:
     """A record's vector readings: each sensor's arrays one row per step."""
     if vectors is None:
         return ()

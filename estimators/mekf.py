@@ -127,8 +127,11 @@ from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
                                  rotvec_from_quat, skew, to_body_frame)
+from estimators import imu
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
                              gate_probability_setting, norm_tolerance_setting)
+from estimators.imu.updates import ImuUpdates
+from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
 _I3 = np.eye(3)
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
@@ -188,7 +191,7 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
-class MultiplicativeEKF(AttitudeAndBiasEstimator):
+class MultiplicativeEKF(ImuUpdates, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
     Parameters
@@ -218,10 +221,25 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         Magnetic disturbance detection: a magnetometer reading whose
         magnitude is off its reference's by more than this fraction is
         rejected (None: no test; :meth:`~estimators.base.KalmanEstimator.passes_norm`).
-    rate_interpolation : {"hold", "trapezoid"}
-        The rate over a step: its reading held (an averaging gyro's), or the
-        mean of the readings at its two ends (a sampled gyro's;
-        :mod:`estimators.sampled_rate`).
+    rate_interpolation : {"hold", "trapezoid", "end"}
+        The rate over a step (:mod:`estimators.sampled_rate`): its reading
+        held (an averaging gyro's), the mean of the readings at its two ends
+        (a sampled gyro's), or the reading at its end (an IMU's, whose
+        reading is the rate over the interval before it).
+    gravity_model : {"reading", "lowpass"}
+        The accelerometer as a gravity reading of its own variance, or
+        gravity low-passed in the strapdown frame (:mod:`estimators.imu.gravity`).
+    magnetometer_model : {"vector", "heading"}
+        The magnetometer as a field vector reading, or as a heading
+        reference only (:mod:`estimators.imu.heading`).
+    rest_updates : bool
+        Detect rest and apply the zero-rate update of the bias
+        (:mod:`estimators.imu.rest`).
+    gravity_density, heading_density, rest_density : float
+        The densities of the IMU models' errors: gravity's low-passed
+        direction (rad²·s), the heading (rad²·s), the low-passed rate at rest
+        (rad²/s²·s); a reading's variance is the density over the time since
+        the sensor's last reading.
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
@@ -235,6 +253,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
 
     name = "mekf"
     label = "MEKF"
+    #: The filters' tunables, and the IMU models' densities (named only).
+    tunable = AttitudeAndBiasEstimator.tunable + (GRAVITY_DENSITY, HEADING_DENSITY)
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
@@ -242,9 +262,15 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
                  initial_bias_sigma_radps=1e-4, output: str = "posterior",
                  gate_probability: float | None = None,
                  magnetic_norm_tolerance: float | None = None, rate_interpolation: str = "hold",
-                 on_invalid: str = "raise"):
+                 gravity_model: str = "reading", magnetometer_model: str = "vector",
+                 rest_updates: bool = False, gravity_density: float = imu.GRAVITY_DENSITY,
+                 heading_density: float = imu.HEADING_DENSITY,
+                 rest_density: float = imu.REST_DENSITY, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self._configure_imu(gravity_model=gravity_model, magnetometer_model=magnetometer_model,
+                            rest_updates=rest_updates, gravity_density=gravity_density,
+                            heading_density=heading_density, rest_density=rest_density)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         self.filter = KalmanFilter(dim_x=6, dim_z=3)
@@ -263,6 +289,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         self.beta_hat = self.initial_bias_radps.copy()
         self._reset_filter(np.zeros(6), self.initial_covariance.copy())
         self._restart_rates()
+        if self.imu is not None:
+            self.imu.reset(self.q_hat)
         self._record()
 
     def _record(self) -> None:
@@ -294,8 +322,9 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         return np.asarray(observation.body, dtype=float) - predicted, H
 
     def correct_vector(self, observation) -> None:
-        """Kalman update with one vector reading, then the reset."""
-        if not self.passes_norm(observation):
+        """Kalman update with one vector reading, then the reset (or the IMU
+        models' updates, where the settings ask: :mod:`estimators.imu.updates`)."""
+        if self._imu_reading(observation) or not self.passes_norm(observation):
             return
         y, H = self.vector_model(observation)
         R = observation.variance * _I3
@@ -323,6 +352,8 @@ class MultiplicativeEKF(AttitudeAndBiasEstimator):
         self.filter.predict(F=phi, Q=q)
         propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)
+        if self.imu is not None:
+            self.imu.propagate(omega_hat * dt, dt)
 
     def state_is_finite(self) -> bool:
         return finite_state(self.q_hat, self.filter.P) and finite_state(self.beta_hat)

@@ -9,6 +9,10 @@ Each needs its package, in the ``peers`` extra (``pip install
   (``VQF.update`` per sample, not the acausal ``offlineVQF``). It starts
   itself from its first readings; ``vqf-6d`` is its output without the
   magnetometer, whose heading is its own (score it by inclination).
+* ``vqf-offline`` — VQF's offline variant (``offlineVQF``, §3.5 of the
+  paper): acausal, forward and backward passes of its bias estimation and
+  zero-phase filtering over the whole recording; it runs on whole
+  recordings only, the peer of :class:`estimators.smoother.MekfSmoother`.
 * ``fusion`` — x-io's Fusion (``imufusion``), the settings of its README
   example: gain 0.5, 2000 °/s gyro range, 10° acceleration and magnetic
   rejection, 5 s rejection timeout; in its NWU convention, turned to ENU
@@ -27,7 +31,7 @@ import numpy as np
 from dynamics.quaternion import IDENTITY, quat_multiply
 from dynamics.validation import InvalidParameterError
 from estimators import sensing
-from estimators.base import AttitudeEstimator
+from estimators.base import AttitudeEstimator, InvalidMeasurementError
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
 
 #: m/s² per g, as Fusion takes the accelerometer.
@@ -130,6 +134,59 @@ class VQF6D(VQF9D):
     has_heading = False
 
 
+class OfflineVQF(VQF9D):
+    name = "vqf-offline"
+    label = "VQF offline"
+    #: It reads the whole recording before its first estimate.
+    mode = "offline"
+    needs = (frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER}),)
+
+    def step(self, *args, **kwargs):
+        raise TypeError(f"{self.name} is offline: it estimates from the whole recording "
+                        "(run or run_batch), not step by step")
+
+    def run_batch(self, omega_meas_radps, vectors) -> np.ndarray:
+        """``offlineVQF`` over the whole recording; a sample without a usable
+        accelerometer or magnetometer reading holds the channel's nearest
+        earlier one (the first one before it), as the library takes every
+        sample of every channel."""
+        found = {v.sensor: v for v in vectors}
+        if not {"accelerometer", "magnetometer"} <= set(found):
+            raise InvalidParameterError("estimator", self.name, "needs the accelerometer's and "
+                                        "the magnetometer's readings of a whole recording")
+        omega = np.asarray(omega_meas_radps, dtype=float)
+        bad = np.flatnonzero(~np.isfinite(omega).all(axis=1))
+        if omega.ndim != 2 or omega.shape[1:] != (3,) or len(bad):
+            step = int(bad[0]) if len(bad) else 0
+            raise InvalidMeasurementError(f"omega_meas_radps at step {step}",
+                                          omega[step] if len(bad) else omega.shape,
+                                          "must be finite rates, one (3,) row per step")
+        acc, mag = (_held(found[name].body, found[name].available)
+                    for name in ("accelerometer", "magnetometer"))
+        self.reset()
+        out = _package(self.name, "vqf").offlineVQF(np.ascontiguousarray(omega), acc, mag,
+                                                     self.dt)
+        self.learn_frame(found["magnetometer"].reference[0])
+        return self.in_reference_frame(np.asarray(out["quat9D"], dtype=float))
+
+    def run(self, omega_meas_radps, star_tracker_quat=None, available=None, offset_s=None, *,
+            vectors=(), progress=None) -> np.ndarray:
+        return self.run_batch(omega_meas_radps, vectors or ())
+
+
+def _held(channel: np.ndarray, available: np.ndarray) -> np.ndarray:
+    """``channel`` with each unavailable row replaced by the nearest earlier
+    available one (the first available one before the first)."""
+    channel, available = np.asarray(channel, dtype=float), np.asarray(available, dtype=bool)
+    if not available.any():
+        raise InvalidParameterError("readings", "none available", "the offline filter needs "
+                                    "at least one reading of each channel")
+    index = np.where(available, np.arange(len(channel)), 0)
+    np.maximum.accumulate(index, out=index)
+    index[:np.argmax(available)] = np.argmax(available)
+    return np.ascontiguousarray(channel[index])
+
+
 class Fusion(PeerFilter):
     name = "fusion"
     label = "Fusion"
@@ -167,4 +224,4 @@ class Fusion(PeerFilter):
         return quat_multiply(NWU_TO_ENU, self.filter.get_quaternion())
 
 
-PEER_ESTIMATORS = (VQF9D, VQF6D, Fusion)
+PEER_ESTIMATORS = (VQF9D, VQF6D, OfflineVQF, Fusion)

@@ -37,9 +37,9 @@ import numpy as np
 
 from dynamics.validation import one_of
 
-#: How a filter takes the rate over a step: that step's reading held, or the
-#: mean of the readings at the step's two ends.
-RATE_INTERPOLATIONS = ("hold", "trapezoid")
+#: How a filter takes the rate over a step: that step's reading held, the
+#: mean of the readings at the step's two ends, or the reading at its end.
+RATE_INTERPOLATIONS = ("hold", "trapezoid", "end")
 
 
 def derived_rate_interpolation(scenario) -> str:
@@ -74,7 +74,8 @@ class SampledRate:
         the rates at both ends (nothing before the first reading)."""
         if self._rate_at_state is None:
             return
-        mean = 0.5 * (self._rate_at_state + omega_meas_radps)
+        mean = (omega_meas_radps if self.rate_interpolation == "end"
+                else 0.5 * (self._rate_at_state + omega_meas_radps))
         self.propagate(mean, None if self._time_left == self.dt else self._time_left)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:

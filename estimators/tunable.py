@@ -6,8 +6,9 @@ tuple, one :class:`Tunable` each, named as its constructor keyword (so a
 tuned value is an ``[estimators.NAME]`` key, reusable in a scenario file):
 
 >>> from estimators import MultiplicativeEKF
->>> [t.name for t in MultiplicativeEKF.tunable]
-['gyro_noise', 'gyro_bias_random_walk', 'measurement_scale', 'gate_probability', 'magnetic_norm_tolerance']
+>>> [t.name for t in MultiplicativeEKF.tunable]  # doctest: +NORMALIZE_WHITESPACE
+['gyro_noise', 'gyro_bias_random_walk', 'measurement_scale', 'gate_probability',
+ 'magnetic_norm_tolerance', 'gravity_density', 'heading_density']
 
 A user's class declares its own the same way. The *default* of a setting is
 the value the estimator takes from the scenario (``from_scenario``, with
@@ -147,6 +148,14 @@ MAGNETIC_NORM_TOLERANCE = Tunable("magnetic_norm_tolerance", "log", (1e-6, 1e3),
                                   search=(0.01, 1.0),
                                   description="the magnetic disturbance test's tolerance on "
                                   "the field's magnitude (a fraction)", sensor="magnetometer")
+#: The IMU models' densities (:mod:`estimators.imu`), tuned only when named:
+#: they act only where the filter's settings turn the models on.
+GRAVITY_DENSITY = Tunable("gravity_density", "log", (1e-16, 1.0), search=(1e-8, 1e-3),
+                          description="the low-passed gravity direction's error density "
+                          "(rad²·s)", sensor="accelerometer")
+HEADING_DENSITY = Tunable("heading_density", "log", (1e-16, 1.0), search=(1e-6, 1e-1),
+                          description="the heading-only magnetometer's error density (rad²·s)",
+                          sensor="magnetometer")
 #: A static solver's weight on the magnetometer against the other sensors.
 MAGNETOMETER_WEIGHT = Tunable("magnetometer_weight", "log", (1e-9, 1e9), search=(1e-3, 1e3),
                               description="a factor on the magnetometer's weight σ⁻² in "

@@ -24,6 +24,7 @@ sensor, none outside its field of view).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,10 @@ class VectorObservation:
     variance : float, σ² per axis of ``body``'s noise (the vector's unit squared)
     sensor : str, the sensor's name (``"magnetometer"``, ``"sun_sensor"``, …)
     dof : int, the degrees of freedom of its innovation (3, or 2 for a unit vector)
+    reference_known : bool, whether ``reference`` is the vector itself (a
+        model's, in the reading's unit), or only gives its direction's
+        azimuth (a recording's field, whose norm and dip a filter must learn:
+        :mod:`estimators.imu.heading`)
     """
 
     body: np.ndarray
@@ -50,6 +55,7 @@ class VectorObservation:
     variance: float
     sensor: str
     dof: int = 3
+    reference_known: bool = True
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,7 @@ class VectorReadings:
     variance : (N,) σ² per axis of each reading
     dof : int
     unit : str, the vectors' unit ("nT", "m/s^2", or "" for unit vectors)
+    reference_known : bool, as :attr:`VectorObservation.reference_known`
     """
 
     sensor: str
@@ -74,25 +81,26 @@ class VectorReadings:
     variance: np.ndarray
     dof: int = 3
     unit: str = ""
+    reference_known: bool = True
 
     def observation(self, k: int) -> VectorObservation:
         """Step ``k``'s reading (``available[k]`` must be True)."""
         return VectorObservation(self.body[k], self.reference[k], float(self.variance[k]),
-                                 self.sensor, self.dof)
+                                 self.sensor, self.dof, self.reference_known)
 
     def steps(self, part: slice) -> "VectorReadings":
         """The readings of the steps ``part`` (a slice of the record)."""
-        return VectorReadings(sensor=self.sensor, body=self.body[part],
-                              reference=self.reference[part], available=self.available[part],
-                              variance=self.variance[part], dof=self.dof, unit=self.unit)
+        return dataclasses.replace(self, body=self.body[part], reference=self.reference[part],
+                                   available=self.available[part],
+                                   variance=self.variance[part])
 
     def run(self, index: int) -> "VectorReadings":
         """One run's readings of readings made for several
         (:meth:`VectorSensor.measure_runs`: ``body`` ``(R, N, 3)``,
         ``available`` and ``variance`` ``(R, N)``)."""
-        return VectorReadings(sensor=self.sensor, body=self.body[index],
-                              reference=self.reference, available=self.available[index],
-                              variance=self.variance[index], dof=self.dof, unit=self.unit)
+        return dataclasses.replace(self, body=self.body[index],
+                                   available=self.available[index],
+                                   variance=self.variance[index])
 
 
 def to_body(q_true: np.ndarray, reference: np.ndarray) -> np.ndarray:

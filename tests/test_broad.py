@@ -94,9 +94,10 @@ def test_a_heading_error_is_no_inclination_error_and_a_tilt_no_heading_error(
     reference = quat_from_rotvec(np.array([tilt_x, tilt_y, yaw]))[None]
     turned = quat_multiply(quat_from_rotvec(np.array([0.0, 0.0, heading])), reference[0])[None]
     found = errors_deg(turned, reference)
-    assert found["heading"][0] == pytest.approx(abs(math.degrees(heading)), abs=1e-6)
+    # (2 arccos resolves angles to about √(8 ε) rad, 2e-6°: the tolerances are 1e-5°.)
+    assert found["heading"][0] == pytest.approx(abs(math.degrees(heading)), abs=1e-5)
     assert found["inclination"][0] == pytest.approx(0.0, abs=1e-5)
-    assert found["total"][0] == pytest.approx(abs(math.degrees(heading)), abs=1e-6)
+    assert found["total"][0] == pytest.approx(abs(math.degrees(heading)), abs=1e-5)
     tilt = np.array([tilt_x, tilt_y, 0.0])
     tilted = quat_multiply(quat_from_rotvec(tilt), reference[0])[None]
     found = errors_deg(tilted, reference)
@@ -220,13 +221,14 @@ def test_the_peers_run_as_registry_estimators(name, tmp_path):
 @pytest.mark.slow
 def test_the_gate_rejects_the_attached_magnets_disturbed_field():
     # Trial 32 (a magnet 1 cm from the IMU) against trial 02 (undisturbed):
-    # the MEKF's 99.99 % gate and its magnetic norm test (10 %) reject far
-    # more magnetometer readings.
+    # USQUE's 99.99 % gate and its magnetic norm test (10 %) reject far more
+    # magnetometer readings. (The MEKF's heading model takes the magnet's
+    # constant field as a new reference after 20 s: tests/test_imu_models.py.)
     from benchmarks.broad.benchmark import run_trial
     full = open_broad(FULL)
     counts = {}
     for trial in ("02", "32"):
-        rows, _, _ = run_trial(full, full.trial_name(trial), ["mekf"])
+        rows, _, _ = run_trial(full, full.trial_name(trial), ["usque"])
         counts[trial] = rows[0]["rejected_magnetometer"]
     assert counts["32"] > 5 * max(counts["02"], 1000)
 
@@ -328,8 +330,8 @@ def test_the_mekf_tuner_lowers_its_training_loss(trial_02_case, monkeypatch):
     from benchmarks.broad import tuning
     monkeypatch.setattr(tuning, "MAX_EVALUATIONS", 14)
     found = tuning.tune_on("mekf", [trial_02_case])
-    assert set(found["values"]) == {"gyro_noise", "gyro_bias_random_walk", "gate_probability",
-                                    "magnetic_norm_tolerance"}
+    assert set(found["values"]) == {"gyro_noise", "gyro_bias_random_walk", "gravity_density",
+                                    "heading_density"}
     assert found["evaluations"] <= 14 + 1
     assert found["loss"] <= found["loss_default"]
 

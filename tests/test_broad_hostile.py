@@ -142,8 +142,8 @@ def test_a_two_sample_trial_is_refused_with_the_rule(tmp_path, capsys):
         for key in PER_SAMPLE:
             arrays[key] = arrays[key][moving - 1:moving + 1]   # one at rest, one moving
     folder = _folder(tmp_path, _on(TRIAL_02, two_samples))
-    _refused(tmp_path, capsys, folder, "has 1 usable accelerometer reading at rest before its "
-             f"movement (samples 0 to 0); a trial needs at least {inputs.MIN_REST_SAMPLES}")
+    _refused(tmp_path, capsys, folder, f"has 2 samples; a trial needs at least "
+             f"{inputs.MIN_SAMPLES} to be run and scored")
 
 
 # --- unusable first samples ----------------------------------------------------------
@@ -186,22 +186,29 @@ def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, 
             pytest.approx(row["total_rmse_deg"], abs=0.01)
 
 
-def test_a_rest_with_no_usable_pair_is_refused_naming_the_samples(tmp_path, capsys):
+def test_a_trial_with_no_usable_pair_is_refused_with_the_rule(tmp_path, capsys):
     # Every other accelerometer reading a dropout, the others parallel to the field.
     def no_pair(arrays):
-        moving = int(np.argmax(arrays["movement"]))
-        arrays["imu_acc_mps2"][0:moving:2] = 0.0
-        arrays["imu_mag_uT"][1:moving:2] = 3.0 * arrays["imu_acc_mps2"][1:moving:2]
+        arrays["imu_acc_mps2"][0::2] = 0.0
+        arrays["imu_mag_uT"][1::2] = 3.0 * arrays["imu_acc_mps2"][1::2]
     folder = _folder(tmp_path, _on(TRIAL_02, no_pair))
-    _refused(tmp_path, capsys, folder, "no sample of its rest (samples 0 to 1448) has "
-             "accelerometer and magnetometer readings both non-zero and at least 1° apart")
+    _refused(tmp_path, capsys, folder, "no sample has accelerometer and magnetometer readings "
+             "both non-zero and at least 1° apart, which the start attitude is taken from")
 
 
-def test_a_rest_of_dropouts_is_refused(tmp_path, capsys):
+def test_a_rest_of_dropouts_is_no_rest_and_none_is_needed(tmp_path, capsys):
+    # Nothing is taken from a rest: a trial whose rest is all dropouts starts
+    # at its first usable sample, says so, and is scored.
+    moving = int(np.argmax(_arrays(TRIAL_02)["movement"]))
+
     def dead(arrays):
-        arrays["imu_acc_mps2"][:int(np.argmax(arrays["movement"]))] = 0.0
-    _refused(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, dead)),
-             "has 0 usable accelerometer readings at rest before its movement")
+        arrays["imu_acc_mps2"][:moving] = 0.0
+    status, _, err, out = _run(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, dead),
+                                                         names=(TRIAL_02,)))
+    assert status == 0, err
+    assert f"the start attitude is taken at sample {moving}" in err
+    scores = pd.read_csv(out / "broad_trials.csv").set_index("estimator")["total_rmse_deg"]
+    assert scores.notna().all()
 
 
 # --- trials.json and the case study's files --------------------------------------------
@@ -268,12 +275,12 @@ def test_the_sigmas_are_checked_where_the_filters_take_them():
     recording = open_broad(SHIPPED).load(TRIAL_02)
     with pytest.raises(InvalidParameterError, match=r"^magnetometer_sigma = 1e\+200: must be "
                                                     "below"):
-        inputs.rest_references(recording, {"magnetometer": 1e200})
+        inputs.references_and_variances(recording, {"magnetometer": 1e200})
     with pytest.raises(InvalidParameterError, match=r"^accelerometer_sigma = 0.0: must be > 0"):
         inputs.imu_inputs(recording, sigmas={"accelerometer": 0.0})
     with pytest.raises(InvalidParameterError, match="sigmas = 'gyro': must name one of"):
         inputs.checked_sigmas({"gyro": 1.0})
-    _, variances = inputs.rest_references(recording, {"accelerometer": 1e100})
+    _, variances = inputs.references_and_variances(recording, {"accelerometer": 1e100})
     assert variances["accelerometer"] == 1e200
 
 
@@ -367,19 +374,22 @@ def test_the_trial_table_shows_the_share_of_readings_each_filter_rejected(tmp_pa
     def dropouts(arrays):
         arrays["imu_acc_mps2"][2000:2010] = 0.0        # ten readings that are none
     folder = _folder(tmp_path, _on(TRIAL_07, dropouts), names=(TRIAL_07,))
-    status, printed, err, out = _run(tmp_path, capsys, folder)
+    status, printed, err, out = _run(tmp_path, capsys, folder,
+                                     estimators="madgwick,usque,mekf")
     assert status == 0, err
     trials = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
-    mekf = trials.loc["mekf"]
-    share = mekf["rejected_accelerometer"] / (mekf["samples"] - 10)
-    assert mekf["rejected_accelerometer_share"] == pytest.approx(share)
-    assert 0.2 < share < 0.9                  # trial 07's movement: the gate is busy
+    usque = trials.loc["usque"]
+    share = usque["rejected_accelerometer"] / (usque["samples"] - 10)
+    assert usque["rejected_accelerometer_share"] == pytest.approx(share)
+    assert 0.2 < share < 0.9          # trial 07's movement: the vector filter's gate is busy
+    # The MEKF's low-passed gravity (estimators.imu.gravity) takes every reading.
+    assert trials.loc["mekf", "rejected_accelerometer_share"] == 0.0
     assert math.isnan(trials.loc["madgwick", "rejected_accelerometer_share"])
     header, *lines = printed.splitlines()
     assert header.rstrip().endswith("rejected acc/mag %")
-    row = next(line for line in lines if " mekf " in line)
+    row = next(line for line in lines if " usque " in line)
     assert row.split()[-1] == (f"{100 * share:.1f}/"
-                               f"{100 * mekf['rejected_magnetometer_share']:.1f}")
+                               f"{100 * usque['rejected_magnetometer_share']:.1f}")
     assert next(line for line in lines if " madgwick " in line).split()[-1] == "-/-"
 
 
@@ -405,18 +415,19 @@ def test_the_figures_are_readable(tmp_path):
     assert "NaN" in [t.get_text() for t in figure.axes[0].texts]   # slow: nothing scored
 
 
-def test_an_intact_trial_is_configured_exactly_as_before():
-    # Leaving dropouts out must not touch a trial without any: the rest's
-    # means and variances are those of the rest itself, to the last bit
-    # (the scores of the default estimators stay as they were).
+def test_an_intact_trial_takes_nothing_from_a_rest():
+    # Gravity is the standard one, the vector filters' field the medians of
+    # the first second, the noise the declared defaults: none depends on
+    # where the movement starts.
     recording = open_broad(SHIPPED).load(TRIAL_02)
-    rest = recording.rest_samples
-    references, variances = inputs.rest_references(recording)
-    for name, channel in inputs.channels(recording).items():
-        mean = channel[rest].mean(axis=0)
-        assert np.linalg.norm(references[name]) == pytest.approx(np.linalg.norm(mean), rel=1e-15)
-        assert variances[name] == max(float(np.mean(channel[rest].var(axis=0))),
-                                      inputs.MOTION_SIGMAS[name] ** 2)
-    assert references["accelerometer"][2] == np.linalg.norm(
-        recording.accelerometer_mps2[rest].mean(axis=0))
+    references, variances = inputs.references_and_variances(recording)
+    assert np.array_equal(references["accelerometer"], [0.0, 0.0, 9.80665])
+    window = round(inputs.FIELD_WINDOW_S * recording.rate_hz)
+    first = recording.magnetometer_uT[:window]
+    assert np.linalg.norm(references["magnetometer"]) == pytest.approx(
+        np.median(np.linalg.norm(first, axis=1)), rel=1e-12)
+    assert references["magnetometer"][0] == 0.0 and references["magnetometer"][1] > 0.0
+    assert variances == {name: sigma ** 2 for name, sigma in inputs.MOTION_SIGMAS.items()}
     assert inputs.start_sample(recording) == 0
+    said = "\n".join(inputs.imu_inputs(recording).assumptions)
+    assert "gravity: the standard 9.80665 m/s²" in said and "TRIAD on sample 0" in said

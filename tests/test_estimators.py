@@ -16,6 +16,7 @@ from estimators import (
     QuaternionEKF,
 )
 from estimators.model import propagate, propagate_with_jacobian
+from sensors.vector import VectorReadings
 
 
 def central_difference_jacobian(func, q, step=1e-6):
@@ -148,7 +149,11 @@ def test_noiseless_dead_reckoning_error_is_small_and_first_order():
     assert error.max() / error_half.max() == pytest.approx(2.0, rel=0.02)   # first order
 
 
-@pytest.mark.parametrize("cls", list(ESTIMATORS.values()))
+#: The estimators that step (the offline ones run on whole records only).
+ONLINE = [cls for cls in ESTIMATORS.values() if cls.mode == "online"]
+
+
+@pytest.mark.parametrize("cls", ONLINE)
 def test_every_estimator_shares_the_interface(cls, rng):
     estimator = cls(dt=0.01)
     assert isinstance(estimator, AttitudeEstimator)
@@ -163,6 +168,28 @@ def test_every_estimator_shares_the_interface(cls, rng):
     first = estimator.run(omega, star, available)
     assert first.shape == (n, 4)
     assert np.array_equal(estimator.run(omega, star, available), first)   # run() resets
+
+
+@pytest.mark.parametrize("cls", [cls for cls in ESTIMATORS.values() if cls.mode == "offline"])
+def test_an_offline_estimator_runs_on_whole_records_and_refuses_to_step(cls, rng):
+    if cls.name == "vqf-offline":
+        pytest.importorskip("vqf")
+    estimator = cls(dt=0.01)
+    with pytest.raises(TypeError, match="is offline"):
+        estimator.step(np.array([0.01, 0.02, 0.03]), None)
+    n = 200
+    omega = rng.normal(0, 0.05, (n, 3))
+    up, north = np.array([0.0, 0.0, 9.81]), np.array([0.0, 20.0, -40.0])
+    vectors = tuple(VectorReadings(sensor=name, body=np.tile(v, (n, 1)),
+                                   reference=np.tile(v, (n, 1)), available=np.ones(n, bool),
+                                   variance=np.full(n, 0.1), unit=unit)
+                    for name, v, unit in (("accelerometer", up, "m/s^2"),
+                                          ("magnetometer", north, "uT")))
+    star = np.tile([1.0, 0, 0, 0], (n, 1))
+    first = estimator.run(omega, star, np.zeros(n, bool), vectors=vectors)
+    assert first.shape == (n, 4) and np.isfinite(first).all()
+    again = estimator.run(omega, star, np.zeros(n, bool), vectors=vectors)
+    np.testing.assert_array_equal(again, first)                      # run() starts afresh
 
 
 def test_swapping_estimators_is_one_line():

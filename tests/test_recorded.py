@@ -43,6 +43,7 @@ def _per_run(estimator, omega, vectors):
 
 @pytest.mark.parametrize("name, path", [
     ("dead-reckoning", "kernel"), ("mekf", "kernel"), ("usque", "kernel"),
+    ("mekf-smoother", "kernel"),
     ("madgwick", "compiled"), ("madgwick-broad", "compiled"), ("mahony", "compiled"),
     ("triad", "batch"), ("vqf", "batch"), ("vqf-6d", "batch"), ("fusion", "batch")])
 def test_each_fast_path_gives_the_per_run_estimates_and_rejections(trial, name, path):
@@ -64,9 +65,22 @@ def test_each_fast_path_gives_the_per_run_estimates_and_rejections(trial, name, 
     assert run.diverged_step is None
 
 
+def _textbook(scenario, name="mekf", **options):
+    """``scenario`` with ``name``'s IMU models off: acc/mag as vector readings."""
+    textbook = {"gravity_model": "reading", "magnetometer_model": "vector",
+                "rest_updates": False, "gate_probability": 0.9999}
+    merged = dict(scenario.estimator_options)
+    merged[name] = {**merged.get(name, {}), **(textbook if name == "mekf" else {}), **options}
+    return scenario.replace(estimator_options=merged)
+
+
 def test_the_mekf_gate_is_counted_on_the_kernel_path(trial):
     scenario, omega, vectors = trial
-    run = run_recorded(build_estimator("mekf", scenario), omega, vectors)
+    textbook = _textbook(scenario)
+    reference, rejected = _per_run(build_estimator("mekf", textbook), omega, vectors)
+    run = run_recorded(build_estimator("mekf", textbook), omega, vectors)
+    np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-9)
+    assert run.rejected == rejected
     # Fast rotation: the centripetal acceleration fails the gate (not a vacuous count).
     assert run.rejected.get("accelerometer", 0) > LENGTH // 10
 
@@ -149,9 +163,8 @@ def test_a_disturbed_field_is_rejected_by_its_magnitude_on_both_paths(trial, nam
     body = magnetometer.body.copy()
     body[400:700] *= 1.3            # a magnet nearby: the field 30 % stronger
     disturbed = (accelerometer, replace(magnetometer, body=body))
-    options = dict(scenario.estimator_options)
-    options[name] = {**options[name], "magnetic_norm_tolerance": 0.1}
-    tested = scenario.replace(estimator_options=options)
+    tested = _textbook(scenario, name, magnetic_norm_tolerance=0.1)
+    options = dict(tested.estimator_options)
     reference, rejected = _per_run(build_estimator(name, tested), omega, disturbed)
     run = run_recorded(build_estimator(name, tested), omega, disturbed)
     np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-9)

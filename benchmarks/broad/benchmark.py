@@ -33,15 +33,15 @@ from benchmarks.engine.recorded import path_of, run_recorded
 from benchmarks.output import progress
 from estimators import resolve_estimator, sensing
 
-#: ``broad`` without ``--estimators``: the textbook filter, a static
-#: solution, dead reckoning and the complementary filters; the peers when
-#: installed (:func:`default_estimators`).
-DEFAULT_ESTIMATORS = ("dead-reckoning", "triad", "mekf", "usque", "madgwick", "madgwick-broad",
-                      "mahony")
-PEERS = ("vqf", "vqf-6d", "fusion")
+#: ``broad`` without ``--estimators``: the textbook filter and its smoother
+#: (offline), a static solution, dead reckoning and the complementary
+#: filters; the peers when installed (:func:`default_estimators`).
+DEFAULT_ESTIMATORS = ("dead-reckoning", "triad", "mekf", "mekf-smoother", "usque", "madgwick",
+                      "madgwick-broad", "mahony")
+PEERS = ("vqf", "vqf-6d", "vqf-offline", "fusion")
 #: The vector sensors, in the tables' order, and their short names.
 SENSORS = {"accelerometer": "acc", "magnetometer": "mag"}
-TRIAL_COLUMNS = ("trial", "estimator", *METRICS, "us_per_sample", "samples",
+TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, "us_per_sample", "samples",
                  "movement_samples", "scored_samples",
                  "rejected_accelerometer", "rejected_magnetometer",
                  "rejected_accelerometer_share", "rejected_magnetometer_share",
@@ -57,7 +57,7 @@ BAR_WIDTH = 0.8
 def default_estimators() -> tuple:
     """:data:`DEFAULT_ESTIMATORS`, and :data:`PEERS` whose packages are installed."""
     import importlib.util
-    modules = {"vqf": "vqf", "vqf-6d": "vqf", "fusion": "imufusion"}
+    modules = {"vqf": "vqf", "vqf-6d": "vqf", "vqf-offline": "vqf", "fusion": "imufusion"}
     return DEFAULT_ESTIMATORS + tuple(name for name in PEERS
                                       if importlib.util.find_spec(modules[name]) is not None)
 
@@ -108,7 +108,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             # reference's; only its inclination is a score.
             scores.update(total_rmse_deg=math.nan, heading_rmse_deg=math.nan)
         tested = tests_readings(estimator)
-        rows.append({"trial": trial, "estimator": name, **scores,
+        rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
                      "movement_samples": int(np.count_nonzero(recording.movement)),
@@ -122,7 +122,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
                      "path": run.path})
         heading = sensing.heading_observed(type(estimator), readings)
         curves[name] = (recording.time_s, errors["total" if heading else "inclination"])
-        labels[name] = estimator.label + ("" if heading else " [inclination only]")
+        labels[name] = estimator.label + ("" if heading else " [inclination only]") + (
+            " [offline]" if estimator.mode == "offline" else "")
     return rows, curves, labels
 
 
@@ -130,14 +131,19 @@ def tests_readings(estimator) -> dict:
     """``sensor → bool``: whether ``estimator`` tests that sensor's readings
     and counts those it rejects (a χ² gate, ``gate_probability``; for the
     magnetometer also a test of the field's magnitude,
-    ``magnetic_norm_tolerance``). The others take every reading, or weigh
-    or reject them inside a library that does not say (VQF): their share of
-    rejected readings is unknown, NaN, not 0."""
+    ``magnetic_norm_tolerance``, or the heading model's trust,
+    :mod:`estimators.imu.heading`); the low-passed gravity model
+    (:mod:`estimators.imu.gravity`) takes every reading it is not gated on, a
+    known 0. The others take every reading, or weigh or reject them inside
+    a library that does not say (VQF): their share of rejected readings is
+    unknown, NaN, not 0."""
     if not getattr(estimator, "uses_vector_readings", False):
         return {sensor: False for sensor in SENSORS}
     gated = getattr(estimator, "gate_probability", None) is not None
     normed = getattr(estimator, "magnetic_norm_tolerance", None) is not None
-    return {"accelerometer": gated, "magnetometer": gated or normed}
+    lowpass = getattr(estimator, "gravity_model", None) == "lowpass"
+    heading = getattr(estimator, "magnetometer_model", None) == "heading"
+    return {"accelerometer": gated or lowpass, "magnetometer": gated or normed or heading}
 
 
 _WARM = set()
@@ -266,8 +272,14 @@ def format_groups(result: BroadResult, metric: str = "total_rmse_deg") -> str:
             part.set_index("estimator")[metric]
     table = pd.DataFrame(columns)
     table.index.name = "estimator"
+    modes = result.trials.get("mode")
+    offline = set() if modes is None else set(result.trials.loc[modes == "offline", "estimator"])
+    table.index = [f"{name} (offline)" if name in offline else name for name in table.index]
+    table.index.name = "estimator"
     text = table.to_string(float_format=lambda v: f"{v:.3f}", na_rep="NaN")
-    return "\n".join([text, *group_notes(result)])
+    notes = ["(offline): a smoother, each estimate from the whole recording, before and after "
+             "it; the others are online, each from the readings up to it"] if offline else []
+    return "\n".join([text, *group_notes(result), *notes])
 
 
 def _share(value: float) -> str:
@@ -280,7 +292,7 @@ def format_trials(result: BroadResult) -> str:
     test them, :func:`tests_readings`); a trial with nothing to score named
     below it."""
     trials = result.trials
-    shown = trials[["trial", "estimator", *METRICS, "us_per_sample"]].copy()
+    shown = trials[["trial", "estimator", "mode", *METRICS, "us_per_sample"]].copy()
     shown["trial"] = shown["trial"].map(_number)
     shown["rejected acc/mag %"] = [
         f"{_share(a)}/{_share(m)}" for a, m in zip(trials["rejected_accelerometer_share"],

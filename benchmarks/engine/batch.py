@@ -414,9 +414,12 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
 
 def new_record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency: bool,
                 nees_every: int, settle_steps: int, health: bool, error_every: int,
-                n_sensors: int = 0):
-    """The kernels' outputs, one row per estimator in ``names``."""
-    from benchmarks.engine.kernels.common import N_ACCUMULATORS, N_HEALTH, Record
+                n_sensors: int = 0, full_state: bool = False):
+    """The kernels' outputs, one row per estimator in ``names``; with traces
+    and ``full_state``, each output's whole 6x6 covariance and bias too
+    (:func:`benchmarks.engine.kernels.common.keep_output`)."""
+    from benchmarks.engine.kernels.common import (FULL_STATE_WIDTH, N_ACCUMULATORS, N_HEALTH,
+                                                  Record)
     rows = len(names)
     n_samples = -(-n_steps // nees_every) if consistency else 0
     return Record(
@@ -427,7 +430,8 @@ def new_record(names, n_runs: int, n_steps: int, keep_traces: bool, consistency:
         traces=(np.zeros((rows, n_runs, n_steps, 4)) if keep_traces
                 else np.zeros((rows, 0, 0, 4))),
         keep_traces=bool(keep_traces),
-        variances=np.zeros((rows, n_runs, n_steps, 3) if keep_traces else (rows, 0, 0, 3)),
+        variances=np.zeros((rows, n_runs, n_steps, FULL_STATE_WIDTH if full_state else 6)
+                           if keep_traces else (rows, 0, 0, 6)),
         error_every=error_every,
         error_samples=np.zeros((rows, n_runs, -(-n_steps // error_every) if error_every else 0)),
         consistency=bool(consistency), nees_every=nees_every,
@@ -569,7 +573,7 @@ def _result(scenario, runs, kernels, objects, states, record, sensors) -> BatchR
 
 def _variances(record, row: int) -> np.ndarray:
     """One estimator's kept attitude variances, NaN from the step it diverged."""
-    diverged, variances = record.diverged[row], record.variances[row]
+    diverged, variances = record.diverged[row], record.variances[row, ..., :3]
     steps = np.arange(variances.shape[1])
     lost = (diverged[:, None] >= 0) & (steps >= diverged[:, None])
     return np.where(lost[:, :, None], np.nan, variances)

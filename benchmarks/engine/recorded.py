@@ -10,6 +10,9 @@ real IMU), by the fastest path that gives the per-run class's numbers.
   throughout, and the vector readings are the recording's. The kernel's
   error against the block's truth is not used (the truth is the identity):
   the estimates are kept and scored by the caller.
+* The MEKF's smoother (:mod:`estimators.smoother`) runs its forward and
+  backward passes through the MEKF's kernel, keeping each output's
+  attitude covariance, and fuses them as the per-run class does.
 * Madgwick's and Mahony's filters run through their compiled step functions
   (:mod:`benchmarks.engine.kernels.complementary`).
 * An estimator with a ``run_batch(omega, vectors)`` method (the peers'
@@ -24,13 +27,14 @@ its reset; the tests hold each to the per-run path to 1e-9 at every sample.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from benchmarks.engine.kernels import KERNELS, kernel
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
+from estimators.smoother import MekfSmoother, fuse, reversed_readings, reversed_rates
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,8 @@ def path_of(estimator, vectors=()) -> str:
     ``vectors`` (module docstring)."""
     from benchmarks.engine.kernels import complementary
     name = getattr(estimator, "name", None)
+    if isinstance(estimator, MekfSmoother):
+        return "kernel"
     if name in KERNELS and type(estimator).__module__.startswith("estimators."):
         module = kernel(name)
         needs_vectors = bool(vectors) and estimator.uses_vector_readings
@@ -73,6 +79,8 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> Recorde
     vectors = tuple(vectors)
     path = path_of(estimator, vectors)
     estimator.reset()
+    if path == "kernel" and isinstance(estimator, MekfSmoother):
+        return _smoothed(estimator, omega, vectors)
     if path == "kernel":
         return _through_kernel(estimator, omega, vectors)
     if path == "compiled" and _frame_learnt(estimator, vectors):
@@ -85,7 +93,8 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> Recorde
     if path == "batch":
         estimates = estimator.run_batch(omega, vectors)
         if estimates is not None:
-            return _finished(np.asarray(estimates, dtype=float), path)
+            return replace(_finished(np.asarray(estimates, dtype=float), path),
+                           rejected=dict(getattr(estimator, "rejected", {})))
         path = "per-run"
     n = len(omega)
     estimates = estimator.run(omega, np.tile(IDENTITY, (n, 1)), np.zeros(n, dtype=bool),
@@ -135,13 +144,48 @@ def _channels(vectors) -> tuple:
 
 def _through_kernel(estimator, omega: np.ndarray, vectors) -> RecordedRun:
     """One run of the estimator's kernel over one block: the recording."""
+    return _kernel_record(estimator, omega, vectors)[0]
+
+
+def with_covariance(estimator, omega: np.ndarray, vectors) -> tuple:
+    """``estimator`` (with a six-state kernel: the MEKF's) over a recording
+    through its kernel: its :class:`RecordedRun`, and each output's bias
+    ``(N, 3)`` and ``(N, 6, 6)`` covariance (what :mod:`estimators.smoother`
+    fuses)."""
+    run, record, _ = _kernel_record(estimator, np.ascontiguousarray(omega, dtype=float),
+                                    tuple(vectors), full_state=True)
+    kept = record.variances[0, 0]
+    return run, kept[:, 42:45].copy(), kept[:, 6:42].reshape(-1, 6, 6).copy()
+
+
+def _smoothed(smoother, omega: np.ndarray, vectors) -> RecordedRun:
+    """:meth:`estimators.smoother.MekfSmoother.track` on a recording: both
+    passes through the MEKF's kernel, fused by the smoother's own function."""
+    forward_filter = smoother.pass_filter()
+    forward, bias_f, covariance_f = with_covariance(forward_filter, omega, vectors)
+    forward_filter.q_hat, forward_filter.beta_hat = forward.estimates[-1].copy(), bias_f[-1]
+    backward_filter = smoother.pass_filter(backward_from=forward_filter)
+    backward, bias_b, covariance_b = with_covariance(
+        backward_filter, reversed_rates(omega, smoother.rate_interpolation),
+        reversed_readings(vectors))
+    quat, _, _ = fuse((forward.estimates, bias_f, covariance_f),
+                      (backward.estimates[::-1], bias_b[::-1], covariance_b[::-1]))
+    diverged = (None if forward.diverged_step is None or backward.diverged_step is None
+                else max(forward.diverged_step, len(omega) - 1 - backward.diverged_step))
+    return RecordedRun(estimates=quat, diverged_step=diverged, rejected=forward.rejected,
+                       path="kernel")
+
+
+def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = False) -> tuple:
+    """:func:`_through_kernel`'s run, and the kernel's record and state."""
     from benchmarks.engine.batch import new_record
     from benchmarks.engine.kernels.common import Block
     from benchmarks.engine.kernels.sensors import SensorState
     module = kernel(estimator.name)
     used = vectors if estimator.uses_vector_readings else ()
     n = len(omega)
-    record = new_record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used))
+    record = new_record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used),
+                        full_state=full_state)
     block = Block(
         k0=0, steps=n, last_step=n - 1, dt=float(estimator.dt),
         q_true=np.tile(IDENTITY, (n, 1)), omega_true=omega,
@@ -152,12 +196,13 @@ def _through_kernel(estimator, omega: np.ndarray, vectors) -> RecordedRun:
         canonical=False, outage=np.ones(n, dtype=bool), dropout_probability=0.0,
         dropout_uniforms=np.zeros((1, 0)),
         **_vector_arrays(used, n))
+    state = module.initial_state([estimator])
     module.advance(block, SensorState(bias=np.zeros((1, 6)), bias_last=np.zeros((1, 3))),
-                   module.initial_state([estimator]), record, 0)
+                   state, record, 0)
     diverged = int(record.diverged[0, 0])
     rejected = {v.sensor: int(count) for v, count in zip(used, record.rejected[0, 0]) if count}
     return RecordedRun(estimates=record.traces[0, 0], diverged_step=None if diverged < 0
-                       else diverged, rejected=rejected, path="kernel")
+                       else diverged, rejected=rejected, path="kernel"), record, state
 
 
 def _vector_arrays(vectors, n: int) -> dict:
@@ -169,7 +214,11 @@ def _vector_arrays(vectors, n: int) -> dict:
                   vector_available=np.zeros((1, n, count), dtype=bool),
                   vector_dof=np.array([v.dof for v in vectors], dtype=np.int64),
                   vector_magnetic=np.array([v.sensor == "magnetometer" for v in vectors],
-                                           dtype=bool))
+                                           dtype=bool),
+                  vector_gravity=np.array([v.sensor == "accelerometer" for v in vectors],
+                                          dtype=bool),
+                  vector_known=np.array([getattr(v, "reference_known", True) for v in vectors],
+                                        dtype=bool))
     for s, v in enumerate(vectors):
         arrays["vector_body"][0, :, s] = v.body
         arrays["vector_reference"][:, s] = v.reference

@@ -87,7 +87,10 @@ def vector_block(streams: VectorStreams, n_runs: int, k0: int, q_true: np.ndarra
                   vector_available=np.zeros((n_runs, steps, count), dtype=bool),
                   vector_dof=streams.dof,
                   vector_magnetic=np.array([sensor.name == "magnetometer"
-                                            for sensor in streams.sensors], dtype=bool))
+                                            for sensor in streams.sensors], dtype=bool),
+                  vector_gravity=np.array([sensor.name == "accelerometer"
+                                           for sensor in streams.sensors], dtype=bool),
+                  vector_known=np.ones(count, dtype=bool))
     if not count:
         return arrays
     references = references_between(streams.references, k0, k0 + steps)

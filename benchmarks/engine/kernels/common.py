@@ -93,6 +93,8 @@ class Block(NamedTuple):
     vector_available: np.ndarray  # (B, T, S) bool
     vector_dof: np.ndarray        # (S,) int64
     vector_magnetic: np.ndarray   # (S,) bool: a magnetometer (its norm tested, passes_norm)
+    vector_gravity: np.ndarray    # (S,) bool: an accelerometer (the IMU models')
+    vector_known: np.ndarray      # (S,) bool: its reference is the vector, not only its azimuth
 
 
 #: Per-run streaming accumulators: Welford mean and M2, max, final value.
@@ -404,11 +406,20 @@ def projected_covariance(x, P, out):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def keep_variances(run, k, C, variances, keep_traces):
-    """With traces, the diagonal of the output's 3x3 attitude covariance ``C``
-    (rad², body frame) at step ``k``, for the per-axis ±3σ figures."""
+    """With traces, the output's 3x3 attitude covariance ``C`` (rad², body
+    frame) at step ``k``: its diagonal (the per-axis ±3σ figures'), then its
+    xy, xz and yz terms (a smoother's fusion, :mod:`estimators.smoother`)."""
     if keep_traces:
         for i in range(3):
             variances[run, k, i] = C[i, i]
+        variances[run, k, 3] = C[0, 1]
+        variances[run, k, 4] = C[0, 2]
+        variances[run, k, 5] = C[1, 2]
+
+
+#: The width of a trace's covariance row with the full state kept: the
+#: attitude's 6 (diagonal, then xy, xz, yz), the 6x6 covariance, the bias.
+FULL_STATE_WIDTH = 6 + 36 + 3
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -419,6 +430,12 @@ def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, va
     attitude variances with traces, the bias ``beta`` and 6x6 ``P`` at the
     last step for the final report, and the NEES."""
     keep_variances(run, k, P, variances, keep_traces)
+    if keep_traces and variances.shape[2] == FULL_STATE_WIDTH:
+        for i in range(6):
+            for j in range(6):
+                variances[run, k, 6 + 6 * i + j] = P[i, j]
+        for i in range(3):
+            variances[run, k, 42 + i] = beta[i]
     if k == last_step:
         for i in range(3):
             beta_last[run, i] = beta[i]
@@ -475,23 +492,26 @@ def rate_states(estimators) -> dict:
     last reading each run has taken (``rate_prev`` ``(B, 3)``, ``has_rate``
     ``(B,)``), which a trapezoidal filter propagates with at the next step."""
     count = len(estimators)
-    return {"trapezoid": np.array([getattr(e, "rate_interpolation", "hold") == "trapezoid"
-                                   for e in estimators]),
-            "rate_prev": np.zeros((count, 3)), "has_rate": np.zeros(count, dtype=bool)}
+    modes = [getattr(e, "rate_interpolation", "hold") for e in estimators]
+    return {"trapezoid": np.array([mode in ("trapezoid", "end") for mode in modes]),
+            "rate_prev": np.zeros((count, 3)), "has_rate": np.zeros(count, dtype=bool),
+            "end": np.array([mode == "end" for mode in modes])}
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
-    """For a trapezoidal filter (:class:`estimators.sampled_rate.SampledRate`):
-    the mean of the last reading and this one, ``w``, into ``mean``; True if
-    there was a last reading, so that the step just ended is propagated now,
-    before this step's readings. The reading is kept for the next step."""
+def trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
+    """For a filter that propagates at the next step
+    (:class:`estimators.sampled_rate.SampledRate`, ``"trapezoid"`` or
+    ``"end"``): the mean of the last reading and this one, ``w`` (or ``w``
+    itself, at the step's end), into ``mean``; True if there was a last
+    reading, so that the step just ended is propagated now, before this
+    step's readings. The reading is kept for the next step."""
     if not trapezoid[run]:
         return False
     ready = has_rate[run]
     for i in range(3):
         if ready:
-            mean[i] = 0.5 * (rate_prev[run, i] + w[i])
+            mean[i] = w[i] if end[run] else 0.5 * (rate_prev[run, i] + w[i])
         rate_prev[run, i] = w[i]
     has_rate[run] = True
     return ready

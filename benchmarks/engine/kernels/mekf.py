@@ -19,6 +19,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               quadratic_form, quat_exp, quat_times_normalized,
                                               rate_states, record_error, to_body_frame,
                                               trapezoid_rate)
+from benchmarks.engine.kernels import imu
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
 from estimators.mekf import transition_coefficients
@@ -47,6 +48,21 @@ class State(NamedTuple):
     trapezoid: np.ndarray        # (B,) bool: the trapezoidal rate (estimators.sampled_rate)
     rate_prev: np.ndarray        # (B, 3) the last reading, for it
     has_rate: np.ndarray         # (B,) bool: there is one
+    end: np.ndarray              # (B,) bool: the rate at the step's end instead
+    # The IMU models (benchmarks.engine.kernels.imu.imu_state).
+    imu_on: bool
+    imu_lowpass: bool
+    imu_heading: bool
+    imu_rest: bool
+    imu_densities: np.ndarray    # (B, 3) gravity, heading, rest
+    imu_strapdown: np.ndarray    # (B, 4)
+    imu_gravity: np.ndarray      # (B, 4, 3)
+    imu_detector: np.ndarray     # (B, 9, 3)
+    imu_trust: np.ndarray        # (B, 9)
+    imu_rate_lp: np.ndarray      # (B, 3)
+    imu_counts: np.ndarray       # (B, 3) int64
+    imu_rotation: np.ndarray     # (B, 5, 9) the strapdown's rotation integrated, its LP state
+    imu_field: np.ndarray        # (B, 4, 3) the field's low-pass filter in the strapdown frame
 
 
 def initial_state(estimators) -> State:
@@ -61,7 +77,8 @@ def initial_state(estimators) -> State:
                  beta_last=beta.copy(), P_last=P.copy(),
                  posterior=estimators[0].output == "posterior",
                  magnetic_tolerance=norm_tolerances(estimators),
-                 **gate_thresholds(estimators), **rate_states(estimators))
+                 **gate_thresholds(estimators), **rate_states(estimators),
+                 **imu.imu_state(estimators))
 
 
 def nis_dof(estimators) -> int:
@@ -135,20 +152,25 @@ def _mekf_propagate(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
 
 
 @njit(cache=True, error_model="numpy")
-def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq):
+def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq,
+                   bias_columns=False):
     """filterpy's update with innovation ``y`` and Jacobian ``H`` (3x6, zero
-    in its bias columns), ``K = P Hᵀ S⁻¹`` and Joseph's form, then the reset;
-    not applied if gating rejects it. Returns the NIS, whether it was applied
-    and det S."""
+    in its bias columns unless ``bias_columns``), ``K = P Hᵀ S⁻¹`` and
+    Joseph's form, then the reset; not applied if gating rejects it. Returns
+    the NIS, whether it was applied and det S."""
     PHT, S, inverse, K, IK, T, KR = (scratch[0], scratch[1], scratch[2], scratch[3],
                                      scratch[4], scratch[5], scratch[6])
     for i in range(6):
         for j in range(3):
             PHT[i, j] = P[i, 0] * H[j, 0] + P[i, 1] * H[j, 1] + P[i, 2] * H[j, 2]
+            if bias_columns:
+                PHT[i, j] += P[i, 3] * H[j, 3] + P[i, 4] * H[j, 4] + P[i, 5] * H[j, 5]
     for i in range(3):
         for j in range(3):
             S[i, j] = (H[i, 0] * PHT[0, j] + H[i, 1] * PHT[1, j] + H[i, 2] * PHT[2, j]) \
                 + R[i, j]
+            if bias_columns:
+                S[i, j] += H[i, 3] * PHT[3, j] + H[i, 4] * PHT[4, j] + H[i, 5] * PHT[5, j]
     determinant = gauss_jordan(S, inverse, 3)
     nis = quadratic_form((y0, y1, y2), inverse, 3)
     if gating and not nis <= threshold:
@@ -160,11 +182,12 @@ def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq)
     dx = scratch[7, 0]
     for i in range(6):
         dx[i] = K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2
-    # I - K H: H's bias columns are zero.
+    # I - K H: H's bias columns are zero unless bias_columns.
     for i in range(6):
         for j in range(6):
             IK[i, j] = (1.0 if i == j else 0.0) - (
-                K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j] if j < 3 else 0.0)
+                K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j]
+                if j < 3 or bias_columns else 0.0)
     for i in range(6):
         for j in range(6):
             total = 0.0
@@ -223,6 +246,87 @@ def _mekf_vector_update(q, beta, P, body, reference, variance, gating, threshold
                           gating, threshold, scratch, dq)
 
 
+@njit(cache=True, error_model="numpy")
+def _gravity_update(q, beta, P, up, variance, drift, gating, threshold, scratch, dq):
+    """The low-passed gravity direction (estimators.imu.updates): the vector
+    update of e_z with the strapdown's drift in H's bias columns."""
+    p0, p1, p2 = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    H = scratch[8]
+    R = scratch[9]
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = variance if i == j else 0.0
+            H[i, 3 + j] = drift[i, j]
+    H[0, 0], H[0, 1], H[0, 2] = 0.0, -p2, p1
+    H[1, 0], H[1, 1], H[1, 2] = p2, 0.0, -p0
+    H[2, 0], H[2, 1], H[2, 2] = -p1, p0, 0.0
+    return _joseph_update(q, beta, P, up[0] - p0, up[1] - p1, up[2] - p2, H, R,
+                          gating, threshold, scratch, dq, True)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapdown, rotation):
+    """:func:`_mekf_propagate`, and the IMU models' strapdown by the same
+    bias-corrected rotation (MultiplicativeEKF.propagate)."""
+    if imu_on:
+        turn = np.empty(3)
+        for i in range(3):
+            turn[i] = (rate[i] - beta[i]) * dt
+        imu.strapdown_step(strapdown, turn, strapdown)
+        imu.integrate_rotation(strapdown, dt, rotation)
+    _mekf_propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq)
+
+
+@njit(cache=True, error_model="numpy")
+def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, known, dof,
+                gating, gate, rejected, streaming, likelihood, state, scratch, dq):
+    """A vector reading through the IMU models where the settings ask
+    (estimators.imu.updates.ImuUpdates._imu_reading): True if they took it."""
+    densities = state.imu_densities[run]
+    if gravity[s]:
+        up, spare, drift = np.empty(3), np.empty((2, 3)), np.empty((3, 3))
+        interval, at_rest = imu.accelerometer_reading(
+            state.imu_counts, state.imu_detector, state.imu_strapdown, state.imu_gravity,
+            state.imu_rotation, run, body[run, j, s], dt, spare, up, drift)
+        last, kept = (0.0, 0.0), True
+        if state.imu_lowpass:
+            nis, applied, determinant = _gravity_update(
+                q, beta, P, up, densities[0] / interval, drift, gating[run], gate[run, dof[s]],
+                scratch, dq)
+            if applied:
+                last = (nis, determinant)
+            else:
+                rejected[run, s] += 1
+                kept = False
+        if state.imu_rest and at_rest:
+            last = imu.rest_update(q, beta, P, state.imu_rate_lp[run], densities[2] / interval,
+                                   scratch, dq)
+        if streaming and kept and state.imu_lowpass:
+            fold_innovation(run, last[0], last[1], likelihood)
+        return state.imu_lowpass
+    if not (magnetic[s] and state.imu_heading):
+        return False
+    psi, interval, trust, validated = imu.field_reading(
+        state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
+        state.imu_field, run, q, body[run, j, s], reference[j, s], known[s], dt, np.empty(3))
+    if trust == 0.0:
+        rejected[run, s] += 1
+        return True
+    variance = trust * trust * densities[1] / interval
+    s_value = variance
+    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    for a in range(3):
+        for b in range(3):
+            s_value += v[a] * P[a, b] * v[b]
+    if gating[run] and not psi * psi / s_value <= gate[run, 1]:
+        rejected[run, s] += 1
+        return True
+    nis, determinant = imu.heading_update(q, beta, P, psi, variance, validated, scratch, dq)
+    if streaming:
+        fold_innovation(run, nis, determinant, likelihood)
+    return True
+
+
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
@@ -233,16 +337,19 @@ def advance(block, sensors, state, record, row):
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
     (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof, vector_magnetic) = vector_arrays(block)
+     vector_dof, vector_magnetic, vector_gravity, vector_known) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = nees_arrays(record, row)
+    imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
+        state.imu_rate_lp
     q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
     rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
-    trapezoid, rate_prev, has_rate = state.trapezoid, state.rate_prev, state.has_rate
+    trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
+                                           state.end)
     for run in prange(q_all.shape[0]):
         w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch6 = np.empty((10, 6, 6))
@@ -259,8 +366,11 @@ def advance(block, sensors, state, record, row):
                 z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
                 steps_between, star_normals, sigma_rad, mount, canonical, outage,
                 dropout_probability, uniforms)
-            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
-                _mekf_propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq)
+            if imu_on:
+                imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
+            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
+                _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
+                           imu_on, state.imu_strapdown[run], state.imu_rotation[run, 0])
             for i in range(4):
                 out[i] = q[i]
             if not posterior:
@@ -278,6 +388,13 @@ def advance(block, sensors, state, record, row):
                     fold_innovation(run, nis, determinant, likelihood)
             for s in range(vector_dof.shape[0]):
                 if vector_available[run, j, s]:
+                    if imu_on and _imu_vector(
+                            q, beta, P, run, j, s, dt, vector_body, vector_reference,
+                            vector_gravity, vector_magnetic, vector_known, vector_dof, gating,
+                            gate, rejected, streaming, likelihood, state, scratch6, dq):
+                        if check:
+                            check_health(q, True, P, 6, health[run], factor)
+                        continue
                     if vector_magnetic[s] and not passes_norm(
                             vector_body[run, j, s], vector_reference[j, s],
                             magnetic_tolerance[run]):
@@ -302,7 +419,8 @@ def advance(block, sensors, state, record, row):
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
-                _mekf_propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq)
+                _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
+                           state.imu_strapdown[run], state.imu_rotation[run, 0])
             if not (finite_state(q, 4, P, 6) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:

@@ -164,4 +164,5 @@ def vector_arrays(block):
     """The vector sensors' readings of the block (see :class:`Block`), taken
     out of its tuple like :func:`star_arrays`."""
     return (block.vector_body, block.vector_reference, block.vector_variance,
-            block.vector_available, block.vector_dof, block.vector_magnetic)
+            block.vector_available, block.vector_dof, block.vector_magnetic,
+            block.vector_gravity, block.vector_known)

@@ -75,6 +75,7 @@ class State(NamedTuple):
     trapezoid: np.ndarray        # (B,) bool: the trapezoidal rate (estimators.sampled_rate)
     rate_prev: np.ndarray        # (B, 3) the last reading, for it
     has_rate: np.ndarray         # (B,) bool: there is one
+    end: np.ndarray              # (B,) bool: the rate at the step's end instead
 
 
 def _spread(points) -> float:
@@ -405,7 +406,7 @@ def advance(block, sensors, state, record, row):
     (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
      outage, dropout_probability, uniforms) = star_arrays(block)
     (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof, vector_magnetic) = vector_arrays(block)
+     vector_dof, vector_magnetic, _, _) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -416,7 +417,8 @@ def advance(block, sensors, state, record, row):
     beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
     gating, gate = state.gating, state.gate
     rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
-    trapezoid, rate_prev, has_rate = state.trapezoid, state.rate_prev, state.has_rate
+    trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
+                                           state.end)
     for run in prange(q_all.shape[0]):
         w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch = np.empty((6, 6, 6))
@@ -438,7 +440,7 @@ def advance(block, sensors, state, record, row):
             if diverged[run] >= 0:       # the per-run class no longer steps
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
-            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate):
+            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
                 factored = _predict(q, x, P, sigmas, mean, dt, noise[run], bias_rw[run],
                                     spread[run], Wm, Wc, scratch[0], scratch[1], propagated)
                 if not (factored and finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)):

@@ -1,0 +1,83 @@
+"""What each IMU model of the MEKF buys on BROAD: each switched off in turn.
+
+The MEKF on an IMU recording runs the models of :mod:`estimators.imu`
+(:data:`benchmarks.broad.inputs.IMU_MEKF`). Here it runs on every trial
+with all of them, then with one at a time replaced by the textbook's
+reading of that sensor, then with none (the textbook MEKF: the
+accelerometer and the magnetometer as vector readings behind a 99.99 % χ²
+gate and a 10 % test of the field's norm), each scored as ``broad`` scores
+(the mean total RMSE over the trials, :mod:`benchmarks.broad.metric`).
+
+Run ``python -m benchmarks.broad.ablation --broad DIR``; it prints one row
+per variant and writes ``ablation.csv`` (one row per trial and variant).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.inputs import imu_inputs
+from benchmarks.broad.metric import rmse_deg
+from benchmarks.engine.recorded import run_recorded
+from benchmarks.output import progress, write_text
+from benchmarks.shipped import shipped_file
+from dynamics.validation import InvalidParameterError
+from estimators import MultiplicativeEKF
+
+#: The textbook's reading of each sensor, and its tests.
+GATES = {"gate_probability": 0.9999, "magnetic_norm_tolerance": 0.1}
+#: Variant → the MEKF's settings over the recording's.
+VARIANTS = {
+    "all IMU models": {},
+    "gravity as a vector reading": {"gravity_model": "reading", **GATES},
+    "the field as a vector reading": {"magnetometer_model": "vector", **GATES},
+    "no zero-rate update at rest": {"rest_updates": False},
+    "the textbook MEKF (none)": {"gravity_model": "reading", "magnetometer_model": "vector",
+                                 "rest_updates": False, **GATES},
+}
+
+
+def scores(dataset, trial: str) -> list[dict]:
+    """One trial's rows: each variant's total, heading and inclination RMSE."""
+    recording = dataset.load(trial)
+    inputs = imu_inputs(recording)
+    rows = []
+    for variant, settings in VARIANTS.items():
+        mekf = MultiplicativeEKF.from_scenario(inputs.scenario, **settings)
+        run = run_recorded(mekf, inputs.sensors.omega_meas_radps, inputs.sensors.vectors)
+        rows.append({"trial": trial, "variant": variant,
+                     **rmse_deg(run.estimates, recording.reference_quat, recording.movement)})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.broad.ablation",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--broad", type=Path, help="the BROAD folder (default: the two "
+                        "shipped trials)")
+    parser.add_argument("--out", type=Path, default=Path("results"))
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        dataset = open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent)
+        rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
+                for row in scores(dataset, trial)]
+    except InvalidParameterError as err:
+        print(f"ablation: error: {err}", file=sys.stderr)
+        return 2
+    table = pd.DataFrame(rows)
+    means = table.groupby("variant", sort=False)[["total_rmse_deg", "heading_rmse_deg",
+                                                  "inclination_rmse_deg"]].mean()
+    print(f"MEKF on {len(dataset.available)} trials, mean RMSE over the movement (degrees):")
+    print(means.to_string(float_format=lambda x: f"{x:.3f}"))
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_text(args.out / "ablation.csv", table.to_csv(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""The BROAD trials without their rest: does an estimator need one?
+
+Each trial is run twice with the same settings: whole, and with everything
+before its first movement sample cut off and the magnetometer kept at a
+quarter of the gyro's rate (a phone's magnetometer beside its gyro). Both
+are scored on the same samples, the movement after the cut (the authors'
+total RMSE, :mod:`benchmarks.broad.metric`). Nothing in the inputs comes from
+a rest (:mod:`benchmarks.broad.inputs`), so what changes is what the
+estimators themselves learn in the rest: the gyro's bias, the field, the
+start.
+
+Run ``python -m benchmarks.broad.without_rest --broad DIR`` (the full
+dataset; the two shipped trials without ``--broad``); it prints each
+estimator's mean over the trials, whole and cut, and their ratio, and
+writes ``without_rest.csv`` (one row per trial and estimator) to ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.inputs import imu_inputs
+from benchmarks.broad.metric import rmse_deg
+from benchmarks.engine.recorded import run_recorded
+from benchmarks.output import progress, write_text
+from benchmarks.shipped import shipped_file
+from dynamics.validation import InvalidParameterError
+from estimators import resolve_estimator
+
+#: The estimators compared by default: ours, online and offline, and VQF's.
+DEFAULT_ESTIMATORS = ("mekf", "mekf-smoother", "vqf", "vqf-offline")
+#: The magnetometer keeps every MAGNETOMETER_EVERY-th reading in the cut trials.
+MAGNETOMETER_EVERY = 4
+
+
+def cut(recording):
+    """``recording`` from its first movement sample on, with the magnetometer
+    at a quarter rate: its inputs (:func:`benchmarks.broad.inputs.imu_inputs`)."""
+    start = int(np.argmax(recording.movement))
+    inputs = imu_inputs(recording.from_sample(start))
+    vectors = tuple(replace(v, available=v.available & (np.arange(len(v.available))
+                                                        % MAGNETOMETER_EVERY == 0))
+                    if v.sensor == "magnetometer" else v for v in inputs.sensors.vectors)
+    return start, inputs, vectors
+
+
+def scores(dataset, trial: str, names) -> list[dict]:
+    """One trial's rows: each estimator's total RMSE whole and cut."""
+    recording = dataset.load(trial)
+    whole = imu_inputs(recording)
+    start, part, vectors = cut(recording)
+    rows = []
+    for name in names:
+        cls = resolve_estimator(name)
+        full = run_recorded(cls.from_scenario(whole.scenario), whole.sensors.omega_meas_radps,
+                            whole.sensors.vectors).estimates[start:]
+        cut_run = run_recorded(cls.from_scenario(part.scenario), part.sensors.omega_meas_radps,
+                               vectors).estimates
+        reference, movement = recording.reference_quat[start:], recording.movement[start:]
+        rows.append({"trial": trial, "estimator": name, "cut_at_sample": start,
+                     "whole_deg": rmse_deg(full, reference, movement)["total_rmse_deg"],
+                     "without_rest_deg": rmse_deg(cut_run, reference,
+                                                  movement)["total_rmse_deg"]})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.broad.without_rest",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--broad", type=Path, help="the BROAD folder (default: the two "
+                        "shipped trials)")
+    parser.add_argument("--estimators", default=",".join(DEFAULT_ESTIMATORS))
+    parser.add_argument("--out", type=Path, default=Path("results"))
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        dataset = open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent)
+        names = [name.strip() for name in args.estimators.split(",") if name.strip()]
+        for name in names:
+            resolve_estimator(name)
+        rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
+                for row in scores(dataset, trial, names)]
+    except InvalidParameterError as err:
+        print(f"without_rest: error: {err}", file=sys.stderr)
+        return 2
+    table = pd.DataFrame(rows)
+    summary = table.groupby("estimator", sort=False)[["whole_deg", "without_rest_deg"]].mean()
+    summary["ratio"] = summary["without_rest_deg"] / summary["whole_deg"]
+    print(f"{len(dataset.available)} trials, total RMSE over the movement after the cut "
+          f"(degrees), magnetometer at 1/{MAGNETOMETER_EVERY} rate in the cut trials:")
+    print(summary.to_string(float_format=lambda x: f"{x:.3f}"))
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_text(args.out / "without_rest.csv", table.to_csv(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

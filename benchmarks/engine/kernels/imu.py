@@ -1,0 +1,275 @@
+"""The IMU models (:mod:`estimators.imu`) in the engine: the per-run modules'
+own functions, compiled as they are (their calls to one another turned to
+the compiled twins), and the MEKF's zero-rate and heading updates with them.
+
+Why the same functions: the models are state machines and filters whose
+every branch must match the per-run class's to 1e-9; one definition, read
+by both paths, cannot drift. The state of each run's models sits in
+:class:`ImuState`'s arrays, read off the per-run objects after their reset.
+"""
+from __future__ import annotations
+
+import math
+import types
+
+import numpy as np
+from numba import njit
+
+from benchmarks.engine.kernels.common import quat_exp, quat_times_normalized, to_body_frame
+from estimators.imu import gravity, heading, lowpass, rest
+
+
+def _compiled(func, **globals_):
+    """``func`` compiled, the globals it calls swapped for compiled twins:
+    ``name=function``, or ``name={attribute: function}`` for a module."""
+    names = dict(func.__globals__)
+    for name, twin in globals_.items():
+        if isinstance(twin, dict):
+            namespace = types.ModuleType(f"{name}_compiled")
+            for attribute, compiled in twin.items():
+                setattr(namespace, attribute, compiled)
+            twin = namespace
+        names[name] = twin
+    clone = types.FunctionType(func.__code__, names, func.__name__, func.__defaults__,
+                               func.__closure__)
+    clone.__module__, clone.__qualname__ = func.__module__, func.__qualname__
+    return njit(cache=True, error_model="numpy")(clone)
+
+
+coefficients = _compiled(lowpass.coefficients)
+_rotate = _compiled(gravity.rotate)
+_LOWPASS = {"step": _compiled(lowpass.step)}
+strapdown_step = _compiled(gravity.strapdown_step)
+integrate_rotation = _compiled(gravity.integrate_rotation)
+drift_jacobian = _compiled(gravity.drift_jacobian, lowpass=_LOWPASS,
+                           rotate_back=_compiled(gravity.rotate_back))
+gravity_direction = _compiled(gravity.gravity_direction, lowpass=_LOWPASS,
+                              rotate=_rotate,
+                              rotate_back=_compiled(gravity.rotate_back))
+rest_gyro_step = _compiled(rest.gyro_step, lowpass=_LOWPASS)
+rest_acc_step = _compiled(rest.acc_step, lowpass=_LOWPASS)
+field_in_reference = _compiled(heading.field_in_reference, rotate=_rotate)
+_candidate_step = _compiled(heading._candidate_step)
+trust_step = _compiled(heading.trust_step, _candidate_step=_candidate_step)
+steady_step = _compiled(heading.steady_step, lowpass=_LOWPASS, rotate=_rotate)
+validated = _compiled(heading.validated)
+new_trust = _compiled(heading.new_state)
+first_trust = _compiled(heading.first_state, new_state=new_trust)
+
+#: Entries of :attr:`ImuState.counts`: steps since the last accelerometer and
+#: magnetometer readings, magnetometer readings so far.
+SINCE_ACC, SINCE_MAG, FIELDS = 0, 1, 2
+
+
+def imu_state(estimators) -> dict:
+    """Each run's IMU models (:class:`estimators.imu.ImuModels`) and the
+    filter's settings of them, read off the per-run filters after their
+    reset, as the ``imu_*`` fields of a kernel's state (flat: numba's
+    parallel loops take no tuple nested in a tuple)."""
+    first, count = estimators[0], len(estimators)
+    models = [getattr(e, "imu", None) for e in estimators]
+    if models[0] is None:
+        return {"imu_on": False, "imu_lowpass": False, "imu_heading": False, "imu_rest": False,
+                "imu_densities": np.zeros((count, 3)), "imu_strapdown": np.zeros((count, 4)),
+                "imu_gravity": np.zeros((count, 4, 3)), "imu_detector": np.zeros((count, 9, 3)),
+                "imu_trust": np.zeros((count, heading.STATE_SIZE)), "imu_rate_lp": np.zeros((count, 3)),
+                "imu_counts": np.zeros((count, 3), dtype=np.int64),
+                "imu_rotation": np.zeros((count, 5, 9)), "imu_field": np.zeros((count, 4, 3))}
+    return {"imu_on": True, "imu_lowpass": first.gravity_model == "lowpass",
+            "imu_heading": first.magnetometer_model == "heading",
+            "imu_rest": bool(first.rest_updates),
+            "imu_densities": np.array([[e.gravity_density, e.heading_density, e.rest_density]
+                                       for e in estimators]),
+            "imu_strapdown": np.array([m.strapdown for m in models]),
+            "imu_gravity": np.array([m.gravity_filter for m in models]),
+            "imu_detector": np.array([m.rest for m in models]),
+            "imu_trust": np.array([m.trust for m in models]),
+            "imu_rate_lp": np.array([m.rate_lp for m in models]),
+            "imu_counts": np.array([[m.since_acc, m.since_mag, m.fields] for m in models],
+                                   dtype=np.int64),
+            "imu_rotation": np.array([np.vstack([m.rotation_integral[None], m.rotation_filter])
+                                      for m in models]),
+            "imu_field": np.array([m.field_filter for m in models])}
+
+
+#: The ``imu_*`` fields of a kernel's state, in order (see :func:`imu_state`).
+IMU_FIELDS = ("imu_on", "imu_lowpass", "imu_heading", "imu_rest", "imu_densities",
+              "imu_strapdown", "imu_gravity", "imu_detector", "imu_trust", "imu_rate_lp",
+              "imu_counts", "imu_rotation", "imu_field")
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def gyro_reading(counts, detector, rate_lp, run, rate, dt):
+    """:meth:`estimators.imu.ImuModels.gyro_reading`."""
+    counts[run, SINCE_ACC] += 1
+    counts[run, SINCE_MAG] += 1
+    rest_gyro_step(rate, coefficients(rest.FILTER_TIME_CONSTANT_S, dt), dt, detector[run],
+                   rate_lp[run])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def accelerometer_reading(counts, detector, strapdown, gravity_state, rotation, run,
+                          specific_force, dt, scratch, up, drift):
+    """:meth:`estimators.imu.ImuModels.gravity_reading`: gravity's direction
+    into ``up`` and the bias columns of its H into ``drift``; returns the
+    interval and whether the body is at rest."""
+    interval = max(counts[run, SINCE_ACC], 1) * dt
+    counts[run, SINCE_ACC] = 0
+    at_rest = rest_acc_step(specific_force,
+                            coefficients(rest.FILTER_TIME_CONSTANT_S, interval), interval,
+                            detector[run], scratch[0])
+    coeffs = coefficients(gravity.LOWPASS_TIME_CONSTANT_S, interval)
+    gravity_direction(strapdown[run], specific_force, coeffs, gravity.LOWPASS_TIME_CONSTANT_S,
+                      interval, gravity_state[run], scratch, up)
+    drift_jacobian(strapdown[run], scratch[1], rotation[run, 0], coeffs,
+                   gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:], np.empty(9),
+                   drift)
+    return interval, at_rest
+
+
+@njit(cache=True, error_model="numpy")
+def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field, reference,
+                  known, dt, scratch):
+    """:meth:`estimators.imu.ImuModels.field_reading`: ψ, the interval, the
+    trust and whether the field is validated."""
+    interval = max(counts[run, SINCE_MAG], 1) * dt
+    counts[run, SINCE_MAG] = 0
+    if known and counts[run, FIELDS] == 0:
+        norm = math.sqrt(reference[0] ** 2 + reference[1] ** 2 + reference[2] ** 2)
+        fresh = new_trust(norm, -math.asin(reference[2] / norm))
+        for i in range(heading.STATE_SIZE):
+            trust[run, i] = fresh[i]
+    norm, dip = field_in_reference(q, field, scratch)
+    if not known and counts[run, FIELDS] == 0:
+        fresh = first_trust(norm, dip)
+        for i in range(heading.STATE_SIZE):
+            trust[run, i] = fresh[i]
+    counts[run, FIELDS] += 1
+    steady = steady_step(strapdown[run], field,
+                         coefficients(heading.STEADY_TIME_CONSTANT_S, interval), interval,
+                         field_state[run], np.empty((2, 3)))
+    rate = rate_lp[run]
+    trusted = trust_step(norm, dip, math.sqrt(rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2),
+                         interval, trust[run], steady)
+    psi = math.atan2(scratch[0], scratch[1]) - math.atan2(reference[0], reference[1])
+    psi = (psi + math.pi) % (2.0 * math.pi) - math.pi
+    return psi, interval, trusted, validated(trust[run])
+
+
+@njit(cache=True, error_model="numpy")
+def rest_update(q, beta, P, rate_lp, variance, scratch, dq):
+    """The zero-rate update (:mod:`estimators.imu.rest`): ``y = ω̄ − β̂``,
+    ``H = [0 I]``, ``R = variance I``, Joseph's form, then the reset.
+    Returns the NIS and det S."""
+    S, inverse, K, IK, T = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = P[3 + i, 3 + j] + (variance if i == j else 0.0)
+    _invert3(S, inverse)
+    for i in range(6):
+        for j in range(3):
+            K[i, j] = P[i, 3] * inverse[0, j] + P[i, 4] * inverse[1, j] + P[i, 5] * inverse[2, j]
+    y0, y1, y2 = rate_lp[0] - beta[0], rate_lp[1] - beta[1], rate_lp[2] - beta[2]
+    nis = (y0 * (inverse[0, 0] * y0 + inverse[0, 1] * y1 + inverse[0, 2] * y2)
+           + y1 * (inverse[1, 0] * y0 + inverse[1, 1] * y1 + inverse[1, 2] * y2)
+           + y2 * (inverse[2, 0] * y0 + inverse[2, 1] * y1 + inverse[2, 2] * y2))
+    determinant = (S[0, 0] * (S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1])
+                   - S[0, 1] * (S[1, 0] * S[2, 2] - S[1, 2] * S[2, 0])
+                   + S[0, 2] * (S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]))
+    dx = scratch[5, 0]
+    for i in range(6):
+        dx[i] = K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2
+    for i in range(6):
+        for j in range(6):
+            IK[i, j] = (1.0 if i == j else 0.0) - (K[i, j - 3] if j >= 3 else 0.0)
+    _joseph(P, IK, K, variance, 3, T)
+    _apply(q, beta, dx, dq)
+    return nis, determinant
+
+
+@njit(cache=True, error_model="numpy")
+def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
+    """The heading-only update (:mod:`estimators.imu.heading`): ``y = ψ``,
+    ``H = [vᵀ 0]``, the attitude gain projected on ``v``, the bias rows
+    zeroed unless ``bias``; Joseph's form, then the reset. Returns the NIS
+    and det S."""
+    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    IK, T = scratch[3], scratch[4]
+    K = scratch[2, 0]
+    s = variance
+    for i in range(3):
+        for j in range(3):
+            s += v[i] * P[i, j] * v[j]
+    for i in range(6):
+        K[i] = (P[i, 0] * v[0] + P[i, 1] * v[1] + P[i, 2] * v[2]) / s
+    along = v[0] * K[0] + v[1] * K[1] + v[2] * K[2]
+    for i in range(3):
+        K[i] = v[i] * along
+        if not bias:
+            K[3 + i] = 0.0
+    for i in range(6):
+        for j in range(6):
+            IK[i, j] = (1.0 if i == j else 0.0) - (K[i] * v[j] if j < 3 else 0.0)
+    for i in range(6):
+        for j in range(6):
+            scratch[1, i, j] = K[i] * K[j] * variance
+    _joseph_with(P, IK, scratch[1], T)
+    dx = scratch[5, 0]
+    for i in range(6):
+        dx[i] = K[i] * psi
+    _apply(q, beta, dx, dq)
+    return psi * psi / s, s
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _apply(q, beta, dx, dq):
+    """The reset: ``q ← q ⊗ δq(δθ)``, ``β ← β + δβ``."""
+    quat_exp(dx[0], dx[1], dx[2], dq)
+    quat_times_normalized(q, dq, q)
+    for i in range(3):
+        beta[i] += dx[3 + i]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _invert3(S, inverse):
+    """The inverse of a symmetric positive definite 3x3 ``S`` (its adjugate over
+    its determinant)."""
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 1], S[1, 2], S[2, 2]
+    A, B, C = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * A + b * B + c * C
+    inverse[0, 0], inverse[0, 1], inverse[0, 2] = A / det, B / det, C / det
+    inverse[1, 0], inverse[1, 1], inverse[1, 2] = B / det, (a * f - c * c) / det, \
+        (b * c - a * e) / det
+    inverse[2, 0], inverse[2, 1], inverse[2, 2] = C / det, (b * c - a * e) / det, \
+        (a * d - b * b) / det
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _joseph(P, IK, K, variance, n, T):
+    """P ← (I − KH) P (I − KH)ᵀ + K (variance I) Kᵀ for an n-column gain."""
+    KRK = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            noise = 0.0
+            for m in range(n):
+                noise += K[i, m] * K[j, m]
+            KRK[i, j] = variance * noise
+    _joseph_with(P, IK, KRK, T)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _joseph_with(P, IK, KRK, T):
+    """P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, ``KRK`` given."""
+    for i in range(6):
+        for j in range(6):
+            total = 0.0
+            for m in range(6):
+                total += IK[i, m] * P[m, j]
+            T[i, j] = total
+    for i in range(6):
+        for j in range(6):
+            first = 0.0
+            for m in range(6):
+                first += T[i, m] * IK[j, m]
+            P[i, j] = first + KRK[i, j]

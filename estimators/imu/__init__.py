@@ -1,0 +1,133 @@
+"""The measurement models of a real IMU, beside the filter that uses them.
+
+A spacecraft's vector sensors read their vectors and noise; a hand-held or
+vehicle IMU's accelerometer also reads the body's linear acceleration, its
+magnetometer the room's steel and magnets, and its recordings need not begin
+at rest. Each module here is one model, with the paper's page in its
+docstring (Laidig & Seel, "VQF", *Information Fusion* 91, 2023, whose
+defaults are taken as published):
+
+=============  ================================================================
+module         what it models
+=============  ================================================================
+``lowpass``    the second-order Butterworth filter, started from a mean (§3.1)
+``gravity``    gravity from the specific force low-passed in the strapdown
+               frame, as a direction reading (§3.1, eq. 6–9)
+``rest``       rest detection, and the zero-rate update of the bias (§3.4)
+``heading``    the magnetometer as a heading reference only, and when to
+               trust it: norm and dip tests, hold, new fields (§3.3)
+=============  ================================================================
+
+:class:`ImuModels` holds their state for one filter run; the filters
+(:class:`estimators.MultiplicativeEKF`) call it where their settings ask
+(``gravity_model``, ``magnetometer_model``, ``rest_updates``). Its
+functions work on plain arrays so that the engine compiles the same ones.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from estimators.imu import gravity, heading, lowpass, rest
+
+GRAVITY_MODELS = ("reading", "lowpass")
+MAGNETOMETER_MODELS = ("vector", "heading")
+#: The defaults of the densities of the IMU models' errors: gravity's
+#: direction (rad²·s), the heading (rad²·s), the rest's rate (rad²/s²·s).
+GRAVITY_DENSITY = 1.5e-3 ** 2
+HEADING_DENSITY = 0.015 ** 2
+REST_DENSITY = 3.1e-5 ** 2
+
+
+class ImuModels:
+    """The IMU models' state over one run of a filter of step ``dt`` (see
+    the module docstring): the strapdown frame and its low-pass filter, the
+    rest detector, the magnetometer's trust, and the times of the last
+    readings (the models' densities are per unit of time)."""
+
+    def __init__(self, dt: float):
+        self.dt = dt
+        self.reset(np.array([1.0, 0.0, 0.0, 0.0]))
+
+    def reset(self, q0: np.ndarray) -> None:
+        self.strapdown = np.array(q0, dtype=float)
+        self.gravity_filter = lowpass.new_state(3)
+        #: The strapdown's rotation integrated (J), its low-pass filter, and
+        #: the bias columns of gravity's H (:func:`gravity.drift_jacobian`).
+        self.rotation_integral = np.zeros(9)
+        self.rotation_filter = lowpass.new_state(9)
+        self.drift = np.zeros((3, 3))
+        self.rest = rest.new_state()
+        self.trust = heading.new_state()
+        #: The field's low-pass filter in the strapdown frame (heading.steady_step).
+        self.field_filter = lowpass.new_state(3)
+        self.rate_lp = np.zeros(3)
+        self.at_rest = False
+        #: Steps since the last accelerometer and magnetometer readings (0: none yet).
+        self.since_acc = self.since_mag = 0
+        #: Magnetometer readings taken so far.
+        self.fields = 0
+        self._scratch = np.zeros((2, 3))
+
+    def propagate(self, rotation: np.ndarray, dt: float) -> None:
+        """The strapdown by the filter's own rotation (rad) over ``dt`` s."""
+        gravity.strapdown_step(self.strapdown, rotation, self.strapdown)
+        gravity.integrate_rotation(self.strapdown, dt, self.rotation_integral)
+
+    def gyro_reading(self, rate: np.ndarray) -> None:
+        """A step's gyro reading: the rest detector's gyro part."""
+        self.since_acc += 1
+        self.since_mag += 1
+        rest.gyro_step(rate, lowpass.coefficients(rest.FILTER_TIME_CONSTANT_S, self.dt),
+                       self.dt, self.rest, self.rate_lp)
+
+    def interval(self, since: int) -> float:
+        """Seconds between a sensor's readings, ``since`` steps apart (one
+        step for the first)."""
+        return max(since, 1) * self.dt
+
+    def gravity_reading(self, specific_force: np.ndarray, out: np.ndarray) -> float:
+        """Gravity's direction (up, body frame) from one accelerometer reading
+        into ``out``, and the time since the last reading; updates the rest
+        detector (:attr:`at_rest`)."""
+        interval = self.interval(self.since_acc)
+        self.since_acc = 0
+        self.at_rest = rest.acc_step(
+            specific_force, lowpass.coefficients(rest.FILTER_TIME_CONSTANT_S, interval),
+            interval, self.rest, self._scratch[0])
+        coeffs = lowpass.coefficients(gravity.LOWPASS_TIME_CONSTANT_S, interval)
+        gravity.gravity_direction(self.strapdown, specific_force, coeffs,
+                                  gravity.LOWPASS_TIME_CONSTANT_S, interval,
+                                  self.gravity_filter, self._scratch, out)
+        gravity.drift_jacobian(self.strapdown, self._scratch[1], self.rotation_integral, coeffs,
+                               gravity.LOWPASS_TIME_CONSTANT_S, interval, self.rotation_filter,
+                               np.empty(9), self.drift)
+        return interval
+
+    def field_reading(self, q: np.ndarray, field: np.ndarray, reference: np.ndarray,
+                      reference_known: bool = False) -> tuple[float, float, float, bool]:
+        """One magnetometer reading: the heading error ``ψ`` (rad), the time
+        since the last reading, the trust (:func:`heading.trust_step`: 0 skip,
+        1 use, 2 use with twice the σ) and whether the field is validated. A
+        known reference (``reference_known``) is the trust's reference from
+        the first reading on; otherwise the first reading's norm and dip are
+        (:func:`heading.first_state`), and the reference is learnt from there."""
+        interval = self.interval(self.since_mag)
+        self.since_mag = 0
+        if reference_known and not self.fields:       # a model's field: known from the start
+            norm = math.sqrt(reference @ reference)
+            self.trust[:] = heading.new_state(norm, -math.asin(reference[2] / norm))
+        field_e = np.empty(3)
+        norm, dip = heading.field_in_reference(q, field, field_e)
+        if not self.fields and not reference_known:
+            self.trust[:] = heading.first_state(norm, dip)
+        self.fields += 1
+        steady = heading.steady_step(
+            self.strapdown, field, lowpass.coefficients(heading.STEADY_TIME_CONSTANT_S, interval),
+            interval, self.field_filter, np.empty((2, 3)))
+        rate = math.sqrt(self.rate_lp @ self.rate_lp)
+        trust = heading.trust_step(norm, dip, rate, interval, self.trust, steady)
+        psi = math.atan2(field_e[0], field_e[1]) - math.atan2(reference[0], reference[1])
+        psi = (psi + math.pi) % (2.0 * math.pi) - math.pi
+        return psi, interval, trust, heading.validated(self.trust)

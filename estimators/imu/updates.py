@@ -1,0 +1,133 @@
+r"""The IMU models' measurement updates of an error-state filter (the
+MEKF's: :class:`estimators.MultiplicativeEKF`), each as its model's
+docstring gives it:
+
+* gravity's low-passed direction (:mod:`estimators.imu.gravity`):
+  :math:`y = z - A(\hat q)^\mathsf{T} e_z`, :math:`H = [[A^\mathsf{T}e_z\times]\ D]`
+  (:math:`D` the strapdown's drift, :func:`estimators.imu.gravity.drift_jacobian`),
+  :math:`R = S_g / T\, I_3`;
+* the zero-rate update at rest (:mod:`estimators.imu.rest`):
+  :math:`y = \bar\omega - \hat\beta`, :math:`H = [0\ I_3]`, :math:`R = S_r/T\, I_3`;
+* the heading (:mod:`estimators.imu.heading`): :math:`y = \psi`,
+  :math:`H = [v^\mathsf{T}\ 0]`, the attitude gain projected on :math:`v`,
+  the bias rows kept only where the field is validated.
+
+Every update is the Kalman update of the error state in Joseph form
+(Markley & Crassidis 2014, §6.2), then the filter's reset.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dynamics.quaternion import skew, to_body_frame
+from dynamics.validation import boolean, finite_number, one_of
+from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels
+
+_UP = np.array([0.0, 0.0, 1.0])
+
+
+class ImuUpdates:
+    """What a six-state error filter with :attr:`imu` (an
+    :class:`~estimators.imu.ImuModels`, or None) does with an IMU's
+    accelerometer and magnetometer readings where its settings ask."""
+
+    imu: ImuModels | None = None
+    gravity_model = "reading"
+    magnetometer_model = "vector"
+    rest_updates = False
+
+    def _configure_imu(self, *, gravity_model, magnetometer_model, rest_updates,
+                       gravity_density, heading_density, rest_density) -> None:
+        """Validate and keep the IMU models' settings; the models' state
+        (:attr:`imu`) where any is on."""
+        self.gravity_model = one_of("gravity_model", gravity_model, GRAVITY_MODELS)
+        self.magnetometer_model = one_of("magnetometer_model", magnetometer_model,
+                                         MAGNETOMETER_MODELS)
+        self.rest_updates = boolean("rest_updates", rest_updates)
+        for name, value in (("gravity_density", gravity_density),
+                            ("heading_density", heading_density),
+                            ("rest_density", rest_density)):
+            setattr(self, name, finite_number(name, value, strictly_positive=True))
+        on = (self.gravity_model != "reading" or self.magnetometer_model != "vector"
+              or self.rest_updates)
+        self.imu = ImuModels(self.dt) if on else None
+
+    def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()):
+        if self.imu is not None:
+            self.imu.gyro_reading(omega_meas_radps)
+        return super()._step(omega_meas_radps, star_tracker_quat, vectors)
+
+    def _step_at(self, omega_meas_radps, star_tracker_quat, offset_s, vectors=()):
+        if self.imu is not None:
+            self.imu.gyro_reading(omega_meas_radps)
+        return super()._step_at(omega_meas_radps, star_tracker_quat, offset_s, vectors)
+
+    def _imu_reading(self, observation) -> bool:
+        """Apply ``observation`` through the IMU models; False if they do not
+        take it (the filter's own vector update then applies it)."""
+        if self.imu is None:
+            return False
+        if observation.sensor == "accelerometer":
+            return self._accelerometer(observation)
+        if observation.sensor == "magnetometer" and self.magnetometer_model == "heading":
+            self._heading(observation)
+            return True
+        return False
+
+    def _accelerometer(self, observation) -> bool:
+        """Gravity's low-passed direction and, at rest, the zero-rate update;
+        False where the reading itself is to be applied as a vector reading."""
+        up = np.empty(3)
+        interval = self.imu.gravity_reading(np.asarray(observation.body, dtype=float), up)
+        used = self.gravity_model == "lowpass"
+        if used:
+            predicted = to_body_frame(self.q_hat, _UP)
+            H = np.zeros((3, 6))
+            H[:, :3] = skew(predicted)
+            H[:, 3:] = self.imu.drift
+            self._error_update(up - predicted, H, self.gravity_density / interval * np.eye(3),
+                               observation.dof, "accelerometer")
+        if self.rest_updates and self.imu.at_rest:
+            H = np.zeros((3, 6))
+            H[:, 3:] = np.eye(3)
+            self._error_update(self.imu.rate_lp - self.beta_hat, H,
+                               self.rest_density / interval * np.eye(3), 3, "rest", gated=False)
+        return used
+
+    def _heading(self, observation) -> None:
+        """The heading-only update, as far as the field is trusted."""
+        psi, interval, trust, validated = self.imu.field_reading(
+            self.q_hat, np.asarray(observation.body, dtype=float),
+            np.asarray(observation.reference, dtype=float),
+            getattr(observation, "reference_known", True))
+        if trust == 0.0:
+            self._reject("magnetometer")
+            return
+        v = to_body_frame(self.q_hat, _UP)
+        H = np.zeros((1, 6))
+        H[0, :3] = v
+        R = np.array([[trust * trust * self.heading_density / interval]])
+        self._error_update(np.array([psi]), H, R, 1, "magnetometer", heading_axis=v,
+                           bias=validated)
+
+    def _error_update(self, y, H, R, dof: int, sensor: str, heading_axis=None,
+                      bias: bool = True, gated: bool = True) -> None:
+        """The Kalman update in Joseph form with gain ``K = P Hᵀ S⁻¹``, gated
+        if the filter gates (the zero-rate update never is: rest is its own
+        test); for the heading, the attitude rows of ``K`` projected on
+        ``heading_axis`` and its bias rows zeroed unless ``bias``."""
+        f = self.filter
+        S = H @ f.P @ H.T + R
+        if gated and self.gate_probability is not None and not self.accepts(y, S, dof, sensor):
+            return
+        K = f.P @ H.T @ np.linalg.inv(S)
+        if heading_axis is not None:
+            K[:3] = np.outer(heading_axis, heading_axis @ K[:3])
+            if not bias:
+                K[3:] = 0.0
+        I_KH = np.eye(6) - K @ H
+        f.x = K @ y
+        f.P = I_KH @ f.P @ I_KH.T + K @ R @ K.T
+        f.y, f.S, f.K = y, S, K
+        f.x_post, f.P_post = f.x.copy(), f.P.copy()
+        self._reset()

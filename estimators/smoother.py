@@ -1,0 +1,208 @@
+r"""An offline MEKF: the forward filter and the same filter run backward in
+time, fused at every sample (the two-filter smoother).
+
+A smoother estimates each attitude from the whole record, the readings
+after it as well as before: offline, for a recording that is over. Fraser &
+Potter's two-filter form (Simon, *Optimal State Estimation*, 2006, §9.4.2;
+Crassidis & Junkins, *Optimal Estimation of Dynamic Systems*, 2nd ed., 2012,
+§5.4.2) runs the filter forward, :math:`\hat q_f, P_f`, and backward from
+the end, :math:`\hat q_b, P_b` (its prediction at each sample, before
+that sample's readings, which the forward estimate holds), and combines
+the two independent estimates at each sample by their information, over the whole error state (the
+attitude's body-frame error and the bias, as the MEKF keeps them; Markley &
+Crassidis 2014, §6.2):
+
+.. math::
+
+    \delta = \begin{bmatrix} \log(\hat q_f^{-1} \otimes \hat q_b) \\
+    \hat\beta_b - \hat\beta_f \end{bmatrix}, \qquad
+    G = P_f (P_f + P_b)^{-1}, \qquad
+    \hat q_s = \hat q_f \otimes \exp\bigl((G\delta)_{1:3}\bigr), \quad
+    \hat\beta_s = \hat\beta_f + (G\delta)_{4:6}, \quad P_s = P_f - G P_f.
+
+Fusing the attitudes' marginals alone would not be the smoother: the bias
+carries what the two passes know of each other's attitude (on a linear case,
+the attitude-only fusion is off the RTS smoother by a tenth of the error;
+the full state's equals it, ``tests/test_imu_models.py``). The backward filter is the forward one's class and settings on the
+time-reversed record: the rates negated and each reading moved to the
+interval it covers in reverse (:func:`reversed_rates`), the readings
+reversed; it starts from the forward filter's last attitude and bias (the
+bias of the reversed gyro is the negated bias) with the filter's prior
+covariance, so it converges from its first sample. (The fusion takes the two
+as independent; their shared start makes :math:`P_s` a little optimistic
+near the record's end.) The forward pass outputs its posterior, the
+backward its prior, whatever ``output`` the settings give.
+
+VQF's offline mode (Laidig & Seel 2023, §3.5, ``offlineVQF``) is the peer:
+forward and backward passes of its bias estimator, fused in information
+form, and zero-phase filtering; :class:`estimators.peers.OfflineVQF` runs it.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from estimators.base import (EstimateTrace, checked_vector_record, quiet_overflow,
+                             observations_at)
+from estimators.mekf import MultiplicativeEKF
+
+
+def reversed_rates(omega: np.ndarray, interpolation: str) -> np.ndarray:
+    """The gyro's readings of the time-reversed record, negated, each where
+    the filter's ``rate_interpolation`` takes it: ``"trapezoid"`` takes the
+    two ends of a step, symmetric in time; ``"end"`` takes step ``k``'s
+    reading for the interval before it, which reversed is the interval after
+    it; ``"hold"`` takes it for the interval after it, reversed the one before."""
+    reverse = -omega[::-1]
+    if interpolation == "trapezoid" or len(omega) < 2:
+        return np.ascontiguousarray(reverse)
+    shifted = np.empty_like(omega)
+    if interpolation == "end":              # reversed step m covers original N-m ... N-1-m
+        shifted[1:], shifted[0] = reverse[:-1], reverse[0]
+    else:                                   # "hold": reversed step m is taken from N-2-m
+        shifted[:-1], shifted[-1] = reverse[1:], reverse[-1]
+    return shifted
+
+
+def reversed_readings(vectors) -> tuple:
+    """Each :class:`~sensors.vector.VectorReadings` of ``vectors`` reversed in time."""
+    return tuple(replace(v, **{name: np.ascontiguousarray(getattr(v, name)[::-1])
+                               for name in ("body", "reference", "available", "variance")})
+                 for v in vectors)
+
+
+def fuse(forward, backward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The two-filter fusion (module docstring) of the forward pass's
+    ``(q, β, P)`` — ``(N, 4)`` attitudes, ``(N, 3)`` biases, ``(N, 6, 6)``
+    covariances of the body-frame error state — with the backward pass's,
+    whose bias is the reversed gyro's (negated here). Returns the fused
+    attitudes, biases and covariances; where one pass is not finite, the
+    other's."""
+    q_f, b_f, P_f = (np.asarray(x, dtype=float) for x in forward)
+    q_b, b_b, P_b = (np.asarray(x, dtype=float) for x in backward)
+    b_b, P_b = -b_b, P_b * _FLIP                  # the reversed gyro's bias is −β
+    fused = [q_f.copy(), b_f.copy(), P_f.copy()]
+    ok_f, ok_b = _finite(q_f, b_f, P_f), _finite(q_b, b_b, P_b)
+    for mine, theirs in zip(fused, (q_b, b_b, P_b)):
+        mine[~ok_f] = theirs[~ok_f]
+    both = ok_f & ok_b
+    if both.any():
+        forward_rotation = Rotation.from_quat(q_f[both][:, [1, 2, 3, 0]])
+        delta = np.concatenate(
+            [(forward_rotation.inv() * Rotation.from_quat(q_b[both][:, [1, 2, 3, 0]])).as_rotvec(),
+             b_b[both] - b_f[both]], axis=1)
+        Pf = P_f[both]
+        gain = np.linalg.solve(Pf + P_b[both], Pf).transpose(0, 2, 1)   # P_f (P_f + P_b)⁻¹
+        step = np.einsum("nij,nj->ni", gain, delta)
+        quat = (forward_rotation * Rotation.from_rotvec(step[:, :3])).as_quat()[:, [3, 0, 1, 2]]
+        fused[0][both] = quat * np.sign(np.sum(quat * q_f[both], axis=1))[:, None]
+        fused[1][both] = b_f[both] + step[:, 3:]
+        fused[2][both] = Pf - gain @ Pf
+    return tuple(fused)
+
+
+#: The sign of each covariance entry under the bias's negation.
+_FLIP = np.outer([1, 1, 1, -1, -1, -1], [1, 1, 1, -1, -1, -1]).astype(float)
+
+
+def _finite(q, b, P) -> np.ndarray:
+    return np.isfinite(q).all(axis=1) & np.isfinite(b).all(axis=1) & \
+        np.isfinite(P).all(axis=(1, 2))
+
+
+def filter_pass(mekf: MultiplicativeEKF, omega, star, available, vectors=None) -> tuple:
+    """``mekf`` (reset) over a whole record: each step's output ``(q, β, P)``
+    as ``(N, 4)``, ``(N, 3)`` and ``(N, 6, 6)`` arrays."""
+    omega, star, available, _ = mekf._start_record(omega, star, available)
+    records = checked_vector_record(vectors, len(omega))
+    n = len(omega)
+    quat, bias, covariance = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 6, 6))
+    with quiet_overflow():
+        for k in range(n):
+            quat[k] = mekf.step(omega[k], star[k] if available[k] else None, 0.0,
+                                observations_at(records, k))
+            bias[k], covariance[k] = mekf._output[1], mekf._output[2]
+    return quat, bias, covariance
+
+
+class MekfSmoother(MultiplicativeEKF):
+    """The MEKF forward and backward over a whole record, fused (module
+    docstring): offline. Its settings are the MEKF's: ``[estimators.mekf]``
+    applies to it, and ``[estimators.mekf-smoother]`` over that. It runs on
+    whole records only (:meth:`run`, :meth:`track`; on a recording the engine
+    runs both passes through the MEKF's kernel,
+    :mod:`benchmarks.engine.recorded`), never step by step."""
+
+    name = "mekf-smoother"
+    label = "MEKF smoother"
+    #: It reads the whole record before its first estimate.
+    mode = "offline"
+
+    @classmethod
+    def scenario_section(cls, scenario) -> dict:
+        section = MultiplicativeEKF.scenario_section(scenario)
+        section.update(super().scenario_section(scenario))
+        return section
+
+    def step(self, *args, **kwargs):
+        raise TypeError(f"{self.name} is offline: it estimates from the whole record "
+                        "(run or track), not step by step")
+
+    def pass_filter(self, backward_from=None) -> MultiplicativeEKF:
+        """The MEKF with these settings, reset: the forward pass's, or with
+        ``backward_from`` (the forward pass's last filter) the backward
+        pass's, started from its last attitude and negated bias."""
+        mekf = MultiplicativeEKF.__new__(MultiplicativeEKF)
+        mekf.__dict__.update(copy.deepcopy(self.__dict__))
+        mekf.output = "posterior"
+        if backward_from is not None:
+            mekf.initial_attitude = backward_from.q_hat.copy()
+            mekf.initial_bias_radps = -backward_from.beta_hat.copy()
+            mekf.output = "prior"
+        mekf.reset()
+        return mekf
+
+    def _keep(self, forward: MultiplicativeEKF, backward: MultiplicativeEKF, n: int) -> None:
+        """The forward pass's state and counts as this smoother's; it diverged
+        where both passes had."""
+        self.__dict__.update(forward.__dict__)
+        if backward.diverged_step is None or forward.diverged_step is None:
+            self.diverged_step = None
+        else:
+            self.diverged_step = max(forward.diverged_step, n - 1 - backward.diverged_step)
+
+    def track(self, omega_meas_radps, star_tracker_quat, available, offset_s=None, *,
+              vectors=None, progress=None) -> EstimateTrace:
+        """The forward and backward passes on the per-run path (the
+        reference), fused; the rejections are the forward pass's."""
+        if offset_s is not None and np.any(np.asarray(offset_s) != 0.0):
+            raise ValueError("offset_s: the smoother takes readings on the gyro's grid only "
+                             "(no reading between two steps)")
+        omega = np.asarray(omega_meas_radps, dtype=float)
+        forward_filter = self.pass_filter()
+        forward = filter_pass(forward_filter, omega, star_tracker_quat, available, vectors)
+        backward_filter = self.pass_filter(backward_from=forward_filter)
+        backward = filter_pass(
+            backward_filter, reversed_rates(omega, self.rate_interpolation),
+            np.ascontiguousarray(np.asarray(star_tracker_quat)[::-1]),
+            np.ascontiguousarray(np.asarray(available)[::-1]),
+            None if vectors is None else reversed_readings(vectors))
+        quat, bias, covariance = fuse(forward, tuple(x[::-1] for x in backward))
+        self._keep(forward_filter, backward_filter, len(omega))
+        if progress is not None:
+            progress.update(len(omega))
+        rejected = {}
+        for k, sensor in forward_filter.rejections:
+            rejected.setdefault(sensor, []).append(k)
+        return EstimateTrace(quat=quat, attitude_covariance=covariance[:, :3, :3],
+                             bias_radps=bias, bias_covariance=covariance[:, 3:, 3:],
+                             rejected={sensor: np.array(steps)
+                                       for sensor, steps in rejected.items()})
+
+    def run(self, omega_meas_radps, star_tracker_quat, available, offset_s=None, *,
+            vectors=None, progress=None) -> np.ndarray:
+        return self.track(omega_meas_radps, star_tracker_quat, available, offset_s,
+                          vectors=vectors, progress=progress).quat
