@@ -24,7 +24,8 @@ from benchmarks.resources import TRUTH_CACHE_STEPS, check_memory, engine_bytes, 
 from benchmarks.scenario import Scenario
 from dynamics.rigid_body import RigidBodyTruth, simulate_torque_free, torque_free_blocks
 from dynamics.validation import InvalidParameterError, seed_values
-from benchmarks.sensor_use import (Usage, present_sensors, refuse_unreadable, tagged_label,
+from benchmarks.sensor_use import (Usage, present_sensors, refuse_unreadable, scenario_sensors,
+                                   tagged_label,
                                    warn_unmodelled)
 from estimators import AttitudeEstimator, resolve_estimator
 
@@ -301,7 +302,10 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
                  streaming_bytes=engine_bytes(scenario.n_steps))
     truth = simulate_truth(scenario)
     sensors = simulate_sensors(scenario, truth, seed)
-    present = present_sensors(sensors)
+    # The sensors the scenario declares, as the engine judges them: a run whose
+    # random dropouts took every reading is flagged (Usage), not refused, so
+    # that both paths run the same runs.
+    present = scenario_sensors(scenario) | present_sensors(sensors)
     refuse_unreadable(estimators, present, "the scenario")
     warn_unmodelled(scenario, estimators, sensors.references)
     estimates, errors, labels, kept, diverged, usage = {}, {}, {}, {}, {}, {}

@@ -3,9 +3,10 @@ time, fused at every sample (the two-filter smoother).
 
 A smoother estimates each attitude from the whole record, the readings
 after it as well as before: offline, for a recording that is over. Fraser &
-Potter's two-filter form (Simon, *Optimal State Estimation*, 2006, §9.4.2;
-Crassidis & Junkins, *Optimal Estimation of Dynamic Systems*, 2nd ed., 2012,
-§5.4.2) runs the filter forward, :math:`\hat q_f, P_f`, and backward from
+Potter's two-filter form (Fraser & Potter, "The optimum linear smoother as
+a combination of two optimum linear filters", IEEE TAC 14(4), 1969; Simon,
+*Optimal State Estimation*, 2006, §9.4, fixed-interval smoothing) runs the
+filter forward, :math:`\hat q_f, P_f`, and backward from
 the end, :math:`\hat q_b, P_b` (its prediction at each sample, before
 that sample's readings, which the forward estimate holds), and combines
 the two independent estimates at each sample by their information, over the whole error state (the

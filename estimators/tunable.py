@@ -59,6 +59,9 @@ class Tunable:
         The one sensor whose readings it acts on (:mod:`estimators.sensing`'s
         names): on data without that sensor it changes nothing, and is not
         tuned. None: it acts on every reading.
+    applies_when : (keyword, value) or None
+        The estimator's setting it acts under (an IMU model's density acts
+        only where that model is on); None: always.
     """
 
     name: str
@@ -69,6 +72,12 @@ class Tunable:
     search: tuple | None = None
     description: str = ""
     sensor: str | None = None
+    applies_when: tuple | None = None
+
+    def acts(self, settings: dict) -> bool:
+        """Whether it acts on an estimator of ``settings`` (:attr:`applies_when`)."""
+        return self.applies_when is None or \
+            settings.get(self.applies_when[0]) == self.applies_when[1]
 
     def coordinate(self, value: float) -> float:
         """The tuner's coordinate of ``value``."""
@@ -152,10 +161,11 @@ MAGNETIC_NORM_TOLERANCE = Tunable("magnetic_norm_tolerance", "log", (1e-6, 1e3),
 #: they act only where the filter's settings turn the models on.
 GRAVITY_DENSITY = Tunable("gravity_density", "log", (1e-16, 1.0), search=(1e-8, 1e-3),
                           description="the low-passed gravity direction's error density "
-                          "(rad²·s)", sensor="accelerometer")
+                          "(rad²·s)", sensor="accelerometer",
+                          applies_when=("gravity_model", "lowpass"))
 HEADING_DENSITY = Tunable("heading_density", "log", (1e-16, 1.0), search=(1e-6, 1e-1),
                           description="the heading-only magnetometer's error density (rad²·s)",
-                          sensor="magnetometer")
+                          sensor="magnetometer", applies_when=("magnetometer_model", "heading"))
 #: A static solver's weight on the magnetometer against the other sensors.
 MAGNETOMETER_WEIGHT = Tunable("magnetometer_weight", "log", (1e-9, 1e9), search=(1e-3, 1e3),
                               description="a factor on the magnetometer's weight σ⁻² in "

@@ -6,7 +6,9 @@ with all of them, then with one at a time replaced by the textbook's
 reading of that sensor, then with none (the textbook MEKF: the
 accelerometer and the magnetometer as vector readings behind a 99.99 % χ²
 gate and a 10 % test of the field's norm), each scored as ``broad`` scores
-(the mean total RMSE over the trials, :mod:`benchmarks.broad.metric`).
+(the mean total RMSE over the trials, :mod:`benchmarks.broad.metric`), and
+on each trial without its rest (:mod:`benchmarks.broad.without_rest`: total
+RMSE after the cut, whole and cut).
 
 Run ``python -m benchmarks.broad.ablation --broad DIR``; it prints one row
 per variant and writes ``ablation.csv`` (one row per trial and variant).
@@ -19,9 +21,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.dataset import ATTRIBUTION, open_broad
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
+from benchmarks.broad.without_rest import cut
 from benchmarks.engine.recorded import run_recorded
 from benchmarks.output import progress, write_text
 from benchmarks.shipped import shipped_file
@@ -42,15 +45,24 @@ VARIANTS = {
 
 
 def scores(dataset, trial: str) -> list[dict]:
-    """One trial's rows: each variant's total, heading and inclination RMSE."""
+    """One trial's rows: each variant's total, heading and inclination RMSE
+    over the movement, and its total without the trial's rest
+    (:func:`benchmarks.broad.without_rest.cut`, scored on the same samples)."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording)
+    start, part, vectors = cut(recording)
+    after = recording.reference_quat[start:], recording.movement[start:]
     rows = []
     for variant, settings in VARIANTS.items():
         mekf = MultiplicativeEKF.from_scenario(inputs.scenario, **settings)
         run = run_recorded(mekf, inputs.sensors.omega_meas_radps, inputs.sensors.vectors)
+        mekf = MultiplicativeEKF.from_scenario(part.scenario, **settings)
+        cut_run = run_recorded(mekf, part.sensors.omega_meas_radps, vectors)
         rows.append({"trial": trial, "variant": variant,
-                     **rmse_deg(run.estimates, recording.reference_quat, recording.movement)})
+                     **rmse_deg(run.estimates, recording.reference_quat, recording.movement),
+                     "whole_after_cut_deg": rmse_deg(run.estimates[start:], *after)[
+                         "total_rmse_deg"],
+                     "without_rest_deg": rmse_deg(cut_run.estimates, *after)["total_rmse_deg"]})
     return rows
 
 
@@ -71,11 +83,14 @@ def main(argv=None) -> int:
         return 2
     table = pd.DataFrame(rows)
     means = table.groupby("variant", sort=False)[["total_rmse_deg", "heading_rmse_deg",
-                                                  "inclination_rmse_deg"]].mean()
+                                                  "inclination_rmse_deg", "whole_after_cut_deg",
+                                                  "without_rest_deg"]].mean()
     print(f"MEKF on {len(dataset.available)} trials, mean RMSE over the movement (degrees):")
     print(means.to_string(float_format=lambda x: f"{x:.3f}"))
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "ablation.csv", table.to_csv(index=False))
+    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+    print(f"wrote {args.out / 'ablation.csv'}, {args.out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
     return 0
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.dataset import ATTRIBUTION, open_broad
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
@@ -97,6 +97,8 @@ def main(argv=None) -> int:
     print(summary.to_string(float_format=lambda x: f"{x:.3f}"))
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "without_rest.csv", table.to_csv(index=False))
+    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+    print(f"wrote {args.out / 'without_rest.csv'}, {args.out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
     return 0
 
 

@@ -258,6 +258,12 @@ def tuning_plan(estimator_class, settings: dict, parameters=None, ranges=None,
     plan = []
     for name in parameters:
         tunable = declared[name]
+        if not tunable.acts(settings):
+            keyword, value = tunable.applies_when
+            raise InvalidParameterError("parameters", name, f"acts only with {keyword} = "
+                                        f"{value!r} (this estimator's is "
+                                        f"{settings.get(keyword)!r}): tuning it would change "
+                                        "nothing")
         default = tunable.default(settings)
         bounds = (tunable.checked_range(*ranges[name]) if name in ranges
                   else tunable.search_range(default))
