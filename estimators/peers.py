@@ -29,7 +29,7 @@ import importlib
 import numpy as np
 
 from dynamics.quaternion import IDENTITY, quat_multiply
-from dynamics.validation import InvalidParameterError
+from dynamics.validation import InvalidParameterError, finite_number
 from estimators import sensing
 from estimators.base import AttitudeEstimator, InvalidMeasurementError
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
@@ -100,12 +100,26 @@ class PeerFilter(MagneticFrame, AttitudeEstimator):
 
 
 class VQF9D(PeerFilter):
+    """VQF, its defaults; ``magnetometer_interval_s``: the time between the
+    magnetometer's readings where it reads slower than the gyro (VQF's
+    ``magTs``, which sets its magnetometer filters' coefficients; default:
+    the gyro's step)."""
+
     name = "vqf"
     label = "VQF"
     output = "getQuat9D"
 
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise",
+                 magnetometer_interval_s: float | None = None):
+        self.magnetometer_interval_s = (
+            None if magnetometer_interval_s is None else
+            finite_number("magnetometer_interval_s", magnetometer_interval_s,
+                          strictly_positive=True))
+        super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+
     def _new_filter(self) -> None:
-        self.filter = _package(self.name, "vqf").VQF(self.dt)
+        self.filter = _package(self.name, "vqf").VQF(
+            self.dt, self.dt, self.magnetometer_interval_s or self.dt)
 
     def run_readings(self, gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> np.ndarray:
         """``(N, 4)`` estimates over whole ``(N, 3)`` channels (each sample
@@ -140,6 +154,10 @@ class OfflineVQF(VQF9D):
     #: It reads the whole recording before its first estimate.
     mode = "offline"
     needs = (frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER}),)
+
+    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise"):
+        # offlineVQF takes every channel at the gyro's rate (a slower one held).
+        super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
 
     def step(self, *args, **kwargs):
         raise TypeError(f"{self.name} is offline: it estimates from the whole recording "
