@@ -114,6 +114,15 @@ def _finite(q, b, P) -> np.ndarray:
         np.isfinite(P).all(axis=(1, 2))
 
 
+def diverged_step(forward: int | None, backward: int | None, n: int) -> int | None:
+    """Where a smoothed record of ``n`` steps diverged: where both passes had
+    (fusion takes the finite one), from the later of the forward pass's step
+    and the backward pass's, counted from the record's end (None: never)."""
+    if forward is None or backward is None:
+        return None
+    return max(forward, n - 1 - backward)
+
+
 def filter_pass(mekf: MultiplicativeEKF, omega, star, available, vectors=None) -> tuple:
     """``mekf`` (reset) over a whole record: each step's output ``(q, β, P)``
     as ``(N, 4)``, ``(N, 3)`` and ``(N, 6, 6)`` arrays."""
@@ -167,13 +176,10 @@ class MekfSmoother(MultiplicativeEKF):
         return mekf
 
     def _keep(self, forward: MultiplicativeEKF, backward: MultiplicativeEKF, n: int) -> None:
-        """The forward pass's state and counts as this smoother's; it diverged
-        where both passes had."""
+        """The forward pass's state and counts as this smoother's, and where
+        it diverged (:func:`diverged_step`)."""
         self.__dict__.update(forward.__dict__)
-        if backward.diverged_step is None or forward.diverged_step is None:
-            self.diverged_step = None
-        else:
-            self.diverged_step = max(forward.diverged_step, n - 1 - backward.diverged_step)
+        self.diverged_step = diverged_step(forward.diverged_step, backward.diverged_step, n)
 
     def track(self, omega_meas_radps, star_tracker_quat, available, offset_s=None, *,
               vectors=None, progress=None) -> EstimateTrace:

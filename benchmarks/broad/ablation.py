@@ -7,28 +7,21 @@ reading of that sensor, then with none (the textbook MEKF: the
 accelerometer and the magnetometer as vector readings behind a 99.99 % χ²
 gate and a 10 % test of the field's norm), each scored as ``broad`` scores
 (the mean total RMSE over the trials, :mod:`benchmarks.broad.metric`), and
-on each trial without its rest (:mod:`benchmarks.broad.without_rest`: total
-RMSE after the cut, whole and cut).
+on each trial without its rest (:mod:`benchmarks.broad.without_rest`).
 
 Run ``python -m benchmarks.broad.ablation --broad DIR``; it prints one row
 per variant and writes ``ablation.csv`` (one row per trial and variant).
 """
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
 import pandas as pd
 
-from benchmarks.broad.dataset import ATTRIBUTION, open_broad
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
-from benchmarks.broad.without_rest import cut
+from benchmarks.broad.without_rest import cut, script_parser, trial_rows, write_table
 from benchmarks.engine.recorded import run_recorded
-from benchmarks.output import progress, write_text
-from benchmarks.shipped import shipped_file
-from dynamics.validation import InvalidParameterError
 from estimators import MultiplicativeEKF
 
 #: The textbook's reading of each sensor, and its tests.
@@ -47,7 +40,8 @@ VARIANTS = {
 def scores(dataset, trial: str) -> list[dict]:
     """One trial's rows: each variant's total, heading and inclination RMSE
     over the movement, and its total without the trial's rest
-    (:func:`benchmarks.broad.without_rest.cut`, scored on the same samples)."""
+    (:func:`benchmarks.broad.without_rest.cut`; the cut is the movement's
+    first sample, so both score the same samples)."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording)
     start, part, vectors = cut(recording)
@@ -60,37 +54,23 @@ def scores(dataset, trial: str) -> list[dict]:
         cut_run = run_recorded(mekf, part.sensors.omega_meas_radps, vectors)
         rows.append({"trial": trial, "variant": variant,
                      **rmse_deg(run.estimates, recording.reference_quat, recording.movement),
-                     "whole_after_cut_deg": rmse_deg(run.estimates[start:], *after)[
-                         "total_rmse_deg"],
                      "without_rest_deg": rmse_deg(cut_run.estimates, *after)["total_rmse_deg"]})
     return rows
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.broad.ablation",
-                                     description=__doc__.split("\n\n")[0])
-    parser.add_argument("--broad", type=Path, help="the BROAD folder (default: the two "
-                        "shipped trials)")
-    parser.add_argument("--out", type=Path, default=Path("results"))
-    parser.add_argument("--quiet", action="store_true")
-    args = parser.parse_args(argv)
-    try:
-        dataset = open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent)
-        rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
-                for row in scores(dataset, trial)]
-    except InvalidParameterError as err:
-        print(f"ablation: error: {err}", file=sys.stderr)
+    args = script_parser("python -m benchmarks.broad.ablation", __doc__).parse_args(argv)
+    found = trial_rows(args, "ablation", scores)
+    if found is None:
         return 2
+    dataset, rows = found
     table = pd.DataFrame(rows)
     means = table.groupby("variant", sort=False)[["total_rmse_deg", "heading_rmse_deg",
-                                                  "inclination_rmse_deg", "whole_after_cut_deg",
+                                                  "inclination_rmse_deg",
                                                   "without_rest_deg"]].mean()
     print(f"MEKF on {len(dataset.available)} trials, mean RMSE over the movement (degrees):")
     print(means.to_string(float_format=lambda x: f"{x:.3f}"))
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_text(args.out / "ablation.csv", table.to_csv(index=False))
-    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
-    print(f"wrote {args.out / 'ablation.csv'}, {args.out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
+    write_table(args.out, "ablation.csv", table)
     return 0
 
 

@@ -60,10 +60,10 @@ def scores(dataset, trial: str, names) -> list[dict]:
         cls = resolve_estimator(name)
         full = run_recorded(cls.from_scenario(whole.scenario), whole.sensors.omega_meas_radps,
                             whole.sensors.vectors).estimates[start:]
-        # VQF is told its magnetometer's slower rate (its magTs), as the MEKF
-        # reads it off each reading's interval.
+        # An estimator that takes its magnetometer's interval as a setting (VQF's
+        # magTs) is told it; the MEKF reads it off each reading's interval.
         told = ({"magnetometer_interval_s": MAGNETOMETER_EVERY * recording.dt}
-                if name in ("vqf", "vqf-6d") else {})
+                if "magnetometer_interval_s" in cls.option_names() else {})
         cut_run = run_recorded(cls.from_scenario(part.scenario, **told),
                                part.sensors.omega_meas_radps, vectors).estimates
         reference, movement = recording.reference_quat[start:], recording.movement[start:]
@@ -74,35 +74,57 @@ def scores(dataset, trial: str, names) -> list[dict]:
     return rows
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.broad.without_rest",
-                                     description=__doc__.split("\n\n")[0])
+def script_parser(prog: str, doc: str) -> argparse.ArgumentParser:
+    """The arguments the BROAD benchmark scripts share: ``--broad``,
+    ``--out`` and ``--quiet``."""
+    parser = argparse.ArgumentParser(prog=prog, description=doc.split("\n\n")[0])
     parser.add_argument("--broad", type=Path, help="the BROAD folder (default: the two "
                         "shipped trials)")
-    parser.add_argument("--estimators", default=",".join(DEFAULT_ESTIMATORS))
     parser.add_argument("--out", type=Path, default=Path("results"))
     parser.add_argument("--quiet", action="store_true")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def trial_rows(args, name: str, scores, check=lambda: None):
+    """The dataset of ``args.broad`` and the rows of ``scores(dataset, trial)``
+    over its trials, ``check()`` first; None where the input is refused (one
+    line on stderr, ``NAME: error: …``)."""
     try:
         dataset = open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent)
-        names = [name.strip() for name in args.estimators.split(",") if name.strip()]
-        for name in names:
-            resolve_estimator(name)
-        rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
-                for row in scores(dataset, trial, names)]
+        check()
+        return dataset, [row for trial in progress(dataset.available, desc="trials",
+                                                   quiet=args.quiet)
+                         for row in scores(dataset, trial)]
     except InvalidParameterError as err:
-        print(f"without_rest: error: {err}", file=sys.stderr)
+        print(f"{name}: error: {err}", file=sys.stderr)
+        return None
+
+
+def write_table(out: Path, name: str, table: pd.DataFrame) -> None:
+    """``table`` as ``out/name`` and the data's attribution beside it."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(out / name, table.to_csv(index=False))
+    write_text(out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+    print(f"wrote {out / name}, {out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
+
+
+def main(argv=None) -> int:
+    parser = script_parser("python -m benchmarks.broad.without_rest", __doc__)
+    parser.add_argument("--estimators", default=",".join(DEFAULT_ESTIMATORS))
+    args = parser.parse_args(argv)
+    names = [name.strip() for name in args.estimators.split(",") if name.strip()]
+    found = trial_rows(args, "without_rest", lambda dataset, trial: scores(dataset, trial, names),
+                       check=lambda: [resolve_estimator(name) for name in names])
+    if found is None:
         return 2
+    dataset, rows = found
     table = pd.DataFrame(rows)
     summary = table.groupby("estimator", sort=False)[["whole_deg", "without_rest_deg"]].mean()
     summary["ratio"] = summary["without_rest_deg"] / summary["whole_deg"]
     print(f"{len(dataset.available)} trials, total RMSE over the movement after the cut "
           f"(degrees), magnetometer at 1/{MAGNETOMETER_EVERY} rate in the cut trials:")
     print(summary.to_string(float_format=lambda x: f"{x:.3f}"))
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_text(args.out / "without_rest.csv", table.to_csv(index=False))
-    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
-    print(f"wrote {args.out / 'without_rest.csv'}, {args.out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
+    write_table(args.out, "without_rest.csv", table)
     return 0
 
 

@@ -34,7 +34,8 @@ import numpy as np
 from benchmarks.engine.kernels import KERNELS, kernel
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
-from estimators.smoother import MekfSmoother, fuse, reversed_readings, reversed_rates
+from estimators.smoother import (MekfSmoother, diverged_step, fuse, reversed_readings,
+                                 reversed_rates)
 
 
 @dataclass(frozen=True)
@@ -170,10 +171,9 @@ def _smoothed(smoother, omega: np.ndarray, vectors) -> RecordedRun:
         reversed_readings(vectors))
     quat, _, _ = fuse((forward.estimates, bias_f, covariance_f),
                       (backward.estimates[::-1], bias_b[::-1], covariance_b[::-1]))
-    diverged = (None if forward.diverged_step is None or backward.diverged_step is None
-                else max(forward.diverged_step, len(omega) - 1 - backward.diverged_step))
-    return RecordedRun(estimates=quat, diverged_step=diverged, rejected=forward.rejected,
-                       path="kernel")
+    return RecordedRun(estimates=quat, rejected=forward.rejected, path="kernel",
+                       diverged_step=diverged_step(forward.diverged_step,
+                                                   backward.diverged_step, len(omega)))
 
 
 def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = False) -> tuple:

@@ -73,8 +73,3 @@ def step(x: np.ndarray, coeffs: np.ndarray, tau_s: float, dt: float, state: np.n
         state[0, i] = coeffs[1] * x[i] - coeffs[3] * y + state[1, i]
         state[1, i] = coeffs[2] * x[i] - coeffs[4] * y
         out[i] = y
-
-
-def averaged_s(state: np.ndarray, dt: float) -> float:
-    """How long the filter has averaged, seconds; infinite once it filters."""
-    return math.inf if state[3, 0] < 0.0 else state[3, 0] * dt

@@ -274,6 +274,25 @@ def matmul4(a, b, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def joseph_covariance(P, IK, KRK, T):
+    """Joseph's form of a six-state covariance update, in place:
+    P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, given ``IK`` = I − KH and ``KRK`` =
+    K R Kᵀ; ``T`` (6, 6) scratch."""
+    for i in range(6):
+        for j in range(6):
+            total = 0.0
+            for m in range(6):
+                total += IK[i, m] * P[m, j]
+            T[i, j] = total
+    for i in range(6):
+        for j in range(6):
+            first = 0.0
+            for m in range(6):
+                first += T[i, m] * IK[j, m]
+            P[i, j] = first + KRK[i, j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def gauss_jordan(S, inverse, n):
     """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
     partial pivoting; S is positive definite. Returns det S (the pivots'

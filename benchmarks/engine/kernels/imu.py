@@ -15,7 +15,8 @@ import types
 import numpy as np
 from numba import njit
 
-from benchmarks.engine.kernels.common import quat_exp, quat_times_normalized, to_body_frame
+from benchmarks.engine.kernels.common import (joseph_covariance, quat_exp, quat_times_normalized,
+                                              to_body_frame)
 from estimators.imu import gravity, heading, lowpass, rest
 
 
@@ -182,7 +183,11 @@ def rest_update(q, beta, P, rate_lp, variance, scratch, dq):
     for i in range(6):
         for j in range(6):
             IK[i, j] = (1.0 if i == j else 0.0) - (K[i, j - 3] if j >= 3 else 0.0)
-    _joseph(P, IK, K, variance, 3, T)
+    KRK = S                                        # S is spent: its slot holds K R Kᵀ
+    for i in range(6):
+        for j in range(6):
+            KRK[i, j] = variance * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
+    joseph_covariance(P, IK, KRK, T)
     _apply(q, beta, dx, dq)
     return nis, determinant
 
@@ -213,7 +218,7 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     for i in range(6):
         for j in range(6):
             scratch[1, i, j] = K[i] * K[j] * variance
-    _joseph_with(P, IK, scratch[1], T)
+    joseph_covariance(P, IK, scratch[1], T)
     dx = scratch[5, 0]
     for i in range(6):
         dx[i] = K[i] * psi
@@ -243,33 +248,3 @@ def _invert3(S, inverse):
         (b * c - a * e) / det
     inverse[2, 0], inverse[2, 1], inverse[2, 2] = C / det, (b * c - a * e) / det, \
         (a * d - b * b) / det
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _joseph(P, IK, K, variance, n, T):
-    """P ← (I − KH) P (I − KH)ᵀ + K (variance I) Kᵀ for an n-column gain."""
-    KRK = np.empty((6, 6))
-    for i in range(6):
-        for j in range(6):
-            noise = 0.0
-            for m in range(n):
-                noise += K[i, m] * K[j, m]
-            KRK[i, j] = variance * noise
-    _joseph_with(P, IK, KRK, T)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _joseph_with(P, IK, KRK, T):
-    """P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, ``KRK`` given."""
-    for i in range(6):
-        for j in range(6):
-            total = 0.0
-            for m in range(6):
-                total += IK[i, m] * P[m, j]
-            T[i, j] = total
-    for i in range(6):
-        for j in range(6):
-            first = 0.0
-            for m in range(6):
-                first += T[i, m] * IK[j, m]
-            P[i, j] = first + KRK[i, j]

@@ -13,7 +13,8 @@ from numba import njit, prange
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation,
-                                              gate_thresholds, gauss_jordan, keep_output,
+                                              gate_thresholds, gauss_jordan, joseph_covariance,
+                                              keep_output,
                                               log_error, mark_diverged, nees_arrays,
                                               norm_tolerances, passes_norm,
                                               quadratic_form, quat_exp, quat_times_normalized,
@@ -189,19 +190,13 @@ def _joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq,
                 K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j]
                 if j < 3 or bias_columns else 0.0)
     for i in range(6):
-        for j in range(6):
-            total = 0.0
-            for m in range(6):
-                total += IK[i, m] * P[m, j]
-            T[i, j] = total
         for j in range(3):
             KR[i, j] = K[i, 0] * R[0, j] + K[i, 1] * R[1, j] + K[i, 2] * R[2, j]
+    KRK = PHT                                      # P Hᵀ is spent: its slot holds K R Kᵀ
     for i in range(6):
         for j in range(6):
-            first = 0.0
-            for m in range(6):
-                first += T[i, m] * IK[j, m]
-            P[i, j] = first + (KR[i, 0] * K[j, 0] + KR[i, 1] * K[j, 1] + KR[i, 2] * K[j, 2])
+            KRK[i, j] = KR[i, 0] * K[j, 0] + KR[i, 1] * K[j, 1] + KR[i, 2] * K[j, 2]
+    joseph_covariance(P, IK, KRK, T)
     quat_exp(dx[0], dx[1], dx[2], dq)
     quat_times_normalized(q, dq, q)
     beta[0] += dx[3]
