@@ -199,6 +199,36 @@ def test_a_new_constant_field_becomes_the_reference_after_its_time_in_motion():
     assert state[heading.REF_NORM] == pytest.approx(80.0, rel=1e-6)
 
 
+def _first_replaced_after(disagreement_s: float, dt: float = 0.02) -> float | None:
+    """Seconds until a constant field in motion replaces a disturbed first
+    reference, when one disagreement of ``disagreement_s`` interrupts it
+    halfway (None: not within 3 FIRST_FIELD_S)."""
+    state = heading.first_state(80.0, math.radians(40.0))     # a magnet at the start
+    rate, k_break = math.radians(45.0), round(heading.FIRST_FIELD_S / 2 / dt)
+    for k in range(round(3 * heading.FIRST_FIELD_S / dt)):
+        off = k_break <= k < k_break + round(disagreement_s / dt)
+        heading.trust_step(50.0, math.radians(75.0 if off else 60.0), rate, dt, state)
+        if state[heading.CONFIRMED] and state[heading.REF_NORM] < 60.0:
+            return (k + 1) * dt
+    return None
+
+
+def test_a_candidate_for_the_first_field_outlives_a_brief_disagreement_not_a_lasting_one():
+    # While the first reference is unconfirmed, one reading's spike, or a dip's excursion shorter than the hold time,
+    # does not start the candidate anew: it is accepted as much later than
+    # without it as the readings that disagreed...
+    dt = 0.02
+    uninterrupted = _first_replaced_after(0.0, dt)
+    assert uninterrupted == pytest.approx(heading.FIRST_FIELD_S, abs=4 * dt)
+    assert _first_replaced_after(dt, dt) == pytest.approx(uninterrupted + dt, abs=1.5 * dt)
+    short = heading.MIN_UNDISTURBED_S - 2 * dt
+    assert _first_replaced_after(short, dt) == pytest.approx(uninterrupted + short, abs=1.5 * dt)
+    # ...a disagreement as long as the hold time does: the candidate's time
+    # starts again after it (at the break, then FIRST_FIELD_S more).
+    lasting = _first_replaced_after(heading.MIN_UNDISTURBED_S + 2 * dt, dt)
+    assert lasting > heading.FIRST_FIELD_S / 2 + heading.FIRST_FIELD_S
+
+
 # --- the MEKF with the IMU models: per-run and kernel ---------------------------------
 
 def test_the_kernel_runs_the_imu_models_as_the_per_run_mekf_does():
