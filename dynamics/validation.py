@@ -27,6 +27,10 @@ class _Missing:
 MISSING = _Missing()
 
 
+#: The longest text (a path) an error shows whole.
+MAX_SHOWN_TEXT = 400
+
+
 class InvalidParameterError(ValueError):
     """A parameter broke a rule; ``str(err)`` is a one-line explanation."""
 
@@ -38,10 +42,14 @@ class InvalidParameterError(ValueError):
 
 
 def _show(value) -> str:
+    """``value`` as the error shows it: shortened to 80 characters, except a
+    text (a file's path, a name) up to :data:`MAX_SHOWN_TEXT`, which a user
+    needs whole to know what was refused."""
     if isinstance(value, np.ndarray):
         value = value.tolist()
     text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    limit = MAX_SHOWN_TEXT if isinstance(value, str) else 80
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def finite_number(name: str, value, *, minimum: float | None = None,

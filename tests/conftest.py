@@ -34,3 +34,16 @@ def pytest_report_header(config):
 # 50-odd examples each test asks for, shrunk to the smallest if one fails.
 settings.register_profile("fixed-seed", derandomize=True)
 settings.load_profile("fixed-seed")
+
+
+def pytest_sessionstart(session):
+    """With parallel workers (``-n``), compile the engine's kernels first, two
+    processes at a time (:mod:`benchmarks.engine.warm_up`): each worker would
+    otherwise meet the same cold kernels at the same moment and compile them
+    side by side. Only the controller does it, before its workers start."""
+    config = session.config
+    workers = config.getoption("numprocesses", default=None)
+    if hasattr(config, "workerinput") or not isinstance(workers, int) or workers < 2:
+        return
+    from benchmarks.engine.warm_up import warm_up
+    warm_up()

@@ -150,6 +150,7 @@ def test_flight_study_report_has_its_sections_figures_and_numbers(tmp_path, monk
     assert "efficiency of" in report and "µs" in report
 
 
+@pytest.mark.slow
 def test_workshop_prose_follows_the_numbers_when_the_flags_change_them(tmp_path):
     # A gyro 1000x noisier and a loose Q: resets beat dead reckoning and the EKF.
     assert main(["workshop", "--out", str(tmp_path), "--tstop", "5", "--gyro-noise", "1e-2",
