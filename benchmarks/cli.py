@@ -1051,8 +1051,8 @@ def command_consistency(args, scenario):
 def command_replay(args, _scenario):
     from benchmarks.experiments.replay import load_replay, run_replay, write_replay
     from benchmarks.resources import check_memory, per_run_bytes
-    from benchmarks.experiments.replay import (DELAY_SEARCH_SAMPLES, REPLAY_SENSORS,
-                                               likeliest_gyro_delay)
+    from benchmarks.experiments.gyro_delay import DELAY_SEARCH_SAMPLES, likeliest_gyro_delay
+    from benchmarks.experiments.replay import REPLAY_SENSORS
     from benchmarks.sensor_use import refuse_unreadable
     # The estimators, the recording, the settings and the memory are checked before any write.
     refuse_unreadable(args.estimators, REPLAY_SENSORS, "the replay")

@@ -186,9 +186,7 @@ class AttitudeEstimator:
         options = getattr(scenario, "estimator_options", {}) or {}
         # A registry name's section is the registry class's (and its subclasses'),
         # never a user's class that happens to share its name.
-        registry = _registry_class(cls.name)
-        section = (dict(options.get(cls.name, {}))
-                   if registry is not None and issubclass(cls, registry) else {})
+        section = dict(options.get(cls.name, {})) if _registry_class(cls) is not None else {}
         for key, values in options.items():
             module_name, colon, class_name = key.partition(":")
             module = sys.modules.get(module_name) if colon else None
@@ -548,11 +546,15 @@ def _advance(progress, k: int, n: int) -> None:
         progress.update((k % PROGRESS_EVERY) + 1)
 
 
-def _registry_class(name: str):
-    """The registry's class of that name, or None (imported late: the
-    registry imports this module)."""
-    from estimators import ESTIMATORS
-    return ESTIMATORS.get(name)
+def _registry_class(cls):
+    """The class of this package that gave ``cls`` its name — a registry
+    estimator, ``cls`` itself or one it derives from — or None: a user's
+    class that only shares a registry name. (Found by where the name was
+    declared, not by importing the registry, which imports this module.)"""
+    return next((klass for klass in cls.__mro__
+                 if klass is not AttitudeEstimator and "name" in vars(klass)
+                 and klass.name == cls.name
+                 and klass.__module__.partition(".")[0] == __name__.partition(".")[0]), None)
 
 
 def quiet_overflow():
