@@ -1119,7 +1119,7 @@ BROAD_SENSORS = frozenset({"accelerometer", "magnetometer"})
 
 def command_broad(args, _scenario):
     from benchmarks.broad import benchmark, case_study, tuning
-    from benchmarks.broad.dataset import ATTRIBUTION, broad_folder, open_broad
+    from benchmarks.broad.dataset import broad_folder, open_broad
     from benchmarks.sensor_use import refuse_unreadable
     if not args.case_study:
         refuse_unreadable(args.estimators, BROAD_SENSORS, "a BROAD trial")
@@ -1149,8 +1149,8 @@ def command_broad(args, _scenario):
         write_text(args.out / "broad_case_study.csv", frame.to_csv(index=False))
         if args.grid:
             write_text(args.out / "broad_case_study_grid.csv", grid.to_csv(index=False))
-        write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
-        print(f"wrote {args.out / 'broad_case_study.csv'}\n{ATTRIBUTION}")
+        write_text(args.out / "ATTRIBUTION.txt", dataset.attribution + "\n")
+        print(f"wrote {args.out / 'broad_case_study.csv'}\n{dataset.attribution}")
         return None
     from benchmarks.broad import inputs
     from benchmarks.broad.inputs import checked_sigmas
@@ -1177,13 +1177,13 @@ def command_broad(args, _scenario):
     write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
     for name, data in drawn.items():
         write_bytes(args.out / name, data)
-    write_text(args.out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
+    write_text(args.out / "ATTRIBUTION.txt", dataset.attribution + "\n")
     names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
              "ATTRIBUTION.txt")
     if len(tunings):
         write_text(args.out / "broad_tuning.csv", tunings.to_csv(index=False))
         names += ("broad_tuning.csv",)
-    print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{ATTRIBUTION}")
+    print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{dataset.attribution}")
     return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
                                  in result.trials.groupby("estimator", sort=False)})
 

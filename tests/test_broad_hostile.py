@@ -431,3 +431,51 @@ def test_an_intact_trial_takes_nothing_from_a_rest():
     assert inputs.start_sample(recording) == 0
     said = "\n".join(inputs.imu_inputs(recording).assumptions)
     assert "gravity: the standard 9.80665 m/s²" in said and "TRIAD on sample 0" in said
+
+
+# --- a dataset of one's own in BROAD's layout ----------------------------------------
+
+def test_trial_labels_keep_a_users_names_whole():
+    from benchmarks.broad.dataset import trial_label
+    assert trial_label(TRIAL_02) == "02"
+    assert trial_label("my_phone_log") == "my_phone_log"
+    assert trial_label("2024_walk") == "2024"            # a number and a description, as BROAD's
+    assert trial_label("walk") == "walk" and trial_label("12") == "12"
+
+
+def _own_folder(tmp_path, readme: str | None):
+    """The cut trial 02 as a user's trial ``my_phone_log``, with ``readme``
+    (None: no README) and no LICENSE."""
+    def rename(described):
+        described["trials"] = {"my_phone_log": described["trials"][TRIAL_02]}
+    folder = _folder(tmp_path, index=rename, names=(TRIAL_02,))
+    (folder / f"{TRIAL_02}.npz").rename(folder / "my_phone_log.npz")
+    if readme is not None:
+        (folder / "README.md").write_text(readme)
+    return folder
+
+
+def test_a_users_dataset_is_credited_from_its_own_readme_and_named_whole(tmp_path, capsys):
+    folder = _own_folder(tmp_path, "# Phone logs of the Kestrel lab\n\nCC0, recorded 2026.\n")
+    status, printed, _, out = _run(tmp_path, capsys, folder, estimators="madgwick")
+    assert status == 0
+    credit = (out / "ATTRIBUTION.txt").read_text()
+    assert "Phone logs of the Kestrel lab" in credit and "BROAD" not in credit
+    assert "Laidig" not in printed and "Phone logs of the Kestrel lab" in printed
+    trials = pd.read_csv(out / "broad_trials.csv")
+    assert set(trials["trial"]) == {"my_phone_log"}
+    assert "my_phone_log" in printed and " my " not in printed
+
+
+def test_a_dataset_without_a_readme_is_credited_to_no_one_else(tmp_path, capsys):
+    folder = _own_folder(tmp_path, None)
+    status, _, _, out = _run(tmp_path, capsys, folder, estimators="madgwick")
+    assert status == 0
+    credit = (out / "ATTRIBUTION.txt").read_text()
+    assert "no README or LICENSE" in credit and "BROAD" not in credit
+
+
+def test_broad_itself_is_credited_as_its_authors_ask():
+    from benchmarks.broad.dataset import ATTRIBUTION, open_broad
+    assert open_broad(SHIPPED).attribution == ATTRIBUTION      # its README names BROAD's DOI
+    assert "CC BY 4.0" in ATTRIBUTION and "Laidig" in ATTRIBUTION

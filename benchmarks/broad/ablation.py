@@ -70,7 +70,7 @@ def main(argv=None) -> int:
                                                   "without_rest_deg"]].mean()
     print(f"MEKF on {len(dataset.available)} trials, mean RMSE over the movement (degrees):")
     print(means.to_string(float_format=lambda x: f"{x:.3f}"))
-    write_table(args.out, "ablation.csv", table)
+    write_table(args.out, "ablation.csv", table, dataset.attribution)
     return 0
 
 

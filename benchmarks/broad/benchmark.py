@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.dataset import BroadDataset
+from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import METRICS, errors_deg, rmse_of, scored_samples, \
     unscored_reason
@@ -169,7 +169,7 @@ def unscored_trials(trials: pd.DataFrame) -> dict:
 
 
 def _number(trial: str) -> str:
-    return trial.split("_", 1)[0]
+    return trial_label(trial)
 
 
 def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:

@@ -36,6 +36,11 @@ ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
 ATTRIBUTION = ("Data: BROAD, D. Laidig, M. Caruso, A. Cereatti, T. Seel, \"BROAD - A "
                "Benchmark for Robust Inertial Orientation Estimation\", Data 6(7), 2021, "
                "doi:10.3390/data6070072; CC BY 4.0.")
+#: BROAD's DOI: a folder whose README or LICENSE names it holds BROAD's data.
+BROAD_DOI = "10.3390/data6070072"
+#: The files a dataset folder's attribution is read from, the first found of each.
+ATTRIBUTION_FILES = ("ATTRIBUTION.txt", "README.md", "README.txt", "README", "LICENSE",
+                     "LICENSE.txt", "LICENSE.md")
 #: The published keys → the toolkit's (:data:`sensors.recording.REQUIRED_KEYS`).
 PUBLISHED_KEYS = {"imu_gyr": "imu_gyr_radps", "imu_acc": "imu_acc_mps2",
                   "imu_mag": "imu_mag_uT", "opt_quat": "opt_quat", "movement": "movement",
@@ -62,6 +67,12 @@ class BroadDataset:
     files: dict                  # name → path, the trials present
 
     @property
+    def attribution(self) -> str:
+        """Whose data this is, for the ``ATTRIBUTION.txt`` beside every
+        output derived from it (:func:`dataset_attribution`)."""
+        return dataset_attribution(self.folder)
+
+    @property
     def available(self) -> list[str]:
         """The trials present, in ``trials.json``'s order."""
         return [name for name in self.trials if name in self.files]
@@ -75,7 +86,7 @@ class BroadDataset:
         if len(matches) == 1:
             return matches[0]
         raise InvalidParameterError("trials", text, f"is not a trial of {self.folder} (present: "
-                                    f"{', '.join(n.split('_', 1)[0] for n in self.available)})")
+                                    f"{', '.join(trial_label(n) for n in self.available)})")
 
     def selected(self, names=None) -> list[str]:
         """The trials ``names`` (numbers or full names, :meth:`trial_name`;
@@ -104,7 +115,7 @@ class BroadDataset:
         reasons = {name: self.unscored(name) for name in trials}
         if all(reasons.values()):
             raise InvalidParameterError(
-                "trials", ",".join(name.split("_", 1)[0] for name in trials),
+                "trials", ",".join(trial_label(name) for name in trials),
                 "nothing to score: " + "; ".join(f"{name} {why}" for name, why in
                                                  reasons.items()))
         return trials
@@ -170,6 +181,39 @@ def broad_folder(given: Path | None = None) -> Path:
     if os.environ.get(ENVIRONMENT_VARIABLE):
         return Path(os.environ[ENVIRONMENT_VARIABLE])
     return shipped_file("datasets/broad/trials.json").parent
+
+
+def trial_label(name: str) -> str:
+    """A trial as the tables show it: BROAD's number (``02`` for
+    ``02_undisturbed_slow_rotation_B``), where the name is a number and a
+    description; any other name whole (``my_phone_log``)."""
+    number, underscore, _ = name.partition("_")
+    return number if underscore and number.isdigit() else name
+
+
+def dataset_attribution(folder: Path) -> str:
+    """Whose data the folder holds, in one paragraph: its own
+    ``ATTRIBUTION.txt`` where it has one; BROAD's citation where its README
+    or LICENSE names BROAD's DOI; else the title of its README and the first
+    line of its LICENSE, as they are — never another dataset's credit."""
+    found = {name: folder / name for name in ATTRIBUTION_FILES if (folder / name).is_file()}
+
+    def text(name: str) -> str:
+        try:
+            return found[name].read_text(errors="replace")
+        except OSError:
+            return ""
+    if "ATTRIBUTION.txt" in found and text("ATTRIBUTION.txt").strip():
+        return text("ATTRIBUTION.txt").strip()
+    if any(BROAD_DOI in text(name) for name in found):
+        return ATTRIBUTION
+    firsts = [(name, next((line.strip("# ").strip() for line in text(name).splitlines()
+                           if line.strip()), "")) for name in found]
+    said = "; ".join(f"{name}: {first}" for name, first in firsts if first)
+    if not said:
+        return (f"Data: the recordings in {folder.name}; the folder has no README or LICENSE "
+                "saying whose they are or on what terms (its owner's).")
+    return f"Data: the recordings in {folder.name} ({said}); see those files for their terms."
 
 
 def open_broad(folder) -> BroadDataset:

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.broad.case_study import MADGWICK_BETAS
+from benchmarks.broad.dataset import trial_label
 from benchmarks.broad.inputs import ImuInputs, imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
@@ -199,4 +200,4 @@ def _applied(name: str, result: dict, training, scored, options: dict, scenarios
 
 
 def _number(trial: str) -> str:
-    return trial.split("_", 1)[0]
+    return trial_label(trial)

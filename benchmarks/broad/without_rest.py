@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.dataset import ATTRIBUTION, open_broad
+from benchmarks.broad.dataset import open_broad
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
@@ -100,12 +100,12 @@ def trial_rows(args, name: str, scores, check=lambda: None):
         return None
 
 
-def write_table(out: Path, name: str, table: pd.DataFrame) -> None:
-    """``table`` as ``out/name`` and the data's attribution beside it."""
+def write_table(out: Path, name: str, table: pd.DataFrame, attribution: str) -> None:
+    """``table`` as ``out/name`` and the data's ``attribution`` beside it."""
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / name, table.to_csv(index=False))
-    write_text(out / "ATTRIBUTION.txt", ATTRIBUTION + "\n")
-    print(f"wrote {out / name}, {out / 'ATTRIBUTION.txt'}\n{ATTRIBUTION}")
+    write_text(out / "ATTRIBUTION.txt", attribution + "\n")
+    print(f"wrote {out / name}, {out / 'ATTRIBUTION.txt'}\n{attribution}")
 
 
 def main(argv=None) -> int:
@@ -124,7 +124,7 @@ def main(argv=None) -> int:
     print(f"{len(dataset.available)} trials, total RMSE over the movement after the cut "
           f"(degrees), magnetometer at 1/{MAGNETOMETER_EVERY} rate in the cut trials:")
     print(summary.to_string(float_format=lambda x: f"{x:.3f}"))
-    write_table(args.out, "without_rest.csv", table)
+    write_table(args.out, "without_rest.csv", table, dataset.attribution)
     return 0
 
 
