@@ -282,9 +282,13 @@ def _parse_broad(commands) -> None:
         "broad", help="every estimator on the BROAD trials (gyro, accelerometer, magnetometer "
         "against an optical reference), scored as the dataset's authors score; write "
         "broad_trials.csv, broad_groups.csv, broad.png and broad_trial.png")
-    broad.add_argument("--broad", type=Path, metavar="DIR",
+    broad.add_argument("--broad", "--test", type=Path, metavar="DIR",
                        help="a BROAD folder (trials.json with data_mat/, data_hdf5/ or .npz "
                        "trials; default: $ATTITUDE_BENCH_BROAD, else the two shipped trials)")
+    broad.add_argument("--train", type=Path, metavar="DIR",
+                       help="tune every estimator on all the trials of this other folder "
+                       "(the same layout) and score the settings on --broad's: will they "
+                       "work on another device? (writes broad_tuning.csv)")
     broad.add_argument("--trials", type=_name_list, metavar="A,B",
                        help="trials by number or name (default: every trial present)")
     broad.add_argument("--estimators", type=_estimator_list, metavar="A,B,...",
@@ -1131,7 +1135,8 @@ def command_broad(args, _scenario):
         for flag, given in (("--gyro-delay", args.gyro_delay),
                             ("--accelerometer-sigma", args.accelerometer_sigma),
                             ("--magnetometer-sigma", args.magnetometer_sigma),
-                            ("--tune", args.tune != "none")):
+                            ("--tune", args.tune != "none"),
+                            ("--train", args.train is not None)):
             if given:
                 raise UsageError(f"{flag} does not apply to --case-study: it runs the "
                                  "authors' filters on the data as they ran them")
@@ -1158,18 +1163,26 @@ def command_broad(args, _scenario):
                                                   ("magnetometer", args.magnetometer_sigma))
               if value is not None}
     checked_sigmas(sigmas)
-    options, tunings = tuning.tuned_options(dataset, trials, args.estimators, args.tune,
-                                            args.gyro_delay, sigmas, args.workers, args.quiet)
+    mode, train = args.tune, None
+    if args.train is not None:
+        if args.tune != "none":
+            raise UsageError(f"--train tunes on another dataset; --tune {args.tune} on this "
+                             "one's trials: give one of them")
+        mode, train = "other-dataset", open_broad(args.train, parameter="train")
+        tuning.checked_apart(train, dataset)
+    options, tunings = tuning.tuned_options(dataset, trials, args.estimators, mode,
+                                            args.gyro_delay, sigmas, args.workers, args.quiet,
+                                            train=train)
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
                                  quiet=args.quiet, workers=args.workers, options=options,
-                                 tuning=args.tune)
+                                 tuning=mode)
     print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
     print(benchmark.format_trials(result))
     if len(tunings):
         print("\ntuned (training loss: mean total RMSE over the training trials, °):")
         print(tunings.to_string(index=False, float_format=lambda v: f"{v:.6g}"))
     print(f"\ntotal RMSE (°) per group, mean over its trials (trials run), "
-          f"{tuning.MODE_LABELS[args.tune]}:")
+          f"{tuning.MODE_LABELS[mode]}:")
     print(benchmark.format_groups(result))
     drawn = {name: figure_bytes(args.out / name, figure(result)) for name, figure in
              (("broad.png", benchmark.groups_figure), ("broad_trial.png", benchmark.trial_figure))}
@@ -1177,13 +1190,16 @@ def command_broad(args, _scenario):
     write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
     for name, data in drawn.items():
         write_bytes(args.out / name, data)
-    write_text(args.out / "ATTRIBUTION.txt", dataset.attribution + "\n")
+    attribution = dataset.attribution
+    if train is not None and train.attribution != attribution:    # the settings derive from it
+        attribution += "\nThe settings were tuned on: " + train.attribution
+    write_text(args.out / "ATTRIBUTION.txt", attribution + "\n")
     names = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
              "ATTRIBUTION.txt")
     if len(tunings):
         write_text(args.out / "broad_tuning.csv", tunings.to_csv(index=False))
         names += ("broad_tuning.csv",)
-    print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{dataset.attribution}")
+    print(f"wrote {', '.join(str(args.out / name) for name in names)}\n{attribution}")
     return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
                                  in result.trials.groupby("estimator", sort=False)})
 

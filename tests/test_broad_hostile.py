@@ -479,3 +479,61 @@ def test_broad_itself_is_credited_as_its_authors_ask():
     from benchmarks.broad.dataset import ATTRIBUTION, open_broad
     assert open_broad(SHIPPED).attribution == ATTRIBUTION      # its README names BROAD's DOI
     assert "CC BY 4.0" in ATTRIBUTION and "Laidig" in ATTRIBUTION
+
+
+# --- tuned on one dataset, scored on another -------------------------------------------
+
+def _two_datasets(tmp_path):
+    """The cut trial 07 as a training dataset, the cut trial 02 as the scored one."""
+    train = _folder(tmp_path / "train", names=(TRIAL_07,))
+    test = _folder(tmp_path / "test", names=(TRIAL_02,))
+    return train, test
+
+
+def test_settings_tuned_on_another_dataset_are_scored_on_this_one(tmp_path, capsys):
+    (tmp_path / "train").mkdir()
+    (tmp_path / "test").mkdir()
+    train, test = _two_datasets(tmp_path)
+    status, printed, _, out = _run(tmp_path, capsys, test, "--train", str(train),
+                                   estimators="madgwick,dead-reckoning")
+    assert status == 0
+    assert "tuned on every trial of another dataset" in printed
+    tunings = pd.read_csv(out / "broad_tuning.csv", dtype={"training": str, "scored": str})
+    # Madgwick tuned on the training dataset's trial 07 alone, scored on 02;
+    # dead reckoning has nothing to tune.
+    assert list(tunings["estimator"]) == ["madgwick"]
+    row = tunings.iloc[0]
+    assert row["training"] == "07" and row["scored"] == "02"
+    assert row["training_dataset"] == str(train)
+    assert row["training_loss_deg"] <= row["training_loss_default_deg"]
+    trials = pd.read_csv(out / "broad_trials.csv")
+    assert set(trials["trial"]) == {TRIAL_02}
+
+
+@pytest.mark.parametrize("same", ["folder", "copy", "mat"])
+def test_a_training_dataset_holding_a_scored_recording_is_refused(tmp_path, capsys, same):
+    # The same folder, a copy of it, or the same recording in the other
+    # file format (.mat beside .npz).
+    for sub in ("test", "mat"):
+        (tmp_path / sub).mkdir()
+    test = _folder(tmp_path / "test", names=(TRIAL_02,))
+    if same == "folder":
+        train, message = test, "is the dataset scored (--broad)"
+    else:
+        import shutil
+        train = (shutil.copytree(test, tmp_path / "copy") if same == "copy" else
+                 _folder(tmp_path / "mat", names=(TRIAL_02,), layout="mat"))
+        message = f"holds trial {TRIAL_02}, the same recording as the scored trial {TRIAL_02}"
+    err = _refused(tmp_path, capsys, test, message, "--train", str(train),
+                   estimators="madgwick")
+    assert err.startswith("attitude-bench: error: train = ")
+
+
+def test_train_and_tune_are_one_choice(tmp_path, capsys):
+    (tmp_path / "train").mkdir()
+    (tmp_path / "test").mkdir()
+    train, test = _two_datasets(tmp_path)
+    _refused(tmp_path, capsys, test, "give one of them", "--train", str(train),
+             "--tune", "all-trials", estimators="madgwick")
+    _refused(tmp_path, capsys, test, "is not a folder", "--train", str(tmp_path / "nowhere"),
+             estimators="madgwick")

@@ -216,13 +216,14 @@ def dataset_attribution(folder: Path) -> str:
     return f"Data: the recordings in {folder.name} ({said}); see those files for their terms."
 
 
-def open_broad(folder) -> BroadDataset:
+def open_broad(folder, parameter: str = "broad") -> BroadDataset:
     """The BROAD folder ``folder``, checked: its ``trials.json`` read
-    (:func:`read_index`), its trials found (:data:`LAYOUTS`)."""
+    (:func:`read_index`), its trials found (:data:`LAYOUTS`); an error names
+    ``parameter`` (the flag that gave the folder)."""
     folder = Path(folder)
 
     def refuse(rule: str):
-        raise InvalidParameterError("broad", str(folder), rule)
+        raise InvalidParameterError(parameter, str(folder), rule)
     if not folder.is_dir():
         refuse("is not a folder")
     index = folder / "trials.json"

@@ -11,6 +11,10 @@ trials, then scores them on others:
   trials its settings were not tuned on.
 * ``per-trial``: each trial scored with the settings tuned on itself, the
   authors' "each trial's best": optimistic, and the table says so.
+* ``other-dataset`` (``broad --train DIR``): tuned on every trial of
+  another dataset, scored on this one's — the honest answer to "will these
+  settings work on my device?". The two must share no recording
+  (:func:`checked_apart`).
 * ``none``: the defaults.
 
 How: on the authors' grid where they used one (Madgwick's β,
@@ -42,7 +46,7 @@ from benchmarks.experiments.tuning import keyword_values
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator
 
-MODES = ("none", "all-trials", "per-trial")
+MODES = ("none", "all-trials", "per-trial", "other-dataset")
 FOLDS = 2
 #: The authors' grids (``process_data.py``), searched exhaustively.
 GRIDS = {"madgwick": {"beta": MADGWICK_BETAS}, "madgwick-broad": {"beta": MADGWICK_BETAS}}
@@ -60,7 +64,9 @@ MODE_LABELS = {"none": "default settings",
                "all-trials": f"settings tuned on the other fold of trials ({FOLDS}-fold "
                              "cross-validation: no trial scored with settings tuned on it)",
                "per-trial": "settings tuned on each trial itself (optimistic: the authors' "
-                            "each-trial best)"}
+                            "each-trial best)",
+               "other-dataset": "settings tuned on every trial of another dataset "
+                                "(--train): none of these trials was tuned on"}
 
 
 @dataclass(frozen=True)
@@ -143,6 +149,28 @@ def training_sets(trials, mode: str) -> list[tuple[list, list]]:
             for i, fold in enumerate(folds)]
 
 
+def checked_apart(train, test) -> None:
+    """Refuse a training dataset that holds a recording of the scored one
+    (the same folder, or a trial whose gyro readings are the same, in any
+    file format): its scores would be of settings tuned on them."""
+    import hashlib
+    if train.folder.resolve() == test.folder.resolve():
+        raise InvalidParameterError("train", str(train.folder), "is the dataset scored (--broad):"
+                                    " tune on another, or use --tune all-trials to tune on "
+                                    "half of its trials and score the other half")
+
+    def digest(dataset, name):
+        gyro = np.ascontiguousarray(dataset.load(name).gyro_radps, dtype=float)
+        return hashlib.sha256(gyro.tobytes()).hexdigest()
+    scored = {digest(test, name): name for name in test.available}
+    for name in train.available:
+        twin = scored.get(digest(train, name))
+        if twin is not None:
+            raise InvalidParameterError("train", str(train.folder), f"holds trial {name}, the "
+                                        f"same recording as the scored trial {twin}: the two "
+                                        "datasets must share no recording")
+
+
 def _tune_task(dataset, training, names, gyro_delay_s, sigmas) -> dict:
     """The tunings of one training set (a Dask task): each of ``names`` on
     the ``training`` trials, loaded once for all of them."""
@@ -152,22 +180,26 @@ def _tune_task(dataset, training, names, gyro_delay_s, sigmas) -> dict:
 
 
 def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 0.0,
-                  sigmas=None, workers: int = 0, quiet: bool = False):
+                  sigmas=None, workers: int = 0, quiet: bool = False, train=None):
     """Per trial, each tuned estimator's settings (``trial → {estimator →
     keyword values}``), and the tidy record of every tuning (estimator,
-    training trials, trials scored, values, losses, method)."""
+    training trials, trials scored, values, losses, method); ``train``: the
+    other dataset tuned on (mode ``other-dataset``)."""
     from benchmarks.engine.runner import map_tasks
     from benchmarks.output import progress
     if mode == "none":
         return {}, pd.DataFrame()
-    for trial in trials:        # a training trial with no score would make every loss infinite
-        reason = dataset.unscored(trial)
+    source = train if mode == "other-dataset" else dataset
+    tuned_on = source.available if mode == "other-dataset" else trials
+    for trial in tuned_on:      # a training trial with no score would make every loss infinite
+        reason = source.unscored(trial)
         if reason is not None:
             raise InvalidParameterError("trials", trial, f"{reason}: it cannot be tuned on or "
                                         "scored; leave it out of --trials to tune")
-    sets = training_sets(trials, mode)
+    sets = ([(tuned_on, list(trials))] if mode == "other-dataset"
+            else training_sets(trials, mode))
     names = [name for name in estimators if tunes(name)]
-    tasks = [(dataset, training, names, gyro_delay_s, sigmas) for training, _ in sets]
+    tasks = [(source, training, names, gyro_delay_s, sigmas) for training, _ in sets]
     with progress(total=len(tasks), desc=f"tune ({mode})", unit="training set",
                   quiet=quiet) as bar:
         found = map_tasks(_tune_task, tasks, workers, bar)
@@ -176,7 +208,10 @@ def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 
         for (training, scored), results in zip(sets, found):
             rows.append(_applied(name, results[name], training, scored, options, scenarios,
                                  dataset, gyro_delay_s, sigmas))
-    return options, pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    if mode == "other-dataset" and len(table):
+        table.insert(1, "training_dataset", str(source.folder))
+    return options, table
 
 
 def _applied(name: str, result: dict, training, scored, options: dict, scenarios: dict, dataset,
