@@ -543,7 +543,7 @@ def command_convergence(args, scenario):
         if not 0.0 <= angle <= 180.0:
             raise UsageError(f"angles = {angle!r}: each must be within 0 and 180 degrees")
     table, curves = convergence.convergence_study(scenario, args.estimators, list(args.seeds),
-                                                  args.angles)
+                                                  args.angles, quiet=args.quiet)
     print(convergence.summary(table).to_string(index=False))
     labels = {name: build_estimator(name, scenario).label for name in args.estimators}
     drawn = figure_bytes(args.out / "convergence.png",
@@ -727,7 +727,7 @@ def format_table(stats: dict, first_column: str = "estimator", columns=STAT_COLU
 # Each command validates everything it needs before its first write.
 
 def command_run(args, scenario):
-    stats = experiments.run_one(scenario, args.estimator, args.seed, args.out)
+    stats = experiments.run_one(scenario, args.estimator, args.seed, args.out, quiet=args.quiet)
     print(summary_line(args.estimator, stats))
     return report_of(scenario.dt, {args.estimator: stats["diverged_step"]})
 

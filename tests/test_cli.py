@@ -1,5 +1,6 @@
 """The attitude-bench command line: outputs, and bad input rejected cleanly."""
 import csv
+import io
 import subprocess
 import sys
 from pathlib import Path
@@ -174,3 +175,25 @@ def test_compare_rejects_unknown_and_accepts_registry_names(tmp_path, capsys):
     assert main(["compare", "--estimators", "ekf,ukf", "--out", str(tmp_path / "x")]) == 2
     assert "estimators = 'ekf,ukf'" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+class _Terminal(io.StringIO):
+    """A stderr that says it is a terminal, as tqdm asks before drawing a bar."""
+
+    def isatty(self):
+        return True
+
+
+@pytest.mark.parametrize("argv, bar", [
+    (["run", "--estimator", "mekf", "--tstop", "2"], "mekf:"),
+    (["compare", "--tstop", "2"], "compare:"),
+    (["convergence", "--tstop", "2", "--seeds", "0", "--angles", "90"], "convergence:"),
+])
+def test_long_commands_draw_a_progress_bar_on_a_terminal_and_none_when_quiet(
+        tmp_path, monkeypatch, argv, bar):
+    for quiet in (False, True):
+        terminal = _Terminal()
+        monkeypatch.setattr(sys, "stderr", terminal)
+        out = tmp_path / str(quiet)
+        assert main([*argv, "--out", str(out), *(["--quiet"] if quiet else [])]) == 0
+        assert (bar in terminal.getvalue()) is not quiet, terminal.getvalue()

@@ -57,24 +57,33 @@ def starts(scenario, angles_deg) -> dict:
 
 
 def convergence_study(scenario, estimators=("mekf", "usque"), seeds=range(5),
-                      angles_deg=(90.0, 150.0)) -> tuple[pd.DataFrame, dict]:
+                      angles_deg=(90.0, 150.0), quiet: bool = True) -> tuple[pd.DataFrame, dict]:
     """Each estimator from each start over ``seeds``: a table of convergence
     times (minutes, NaN where not converged) and the first seed's error
-    curves, ``{(start, name): (N,) degrees}``."""
-    rows, curves = [], {}
-    for label, start in starts(scenario, angles_deg).items():
-        case = scenario.replace(initial_state=start)
-        for seed in seeds:
-            result = simulate(case, list(estimators), seed=int(seed))
-            for name in estimators:
-                error = result.error_deg[name]
-                rows.append({"start": label, "estimator": name, "seed": int(seed),
-                             "converged_min": convergence_time_s(result.time_s, error) / 60.0,
-                             "final_deg": float(error[-1]),
-                             "diverged_step": result.diverged_step[name]})
-                if seed == seeds[0]:
-                    curves[(label, name)] = error
+    curves, ``{(start, name): (N,) degrees}`` (a progress bar on a terminal
+    unless ``quiet``)."""
+    from benchmarks.output import progress
+    rows, curves, cases = [], {}, starts(scenario, angles_deg)
+    total = len(cases) * len(seeds) * len(estimators) * scenario.n_steps
+    with progress(total=total, desc="convergence", unit="step", quiet=quiet) as bar:
+        for label, start in cases.items():
+            _study_start(scenario.replace(initial_state=start), label, estimators, seeds, rows,
+                         curves, bar)
     return pd.DataFrame(rows), curves
+
+
+def _study_start(case, label: str, estimators, seeds, rows: list, curves: dict, bar) -> None:
+    """:func:`convergence_study`'s rows and curves of one start."""
+    for seed in seeds:
+        result = simulate(case, list(estimators), seed=int(seed), progress_bar=bar)
+        for name in estimators:
+            error = result.error_deg[name]
+            rows.append({"start": label, "estimator": name, "seed": int(seed),
+                         "converged_min": convergence_time_s(result.time_s, error) / 60.0,
+                         "final_deg": float(error[-1]),
+                         "diverged_step": result.diverged_step[name]})
+            if seed == seeds[0]:
+                curves[(label, name)] = error
 
 
 def summary(table: pd.DataFrame) -> pd.DataFrame:

@@ -69,9 +69,12 @@ def run_statistics(result: RunResult, name: str) -> dict:
             "diverged_step": result.diverged_step[name], "note": result.notes.get(name, "")}
 
 
-def run_one(scenario: Scenario, estimator: str, seed: int, out: Path) -> dict:
-    """Run one estimator; write ``NAME.csv`` (the trace) and ``NAME.png``."""
-    result = simulate(scenario, [estimator], seed=seed)
+def run_one(scenario: Scenario, estimator: str, seed: int, out: Path,
+            quiet: bool = True) -> dict:
+    """Run one estimator; write ``NAME.csv`` (the trace) and ``NAME.png``
+    (a progress bar on a terminal unless ``quiet``)."""
+    with progress(total=scenario.n_steps, desc=estimator, unit="step", quiet=quiet) as bar:
+        result = simulate(scenario, [estimator], seed=seed, progress_bar=bar)
     error = result.error_deg[estimator]
     q_true, q_est = result.truth.q_true, result.estimates[estimator]
     table = np.column_stack([result.time_s, q_true, q_est, error])
