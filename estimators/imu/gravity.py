@@ -131,7 +131,7 @@ def integrate_rotation(q, dt: float, integral) -> None:
 
 def drift_jacobian(q_strapdown, gravity_lp, integral, coeffs, tau_s: float, dt: float,
                    state, scratch, out) -> None:
-    """The bias columns of the reading's :math:`H` (module docstring) into
+    r"""The bias columns of the reading's :math:`H` (module docstring) into
     ``out`` (3, 3): :math:`R_{\mathcal I}^\mathsf{T}[\hat g_{\mathcal I}\times]
     (J - \mathrm{LP}(J))`, ``gravity_lp`` the low-passed vector in the strapdown
     frame, ``state`` the LP filter's of :math:`J` (4, 9), ``scratch`` (9,)."""
