@@ -1168,8 +1168,11 @@ def command_broad(args, _scenario):
         if args.tune != "none":
             raise UsageError(f"--train tunes on another dataset; --tune {args.tune} on this "
                              "one's trials: give one of them")
+        if args.gyro_delay:
+            raise UsageError("--gyro-delay is the scored device's; the training dataset's "
+                             "delay is not known: leave it out with --train")
         mode, train = "other-dataset", open_broad(args.train, parameter="train")
-        tuning.checked_apart(train, dataset)
+        tuning.checked_apart(train, dataset, trials)
     options, tunings = tuning.tuned_options(dataset, trials, args.estimators, mode,
                                             args.gyro_delay, sigmas, args.workers, args.quiet,
                                             train=train)

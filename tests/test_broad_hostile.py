@@ -439,7 +439,10 @@ def test_trial_labels_keep_a_users_names_whole():
     from benchmarks.broad.dataset import trial_label
     assert trial_label(TRIAL_02) == "02"
     assert trial_label("my_phone_log") == "my_phone_log"
-    assert trial_label("2024_walk") == "2024"            # a number and a description, as BROAD's
+    assert trial_label("07_undisturbed_fast_rotation_B") == "07"
+    # A user's name that looks like BROAD's is kept whole too: two of them
+    # could share a number.
+    assert trial_label("01_walk") == "01_walk" and trial_label("2024_walk") == "2024_walk"
     assert trial_label("walk") == "walk" and trial_label("12") == "12"
 
 
@@ -465,6 +468,14 @@ def test_a_users_dataset_is_credited_from_its_own_readme_and_named_whole(tmp_pat
     trials = pd.read_csv(out / "broad_trials.csv")
     assert set(trials["trial"]) == {"my_phone_log"}
     assert "my_phone_log" in printed and " my " not in printed
+
+
+def test_a_users_readme_that_cites_broad_does_not_make_it_broads(tmp_path):
+    from benchmarks.broad.dataset import open_broad
+    folder = _own_folder(tmp_path, "# Walks with my phone\n\nCompared with BROAD "
+                                   "(doi:10.3390/data6070072).\n")
+    credit = open_broad(folder).attribution
+    assert "Walks with my phone" in credit and "Laidig" not in credit
 
 
 def test_a_dataset_without_a_readme_is_credited_to_no_one_else(tmp_path, capsys):
@@ -537,3 +548,5 @@ def test_train_and_tune_are_one_choice(tmp_path, capsys):
              "--tune", "all-trials", estimators="madgwick")
     _refused(tmp_path, capsys, test, "is not a folder", "--train", str(tmp_path / "nowhere"),
              estimators="madgwick")
+    _refused(tmp_path, capsys, test, "--gyro-delay is the scored device's", "--train",
+             str(train), "--gyro-delay", "0.004", estimators="madgwick")

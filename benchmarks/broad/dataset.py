@@ -38,7 +38,7 @@ ATTRIBUTION = ("Data: BROAD, D. Laidig, M. Caruso, A. Cereatti, T. Seel, \"BROAD
                "doi:10.3390/data6070072; CC BY 4.0.")
 #: BROAD's DOI: a folder whose README or LICENSE names it holds BROAD's data.
 BROAD_DOI = "10.3390/data6070072"
-#: The files a dataset folder's attribution is read from, the first found of each.
+#: The files a dataset folder's attribution is read from (every one present).
 ATTRIBUTION_FILES = ("ATTRIBUTION.txt", "README.md", "README.txt", "README", "LICENSE",
                      "LICENSE.txt", "LICENSE.md")
 #: The published keys → the toolkit's (:data:`sensors.recording.REQUIRED_KEYS`).
@@ -65,6 +65,7 @@ class BroadDataset:
     groups: tuple
     trials: dict                 # name → {"description": str, "groups": [names]}
     files: dict                  # name → path, the trials present
+    parameter: str = "broad"     # the flag that gave the folder, for errors
 
     @property
     def attribution(self) -> str:
@@ -142,7 +143,8 @@ class BroadDataset:
         shown = str(path.relative_to(self.folder))
 
         def refuse(rule: str):
-            raise InvalidParameterError("trial", shown, rule)
+            raise InvalidParameterError("trial" if self.parameter == "broad"
+                                        else f"{self.parameter} trial", shown, rule)
         if path.suffix == ".npz":
             try:
                 recording = load_recording(path, name)
@@ -185,17 +187,30 @@ def broad_folder(given: Path | None = None) -> Path:
 
 def trial_label(name: str) -> str:
     """A trial as the tables show it: BROAD's number (``02`` for
-    ``02_undisturbed_slow_rotation_B``), where the name is a number and a
-    description; any other name whole (``my_phone_log``)."""
-    number, underscore, _ = name.partition("_")
-    return number if underscore and number.isdigit() else name
+    ``02_undisturbed_slow_rotation_B``), where the name is one of BROAD's
+    published trials; any other name whole (``my_phone_log``, ``01_walk``)."""
+    number, _, _ = name.partition("_")
+    return number if name in broad_trial_names() else name
+
+
+def broad_trial_names() -> frozenset:
+    """The names of BROAD's published trials (its ``trials.json``, shipped)."""
+    global _BROAD_NAMES
+    if _BROAD_NAMES is None:
+        index = json.loads(shipped_file("datasets/broad/trials.json").read_text())
+        _BROAD_NAMES = frozenset(index["trials"])
+    return _BROAD_NAMES
+
+
+_BROAD_NAMES = None
 
 
 def dataset_attribution(folder: Path) -> str:
     """Whose data the folder holds, in one paragraph: its own
     ``ATTRIBUTION.txt`` where it has one; BROAD's citation where its README
-    or LICENSE names BROAD's DOI; else the title of its README and the first
-    line of its LICENSE, as they are — never another dataset's credit."""
+    or LICENSE names BROAD's DOI and its trials are BROAD's published ones;
+    else the title of its README and the first line of its LICENSE, as they
+    are — never another dataset's credit."""
     found = {name: folder / name for name in ATTRIBUTION_FILES if (folder / name).is_file()}
 
     def text(name: str) -> str:
@@ -205,7 +220,7 @@ def dataset_attribution(folder: Path) -> str:
             return ""
     if "ATTRIBUTION.txt" in found and text("ATTRIBUTION.txt").strip():
         return text("ATTRIBUTION.txt").strip()
-    if any(BROAD_DOI in text(name) for name in found):
+    if any(BROAD_DOI in text(name) for name in found) and _holds_broad_trials(folder):
         return ATTRIBUTION
     firsts = [(name, next((line.strip("# ").strip() for line in text(name).splitlines()
                            if line.strip()), "")) for name in found]
@@ -214,6 +229,15 @@ def dataset_attribution(folder: Path) -> str:
         return (f"Data: the recordings in {folder.name}; the folder has no README or LICENSE "
                 "saying whose they are or on what terms (its owner's).")
     return f"Data: the recordings in {folder.name} ({said}); see those files for their terms."
+
+
+def _holds_broad_trials(folder: Path) -> bool:
+    """Whether the folder's ``trials.json`` names BROAD's published trials only."""
+    try:
+        named = json.loads((folder / "trials.json").read_text()).get("trials", {})
+    except (OSError, ValueError, AttributeError):
+        return False
+    return bool(named) and set(named) <= broad_trial_names()
 
 
 def open_broad(folder, parameter: str = "broad") -> BroadDataset:
@@ -234,7 +258,8 @@ def open_broad(folder, parameter: str = "broad") -> BroadDataset:
         files = {path.stem: path for path in sorted((folder / sub).glob(f"*{suffix}"))
                  if path.stem in trials}
         if files:
-            return BroadDataset(folder=folder, groups=groups, trials=trials, files=files)
+            return BroadDataset(folder=folder, groups=groups, trials=trials, files=files,
+                                parameter=parameter)
     refuse("holds none of the trials its trials.json names (looked in data_mat/*.mat, "
            "data_hdf5/*.hdf5 and *.npz)")
 

@@ -149,10 +149,11 @@ def training_sets(trials, mode: str) -> list[tuple[list, list]]:
             for i, fold in enumerate(folds)]
 
 
-def checked_apart(train, test) -> None:
-    """Refuse a training dataset that holds a recording of the scored one
-    (the same folder, or a trial whose gyro readings are the same, in any
-    file format): its scores would be of settings tuned on them."""
+def checked_apart(train, test, scored_trials) -> None:
+    """Refuse a training dataset that holds a recording of the scored
+    trials (the same folder, or a trial whose gyro readings are exactly the
+    same, in any file format; a trimmed copy is not caught): their scores
+    would be of settings tuned on them."""
     import hashlib
     if train.folder.resolve() == test.folder.resolve():
         raise InvalidParameterError("train", str(train.folder), "is the dataset scored (--broad):"
@@ -162,7 +163,7 @@ def checked_apart(train, test) -> None:
     def digest(dataset, name):
         gyro = np.ascontiguousarray(dataset.load(name).gyro_radps, dtype=float)
         return hashlib.sha256(gyro.tobytes()).hexdigest()
-    scored = {digest(test, name): name for name in test.available}
+    scored = {digest(test, name): name for name in scored_trials}
     for name in train.available:
         twin = scored.get(digest(train, name))
         if twin is not None:
@@ -193,6 +194,9 @@ def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 
     tuned_on = source.available if mode == "other-dataset" else trials
     for trial in tuned_on:      # a training trial with no score would make every loss infinite
         reason = source.unscored(trial)
+        if reason is not None and mode == "other-dataset":
+            raise InvalidParameterError("train trial", trial, f"{reason}: it cannot be tuned "
+                                        "on; leave it out of that folder's trials.json")
         if reason is not None:
             raise InvalidParameterError("trials", trial, f"{reason}: it cannot be tuned on or "
                                         "scored; leave it out of --trials to tune")

@@ -59,7 +59,7 @@ class State(NamedTuple):
     imu_strapdown: np.ndarray    # (B, 4)
     imu_gravity: np.ndarray      # (B, 4, 3)
     imu_detector: np.ndarray     # (B, 9, 3)
-    imu_trust: np.ndarray        # (B, 9)
+    imu_trust: np.ndarray        # (B, 10) the heading's trust (heading.STATE_SIZE)
     imu_rate_lp: np.ndarray      # (B, 3)
     imu_counts: np.ndarray       # (B, 3) int64
     imu_rotation: np.ndarray     # (B, 5, 9) the strapdown's rotation integrated, its LP state
