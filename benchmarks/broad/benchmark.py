@@ -168,10 +168,6 @@ def unscored_trials(trials: pd.DataFrame) -> dict:
             if (why := unscored_reason(int(row.movement_samples), int(row.scored_samples)))}
 
 
-def _number(trial: str) -> str:
-    return trial_label(trial)
-
-
 def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
     """Each group's plain mean over its trials run that have something to
     score (the authors' group score), per estimator (:data:`GROUP_COLUMNS`):
@@ -187,7 +183,7 @@ def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
         if not members:
             continue
         scored = [t for t in members if t not in unscored]
-        left_out = "; ".join(f"{_number(t)} {unscored[t]}" for t in members if t in unscored)
+        left_out = "; ".join(f"{trial_label(t)} {unscored[t]}" for t in members if t in unscored)
         part = trials[trials["trial"].isin(scored)]
         for name in dict.fromkeys(trials["estimator"]):
             scores = part[part["estimator"] == name]
@@ -196,7 +192,7 @@ def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
                      for metric in METRICS}
             rows.append({"group": group.name, "level": group.level, "estimator": name,
                          "trials": len(members), "scored_trials": len(scored), **means,
-                         "left_out": left_out, "nan_on": ",".join(map(_number, missing))})
+                         "left_out": left_out, "nan_on": ",".join(map(trial_label, missing))})
     return pd.DataFrame(rows, columns=list(GROUP_COLUMNS))
 
 
@@ -212,7 +208,7 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
     from benchmarks.engine.runner import map_tasks
     repeated = [trial for i, trial in enumerate(trials) if trial in trials[:i]]
     if repeated:        # it would count twice in every mean (BroadDataset.selected says so first)
-        raise InvalidParameterError("trials", _number(repeated[0]), f"names trial "
+        raise InvalidParameterError("trials", trial_label(repeated[0]), f"names trial "
                                     f"{repeated[0]} a second time; each trial may be named once")
     rows, labels = [], {}
     arguments = [(dataset, trial, tuple(estimators), gyro_delay_s, sigmas,
@@ -225,7 +221,7 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
     frame = pd.DataFrame(rows, columns=list(TRIAL_COLUMNS))
     unscored = unscored_trials(frame)
     if len(unscored) == len(trials):
-        raise InvalidParameterError("trials", ",".join(map(_number, trials)), "nothing to "
+        raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
                                     "score: " + "; ".join(f"{t} {why}"
                                                           for t, why in unscored.items()))
     shown = next(i for i, trial in enumerate(trials) if trial not in unscored)
@@ -293,7 +289,7 @@ def format_trials(result: BroadResult) -> str:
     below it."""
     trials = result.trials
     shown = trials[["trial", "estimator", "mode", *METRICS, "us_per_sample"]].copy()
-    shown["trial"] = shown["trial"].map(_number)
+    shown["trial"] = shown["trial"].map(trial_label)
     shown["rejected acc/mag %"] = [
         f"{_share(a)}/{_share(m)}" for a, m in zip(trials["rejected_accelerometer_share"],
                                                    trials["rejected_magnetometer_share"])]

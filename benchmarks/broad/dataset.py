@@ -18,6 +18,7 @@ be named once each, and at least one of them must have something to score
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import warnings
@@ -67,10 +68,10 @@ class BroadDataset:
     files: dict                  # name → path, the trials present
     parameter: str = "broad"     # the flag that gave the folder, for errors
 
-    @property
+    @functools.cached_property
     def attribution(self) -> str:
         """Whose data this is, for the ``ATTRIBUTION.txt`` beside every
-        output derived from it (:func:`dataset_attribution`)."""
+        output derived from it (:func:`dataset_attribution`), read once."""
         return dataset_attribution(self.folder)
 
     @property
@@ -193,16 +194,11 @@ def trial_label(name: str) -> str:
     return number if name in broad_trial_names() else name
 
 
+@functools.cache
 def broad_trial_names() -> frozenset:
     """The names of BROAD's published trials (its ``trials.json``, shipped)."""
-    global _BROAD_NAMES
-    if _BROAD_NAMES is None:
-        index = json.loads(shipped_file("datasets/broad/trials.json").read_text())
-        _BROAD_NAMES = frozenset(index["trials"])
-    return _BROAD_NAMES
-
-
-_BROAD_NAMES = None
+    index = json.loads(shipped_file("datasets/broad/trials.json").read_text())
+    return frozenset(index["trials"])
 
 
 def dataset_attribution(folder: Path) -> str:

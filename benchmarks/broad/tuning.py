@@ -230,13 +230,10 @@ def _applied(name: str, result: dict, training, scored, options: dict, scenarios
             scenarios[trial] = imu_inputs(dataset.load(trial), gyro_delay_s, sigmas).scenario
         options[trial][name] = (keyword_values(cls, result["values"], scenarios[trial])
                                 if scaled else dict(result["values"]))
-    return {"estimator": name, "training": ",".join(_number(t) for t in training),
-            "scored": ",".join(_number(t) for t in scored),
+    return {"estimator": name, "training": ",".join(trial_label(t) for t in training),
+            "scored": ",".join(trial_label(t) for t in scored),
             "method": result["method"], "evaluations": result["evaluations"],
             "training_loss_default_deg": result["loss_default"],
             "training_loss_deg": result["loss"],
             **{f"tuned_{key}": value for key, value in result["values"].items()}}
 
-
-def _number(trial: str) -> str:
-    return trial_label(trial)

@@ -13,7 +13,6 @@ costs a second or two.
 """
 from __future__ import annotations
 
-import sys
 from concurrent.futures import ProcessPoolExecutor
 
 #: The kernels compiled together, one group per process: about equal compile
@@ -43,4 +42,3 @@ def warm_up(processes: int = len(GROUPS)) -> None:
 
 if __name__ == "__main__":
     warm_up()
-    sys.exit(0)
