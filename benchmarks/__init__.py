@@ -6,9 +6,10 @@ they draw) and ``engine/`` (the batched Monte Carlo engine).
 
 Nothing in the project imports this package; it imports all the others.
 """
-from benchmarks.metrics import STAT_COLUMNS, error_statistics, loss
-from benchmarks.scenario import Scenario
-from benchmarks.simulation import RunResult, SensorData, simulate
+from dynamics.lazy import lazy_exports
 
-__all__ = ["STAT_COLUMNS", "RunResult", "Scenario", "SensorData", "error_statistics", "loss",
-           "simulate"]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "metrics": ("STAT_COLUMNS", "error_statistics", "loss"),
+    "scenario": ("Scenario",),
+    "simulation": ("RunResult", "SensorData", "simulate"),
+})

@@ -9,11 +9,13 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import json
+import math
 import os
 import tempfile
 from pathlib import Path
 
-from tqdm import tqdm
+import numpy as np
 
 
 def _umask() -> int:
@@ -124,5 +126,25 @@ def progress(iterable=None, *, total=None, desc: str = "", quiet: bool = False, 
     tqdm's ``disable=None`` already hides the bar when stderr is not a terminal;
     ``quiet`` hides it everywhere.
     """
+    from tqdm import tqdm      # here: the command line starts without it
     return tqdm(iterable, total=total, desc=desc, unit=unit, leave=False,
                 disable=True if quiet else None, dynamic_ncols=True)
+
+
+def write_json(path: Path, data: dict) -> None:
+    """``data`` as JSON, a NaN or an infinity written as null (JSON has neither)."""
+    write_text(path, json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n")
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {key: _json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return _json_safe(value.item())
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    return value

@@ -25,9 +25,12 @@ same.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:     # scipy is imported where a Rotation is made: the command line starts without it
+    from scipy.spatial.transform import Rotation
 
 
 def quat_multiply(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
@@ -102,6 +105,7 @@ def rotation_matrix(q: np.ndarray) -> np.ndarray:
 
 def to_rotation(q: np.ndarray) -> Rotation:
     """The :class:`~scipy.spatial.transform.Rotation` of a scalar-first quaternion."""
+    from scipy.spatial.transform import Rotation
     return Rotation.from_quat(np.asarray(q, dtype=float), scalar_first=True)
 
 

@@ -26,7 +26,7 @@ measurement" off): output the prior ``x̂[k|k-1]`` as ``q̂[k]``; correct with
 ``ω̃_k``. ``output="posterior"`` outputs ``x̂[k|k]`` instead.
 
 filterpy's own ``predict`` is linear (``x = F x``); here the filter's
-``predict_x`` is overridden (:class:`WorkshopModelEKF`) so the state goes
+``predict_x`` is overridden (:class:`~estimators.ekf_filter.WorkshopModelEKF`) so the state goes
 through the nonlinear ``f`` and ``F`` is recomputed from the exact Jacobian
 at every step (filterpy issue #181 is about users having to discover exactly
 this). The state is kept as a 1-D ``(4,)`` array, so ``x``, ``x_prior`` and
@@ -69,7 +69,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 from dynamics.quaternion import IDENTITY, kinematics_matrix, skew, to_body_frame
 from dynamics.validation import (
@@ -82,7 +81,6 @@ from dynamics.validation import (
 )
 from estimators.base import (OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state,
                              gate_probability_setting)
-from estimators.model import propagate_with_jacobian
 from estimators.tunable import GATE_PROBABILITY, MEASUREMENT_SCALE, Tunable
 
 _IDENTITY_4 = np.eye(4)
@@ -113,20 +111,6 @@ def vector_jacobian(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
     quadratic[:, 1:] = (2.0 * (u @ r) * np.eye(3) + 2.0 * np.outer(u, r) - 2.0 * np.outer(r, u)
                         + 2.0 * w * skew(r))
     return quadratic @ (np.eye(4) - np.outer(n, n)) / norm
-
-
-class WorkshopModelEKF(ExtendedKalmanFilter):
-    """filterpy's ``ExtendedKalmanFilter`` (``dim_x = dim_z = 4``) whose
-    ``predict_x`` takes the state through the workshop's nonlinear ``f`` with
-    the gyro rate ``u`` (rad/s) and sets ``F`` to the exact Jacobian at the
-    pre-step ``x`` (:func:`estimators.model.propagate_with_jacobian`)."""
-
-    def __init__(self, dt: float):
-        super().__init__(dim_x=4, dim_z=4)
-        self.dt = dt
-
-    def predict_x(self, u=np.zeros(3)) -> None:
-        self.x, self.F = propagate_with_jacobian(self.x, np.asarray(u, float), self.dt)
 
 
 class QuaternionEKF(KalmanEstimator):
@@ -163,7 +147,7 @@ class QuaternionEKF(KalmanEstimator):
         :meth:`~estimators.AttitudeEstimator.step`).
 
     After each :meth:`step` the filterpy object :attr:`filter` (a
-    :class:`WorkshopModelEKF`) is there to inspect: ``x_prior``/``P_prior``
+    :class:`~estimators.ekf_filter.WorkshopModelEKF`) is there to inspect: ``x_prior``/``P_prior``
     (after the predict), ``x_post``/``P_post`` (after the update), ``y``,
     ``S``, ``K``, ``F``. ``Q = exp(pc_exponent) I₄`` and ``R`` are its ``Q``
     and ``R``.
@@ -243,6 +227,7 @@ class QuaternionEKF(KalmanEstimator):
             initial_attitude = initial_state
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        from estimators.ekf_filter import WorkshopModelEKF  # here, not at the top: building a scenario (and --help) needs no filterpy
         self.filter = WorkshopModelEKF(self.dt)
         self.align_sign = boolean("align_sign", align_sign)
         self.gate_probability = gate_probability_setting(gate_probability)

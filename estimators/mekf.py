@@ -123,7 +123,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
                                  rotvec_from_quat, skew, to_body_frame)
@@ -273,6 +272,7 @@ class MultiplicativeEKF(ImuUpdates, AttitudeAndBiasEstimator):
                             heading_density=heading_density, rest_density=rest_density)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
+        from filterpy.kalman import KalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
         self.filter = KalmanFilter(dim_x=6, dim_z=3)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,

@@ -44,7 +44,6 @@ import copy
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from estimators.base import (EstimateTrace, checked_vector_record, quiet_overflow,
                              observations_at)
@@ -91,6 +90,7 @@ def fuse(forward, backward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         mine[~ok_f] = theirs[~ok_f]
     both = ok_f & ok_b
     if both.any():
+        from scipy.spatial.transform import Rotation  # here: a scenario is built without scipy
         forward_rotation = Rotation.from_quat(q_f[both][:, [1, 2, 3, 0]])
         delta = np.concatenate(
             [(forward_rotation.inv() * Rotation.from_quat(q_b[both][:, [1, 2, 3, 0]])).as_rotvec(),

@@ -73,7 +73,6 @@ updates, and the tests run on the version this project resolves.
 from __future__ import annotations
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
 
 from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_from_rotvec,
                                  quat_multiply, relative_rotation, to_body_frame)
@@ -176,6 +175,7 @@ class USQUE(AttitudeAndBiasEstimator):
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
         _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
         _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
+        from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
         points = MerweScaledSigmaPoints(STATE_SIZE, alpha=alpha, beta=beta, kappa=kappa)
         self.filter = UnscentedKalmanFilter(dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
                                             fx=self._fx, points=points)
@@ -272,6 +272,7 @@ class USQUE(AttitudeAndBiasEstimator):
     def _gate(self, z, hx, R, dof: int, sensor: str, **hx_args) -> bool:
         """The gating test with the unscented innovation covariance (filterpy's
         transform of the sigma points through ``hx``, as its update computes it)."""
+        from filterpy.kalman import unscented_transform
         f = self.filter
         sigmas_h = np.atleast_2d([hx(s, **hx_args) for s in f.sigmas_f])
         zp, S = unscented_transform(sigmas_h, f.Wm, f.Wc, R)

@@ -144,7 +144,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from dynamics.quaternion import from_rotation, quat_multiply, rotation_matrix
 
@@ -444,11 +443,13 @@ def _foam(body, reference, weights) -> Solution:
 
 def _matrix_quaternion(A: np.ndarray) -> np.ndarray:
     """The quaternion of a body-to-reference rotation matrix (scipy's, ``w >= 0``)."""
+    from scipy.spatial.transform import Rotation  # here: a scenario is built without scipy
     return from_rotation(Rotation.from_matrix(A))
 
 
 def svd(body, reference, weights) -> np.ndarray:
     """The SVD solution: scipy's ``Rotation.align_vectors(r, b, weights)``."""
+    from scipy.spatial.transform import Rotation  # here: a scenario is built without scipy
     rotation, _ = Rotation.align_vectors(reference, body, weights=weights)
     return from_rotation(rotation)
 

@@ -11,42 +11,15 @@ sampled every ``Ts`` seconds it is a zero-mean Gaussian sequence with
 variance ``p / Ts`` per component (see :mod:`sensors.noise` for conversions
 to per-sample standard deviation and angle random walk).
 """
-from sensors.gyro import Gyro
-from sensors.noise import (
-    allan_deviation,
-    arw_deg_per_rthr_to_noise_power,
-    arw_deg_per_rthr_to_rad_per_rts,
-    arw_rad_per_rts_to_deg_per_rthr,
-    deg_per_hr_to_radps,
-    noise_power_to_arw_deg_per_rthr,
-    noise_power_to_std,
-    radps_to_deg_per_hr,
-    rrw_deg_per_hr_rthr_to_rad_per_s1p5,
-    rrw_rad_per_s1p5_to_deg_per_hr_rthr,
-    std_to_noise_power,
-)
-from sensors.star_tracker import (
-    ARCSEC_PER_RAD,
-    RotationStarTracker,
-    StarTracker,
-    StarTrackerReadings,
-)
+from dynamics.lazy import lazy_exports
 
-__all__ = [
-    "ARCSEC_PER_RAD",
-    "Gyro",
-    "RotationStarTracker",
-    "StarTracker",
-    "StarTrackerReadings",
-    "allan_deviation",
-    "arw_deg_per_rthr_to_noise_power",
-    "arw_deg_per_rthr_to_rad_per_rts",
-    "arw_rad_per_rts_to_deg_per_rthr",
-    "deg_per_hr_to_radps",
-    "noise_power_to_arw_deg_per_rthr",
-    "noise_power_to_std",
-    "radps_to_deg_per_hr",
-    "rrw_deg_per_hr_rthr_to_rad_per_s1p5",
-    "rrw_rad_per_s1p5_to_deg_per_hr_rthr",
-    "std_to_noise_power",
-]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "gyro": ("Gyro",),
+    "noise": ("allan_deviation", "arw_deg_per_rthr_to_noise_power",
+              "arw_deg_per_rthr_to_rad_per_rts", "arw_rad_per_rts_to_deg_per_rthr",
+              "deg_per_hr_to_radps", "noise_power_to_arw_deg_per_rthr", "noise_power_to_std",
+              "radps_to_deg_per_hr", "rrw_deg_per_hr_rthr_to_rad_per_s1p5",
+              "rrw_rad_per_s1p5_to_deg_per_hr_rthr", "std_to_noise_power"),
+    "star_tracker": ("ARCSEC_PER_RAD", "RotationStarTracker", "StarTracker",
+                     "StarTrackerReadings"),
+})

@@ -91,11 +91,12 @@ def test_a_run_that_cannot_fit_in_memory_is_refused_naming_tstop(tmp_path, capsy
 
 
 def test_the_engine_commands_memory_does_not_grow_with_the_run():
-    from benchmarks.cli import COMMANDS, build_parser
+    from benchmarks.cli import build_parser
+    from benchmarks.commands import command
     from benchmarks.resources import engine_bytes
     assert engine_bytes(10**9) == engine_bytes(10**7) < 2**30
     args = build_parser().parse_args(["montecarlo"])
-    COMMANDS["montecarlo"].memory(args, Scenario(tstop=1e7))     # 1e9 steps: accepted
+    command("montecarlo").memory(args, Scenario(tstop=1e7))     # 1e9 steps: accepted
 
 
 def test_memory_check_suggests_the_streaming_engine_where_it_fits():

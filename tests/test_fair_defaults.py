@@ -199,7 +199,8 @@ def test_scenario_files_layer_key_by_key(tmp_path):
 def test_the_command_line_layers_scenarios_and_shows_their_defaults(tmp_path, capsys):
     change = tmp_path / "short.toml"
     change.write_text("tstop = 4.0\n")
-    from benchmarks.cli import build_parser, scenario_from_args
+    from benchmarks.cli import build_parser
+    from benchmarks.commands.scenario_args import scenario_from_args
     args = build_parser().parse_args(["compare", "--scenario", str(SCENARIOS / "smallsat.toml"),
                                       "--scenario", str(change)])
     scenario = scenario_from_args(args)

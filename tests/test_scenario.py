@@ -155,7 +155,8 @@ def test_estimators_build_from_the_scenario_with_their_options():
 
 def test_every_setting_is_declared_once_and_the_tables_come_from_it():
     import dataclasses
-    from benchmarks.cli import SCENARIO_FLAGS, build_parser
+    from benchmarks.cli import build_parser
+    from benchmarks.commands.options import SCENARIO_FLAGS
     from benchmarks.engine.batch import PER_RUN_SETTINGS, RunTable
     from benchmarks.experiments import SWEEP_PARAMETERS
     from benchmarks.scenario import SECTIONS, SETTINGS

@@ -7,7 +7,8 @@ import pandas as pd
 import pytest
 
 from benchmarks import Scenario
-from benchmarks.cli import VECTOR_DEFAULTS, main
+from benchmarks.cli import main
+from benchmarks.commands.options import VECTOR_DEFAULTS
 from benchmarks.experiments.convergence import convergence_study, convergence_time_s
 from benchmarks.experiments.wahba_table import CASES, solver_table
 

@@ -7,17 +7,10 @@ resumable campaigns on disk (:mod:`benchmarks.engine.campaign`).
 The filterpy-based classes in :mod:`estimators` stay the reference; this
 engine is their fast twin for campaigns, checked against them to 1e-9.
 """
-from benchmarks.engine.batch import (
-    ENGINE_ESTIMATORS,
-    HEALTH_COLUMNS,
-    MEDIAN_RELATIVE_ERROR,
-    PER_RUN_SETTINGS,
-    BatchResult,
-    RunTable,
-    make_runs,
-    run_batch,
-)
-from benchmarks.engine.runner import run_many
+from dynamics.lazy import lazy_exports
 
-__all__ = ["ENGINE_ESTIMATORS", "HEALTH_COLUMNS", "MEDIAN_RELATIVE_ERROR", "PER_RUN_SETTINGS",
-           "BatchResult", "RunTable", "make_runs", "run_batch", "run_many"]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "batch": ("ENGINE_ESTIMATORS", "HEALTH_COLUMNS", "MEDIAN_RELATIVE_ERROR", "PER_RUN_SETTINGS",
+              "BatchResult", "RunTable", "make_runs", "run_batch"),
+    "runner": ("run_many",),
+})

@@ -4,6 +4,7 @@
 module                 what it does
 =====================  ===============================================
 ``runs``               one run, a comparison, a sweep, the animation
+``sweep_parameters``   the settings a sweep can vary
 ``tuning``             Activity 3b: fminbnd-style tuning of pc_exponent
 ``landscape``          the loss landscape over pc_exponent
 ``consistency``        NEES/NIS campaigns, verdicts, efficiency
@@ -14,21 +15,10 @@ module                 what it does
 
 The everyday ones are importable from here: ``experiments.compare(...)``.
 """
-from benchmarks.experiments.runs import (
-    SWEEP_COLUMNS,
-    SWEEP_PARAMETERS,
-    TRACE_COLUMNS,
-    SweepParameter,
-    animate,
-    compare,
-    flight_comparison_figure,
-    run_one,
-    sweep,
-    sweep_scenarios,
-    write_json,
-    write_summary,
-)
+from dynamics.lazy import lazy_exports
 
-__all__ = ["SWEEP_COLUMNS", "SWEEP_PARAMETERS", "TRACE_COLUMNS", "SweepParameter", "animate",
-           "compare", "flight_comparison_figure", "run_one", "sweep", "sweep_scenarios",
-           "write_json", "write_summary"]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "runs": ("SWEEP_COLUMNS", "TRACE_COLUMNS", "animate", "compare", "flight_comparison_figure",
+             "run_one", "sweep", "sweep_scenarios", "write_summary"),
+    "sweep_parameters": ("SWEEP_PARAMETERS", "SweepParameter"),
+})

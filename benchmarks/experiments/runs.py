@@ -6,18 +6,16 @@ own scripts share one implementation.
 """
 from __future__ import annotations
 
-import json
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
-from benchmarks.output import figure_bytes, write_bytes, write_csv, write_text
+from benchmarks.output import figure_bytes, write_bytes, write_csv
 from benchmarks.figures.plots import comparison_figure, flight_figure
 from benchmarks.output import progress
-from benchmarks.scenario import SECTIONS, SETTINGS, Scenario
+from benchmarks.scenario import Scenario
+from benchmarks.experiments.sweep_parameters import SWEEP_PARAMETERS
 from benchmarks.simulation import WORKSHOP_ESTIMATORS, RunResult, simulate
 from dynamics.quaternion import attitude_error_vector_rad
 from dynamics.validation import InvalidParameterError
@@ -27,35 +25,6 @@ from sensors.noise import radps_to_deg_per_hr
 TRACE_COLUMNS = ("time_s", "q_true_w", "q_true_x", "q_true_y", "q_true_z",
                  "q_est_w", "q_est_x", "q_est_y", "q_est_z", "error_deg")
 
-
-@dataclass(frozen=True)
-class SweepParameter:
-    """A scenario setting that ``sweep`` can vary, how its legend reads, and
-    the conversion of a swept value to the field's unit (None: as given)."""
-
-    field: str
-    legend: str     # format string; {value} and {label} (the estimator's label)
-    convert: object = None
-    unit: str = ""  # of the swept value, as given
-
-
-def _section_parameters() -> dict:
-    """Every key a scenario section declares sweepable, as ``SECTION.KEY``."""
-    units = {(setting.section, setting.key): setting.unit for setting in SETTINGS}
-    return {f"{section}.{key}": SweepParameter(spec.field, f"{section}.{key} = {{value:g}}",
-                                               spec.convert, units.get((section, key), ""))
-            for section, keys in SECTIONS.items() for key, spec in keys.items()
-            if spec.sweepable}
-
-
-#: Sweepable settings by their command-line name: the workshop's four (the
-#: settings declared with a ``sweep`` name), then every sweepable key of the
-#: scenario's sections as ``SECTION.KEY`` (benchmarks.scenario.SETTINGS).
-SWEEP_PARAMETERS = {
-    **{setting.sweep: SweepParameter(setting.field, setting.legend, unit=setting.unit)
-       for setting in SETTINGS if setting.sweep},
-    **_section_parameters(),
-}
 
 SWEEP_COLUMNS = ("param", "value") + STAT_COLUMNS
 
@@ -186,25 +155,6 @@ def sweep(scenario: Scenario, estimator: str, param: str, values, seed: int, out
     write_csv(out / "sweep.csv", SWEEP_COLUMNS, ([row[c] for c in SWEEP_COLUMNS] for row in rows))
     write_bytes(out / "sweep.png", drawn)
     return rows
-
-
-def write_json(path: Path, data: dict) -> None:
-    """``data`` as JSON, a NaN or an infinity written as null (JSON has neither)."""
-    write_text(path, json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n")
-
-
-def _json_safe(value):
-    if isinstance(value, dict):
-        return {key: _json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(item) for item in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, np.generic):
-        return _json_safe(value.item())
-    if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
-    return value
 
 
 def animate(scenario: Scenario, estimator: str | None, seed: int, out: Path, every: int = 50,

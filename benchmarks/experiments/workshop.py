@@ -15,7 +15,7 @@ import numpy as np
 from benchmarks import experiments
 from benchmarks.experiments.landscape import compute_landscape, pc_grid, write_landscape
 from benchmarks.metrics import STAT_COLUMNS
-from benchmarks.output import write_text
+from benchmarks.output import write_json, write_text
 from benchmarks.bounds import check_bound_inputs
 from benchmarks.output import progress
 from benchmarks.scenario import Scenario
@@ -269,7 +269,7 @@ def _activity_3b(run: _Run, folder: Path) -> str:
     """8. Activity 3b: the bounded minimiser."""
     tune = tune_pc_exponent(run.scenario, (SEED,), quiet=True)
     run.tuned_pc_exponent = tune.pc_exponent
-    experiments.write_json(folder / "tune.json", tune.as_json())
+    write_json(folder / "tune.json", tune.as_json())
     _, tuned = experiments.compare(run.scenario.replace(pc_exponent=tune.pc_exponent), SEED,
                                    folder, figure_name="tune.png", summary_name="summary.csv")
     run.count(tuned)
