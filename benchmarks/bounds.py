@@ -101,7 +101,12 @@ class AttitudeBound:
 def mean_angle_rad(covariance: np.ndarray) -> float:
     """``E|δθ|`` for ``δθ ~ N(0, covariance)`` (3x3), from fixed normal draws."""
     root = np.linalg.cholesky(covariance + 1e-300 * np.eye(3))
-    return float(np.mean(np.linalg.norm(_MEAN_DRAWS @ root.T, axis=1)))
+    # np.linalg.norm(axis=1)'s own steps (square, sum along the row, root),
+    # in place: the same numbers, in less than half the time (no temporaries).
+    squared = _MEAN_DRAWS @ root.T
+    np.multiply(squared, squared, out=squared)
+    lengths = np.add.reduce(squared, axis=1)
+    return float(np.mean(np.sqrt(lengths, out=lengths)))
 
 
 def linear_model(scenario):

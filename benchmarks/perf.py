@@ -2,6 +2,9 @@
 
 From one run on this machine:
 
+0. the command line's start-up: whole-process seconds of ``--help``,
+   ``--version``, a command's ``--help`` and a refused argument (the median
+   of ``--repeats``; ``--startup``: this part only);
 1. the per-run (filterpy) path: seconds for one 50-s run of each registered
    estimator and its run-steps per second;
 2. the batched engine at batch sizes 1, 64 and 1024 — the EKF alone and the
@@ -10,7 +13,8 @@ From one run on this machine:
    ratio to the filterpy EKF; then every estimator with a kernel at batch
    1024, on the workshop's sensors (with its ratio to the per-run path) and
    on the flight scenario's (bias random walk, rotation star tracker);
-3. the wall time of a 73-value × 100-seed loss landscape (its computation);
+3. the wall time of a 73-value × 100-seed loss landscape: its computation,
+   and the whole ``attitude-bench landscape`` process (figures and GIF too);
 4. the peak resident memory and wall time of a 10,000-run statistics-only
    campaign of the default scenario, run as a separate ``attitude-bench
    montecarlo`` process and read from the operating system's accounting;
@@ -81,6 +85,36 @@ def landscape_seconds(scenario: Scenario) -> float:
     return time.perf_counter() - start
 
 
+#: The command lines whose start-up is timed: each answers without running anything.
+STARTUP_COMMANDS = (("--help",), ("--version",), ("compare", "--help"),
+                    ("run", "--estimator", "nope"))
+#: The landscape of issue 32's target, as a user types it.
+LANDSCAPE_COMMAND = ("landscape", "--pc-min", "-18", "--pc-max", "0", "--pc-step", "0.25",
+                     "--seeds", "0-99", "--quiet")
+
+
+def process_seconds(arguments, repeats: int) -> float:
+    """Median whole-process seconds of ``python -m benchmarks ARGUMENTS``
+    (start-up included; its output thrown away)."""
+    command = [sys.executable, "-m", "benchmarks", *arguments]
+    return _median_seconds(lambda: subprocess.run(command, stdout=subprocess.DEVNULL,
+                                                  stderr=subprocess.DEVNULL), repeats)
+
+
+def startup_section(repeats: int) -> None:
+    """Part 0: how soon the command line answers."""
+    print("command line start-up (whole process, median):")
+    for arguments in STARTUP_COMMANDS:
+        print(f"  attitude-bench {' '.join(arguments):<28} "
+              f"{process_seconds(arguments, max(repeats, 5)):.2f} s")
+
+
+def landscape_process_seconds(repeats: int) -> float:
+    """Median whole-process seconds of :data:`LANDSCAPE_COMMAND`."""
+    with tempfile.TemporaryDirectory() as out:
+        return process_seconds(LANDSCAPE_COMMAND + ("--out", out), repeats)
+
+
 def campaign_peak_memory(runs: int) -> tuple[float, float]:
     """(peak MiB, wall seconds) of a statistics-only campaign in a child process."""
     with tempfile.TemporaryDirectory() as out:
@@ -118,14 +152,19 @@ def main(argv=None) -> int:
                         help="runs of the memory campaign (default 10000)")
     parser.add_argument("--vectors", action="store_true",
                         help="only the vector sensors' part (the CubeSat's MEKF and USQUE)")
+    parser.add_argument("--startup", action="store_true",
+                        help="only the command line's start-up")
     args = parser.parse_args(argv)
     if args.vectors:
         vector_section(args.repeats)
         return 0
+    startup_section(args.repeats)
+    if args.startup:
+        return 0
     scenario = Scenario()
     steps = scenario.n_steps
 
-    print(f"scenario: {scenario.tstop:g} s at {1 / scenario.dt:g} Hz ({steps} steps per run)")
+    print(f"\nscenario: {scenario.tstop:g} s at {1 / scenario.dt:g} Hz ({steps} steps per run)")
     print("\nper-run path (filterpy EKF, MEKF and UKF; hand-written dead reckoning):")
     per_run = per_run_seconds(scenario, max(args.repeats, 3))
     for name, seconds in per_run.items():
@@ -152,7 +191,9 @@ def main(argv=None) -> int:
         print(f"  {name:<22} {workshop:>14,.0f} {workshop * per_run[name] / steps:>6,.0f}x "
               f"{flight:>16,.0f}")
 
-    print(f"\nlandscape, 73 pc values x 100 seeds: {landscape_seconds(scenario):.1f} s")
+    print(f"\nlandscape, 73 pc values x 100 seeds: {landscape_seconds(scenario):.1f} s "
+          f"computing; {landscape_process_seconds(args.repeats):.1f} s the whole process "
+          f"(attitude-bench {' '.join(LANDSCAPE_COMMAND)}, figures and GIF included)")
     peak_mib, wall = campaign_peak_memory(args.campaign_runs)
     print(f"campaign, {args.campaign_runs:,} runs x 3 estimators, statistics only: "
           f"peak {peak_mib:,.0f} MiB, {wall:.1f} s wall (whole process)")

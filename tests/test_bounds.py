@@ -3,6 +3,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from scipy.linalg import solve_discrete_are
 
 from benchmarks import Scenario
@@ -41,6 +44,19 @@ def test_mean_angle_of_an_isotropic_gaussian_is_the_maxwell_mean():
     s = 0.01
     assert mean_angle_rad(s * s * np.eye(3)) == pytest.approx(2 * s * np.sqrt(2 / np.pi),
                                                               rel=5e-3)
+
+
+@settings(max_examples=25, deadline=None)
+@given(arrays(np.float64, (3, 3), elements=st.floats(-1.0, 1.0)),
+       st.floats(1e-12, 1e-2), st.floats(1e-6, 1.0))
+def test_mean_angle_is_numpys_norm_bit_for_bit(factor, floor, scale):
+    # The in-place steps are np.linalg.norm(axis=1)'s own: the same number,
+    # to the last bit, for any covariance (the landscape's bound unchanged).
+    from benchmarks.bounds import _MEAN_DRAWS
+    covariance = scale * (factor @ factor.T + floor * np.eye(3))
+    root = np.linalg.cholesky(covariance + 1e-300 * np.eye(3))
+    expected = float(np.mean(np.linalg.norm(_MEAN_DRAWS @ root.T, axis=1)))
+    assert mean_angle_rad(covariance) == expected
 
 
 def test_workshop_ekf_at_its_best_pc_is_at_the_bound():

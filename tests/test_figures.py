@@ -303,3 +303,26 @@ def test_sweep_and_animation_name_their_units(tmp_path):
     from benchmarks.figures.animation import AttitudeView
     view = AttitudeView(Figure(), with_estimate=False)
     assert view.subtitle.get_text().endswith(" s")
+
+
+def test_the_blitting_gif_writer_writes_what_pillow_would_write(tmp_path):
+    # Its frames get their palettes in a worker while the next is drawn; the
+    # file must be the one Pillow's GIF writer makes from the same RGBA frames.
+    from PIL import Image
+    from benchmarks.figures.plots import BlittingPillowWriter, new_figure
+    figure, (ax,) = new_figure(width=3.0, height=2.0)
+    line, = ax.plot(np.linspace(0, 1, 50), np.zeros(50))
+    ax.set_ylim(-1, 1)
+    writer = BlittingPillowWriter([line], fps=5)
+    rgba = []
+    with writer.saving(figure, tmp_path / "a.gif", 50):
+        for phase in range(4):
+            line.set_ydata(np.sin(np.linspace(0, 6, 50) + phase))
+            writer.grab_frame()
+            canvas = figure.canvas
+            rgba.append(Image.frombuffer("RGBA", canvas.get_width_height(),
+                                         bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1))
+    rgba[0].save(tmp_path / "b.gif", save_all=True, append_images=rgba[1:], duration=200, loop=0)
+    written = (tmp_path / "a.gif").read_bytes()
+    assert written == (tmp_path / "b.gif").read_bytes()
+    assert Image.open(tmp_path / "a.gif").n_frames == 4       # the frames differ: none merged

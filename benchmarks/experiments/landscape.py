@@ -204,15 +204,22 @@ def write_animation(landscape: Landscape, path, fps: int = 8, dpi: int = 80) -> 
     """The two panels animated over the sweep, as a GIF; returns the frame count."""
     figure, ekf_line, vertical = _draw(landscape, 0)
     left = figure.axes[0]
+    # The title's words stay in the background; only the value is drawn
+    # again each frame (redrawing the whole title was a quarter of the GIF's time).
+    left.set_title("Absolute Attitude Error, pc exponent =")
+    value = left.annotate("", xy=(1.0, 1.0), xycoords=left.title, ha="left", va="top",
+                          xytext=(3, 0), textcoords="offset points",
+                          fontsize=left.title.get_fontsize(), color=left.title.get_color(),
+                          fontweight=left.title.get_fontweight())
     freeze_layout(figure)
-    writer = BlittingPillowWriter([ekf_line, vertical, left.title], fps=fps)
+    writer = BlittingPillowWriter([ekf_line, vertical, value], fps=fps)
     indices = animation_indices(len(landscape.pc_values))
     with atomic_path(path) as temporary, writer.saving(figure, temporary, dpi):
         for index in indices:
             pc = landscape.pc_values[index]
             ekf_line.set_ydata(landscape.ekf_curves[index])
             vertical.set_xdata([pc, pc])
-            left.set_title(f"Absolute Attitude Error, pc exponent = {pc:g}")
+            value.set_text(f"{pc:g}")
             writer.grab_frame()
     return len(indices)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import textwrap
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import seaborn as sns
@@ -135,6 +136,19 @@ class BlittingPillowWriter(PillowWriter):
         super().__init__(fps=fps)
         self._animated = list(animated_artists)
         self._background = None
+        self._palettes = None
+
+    def setup(self, fig, outfile, dpi=None):
+        super().setup(fig, outfile, dpi)
+        # Each frame's palette is chosen (Pillow's GIF writer would do it in
+        # finish(), one frame after another) in a worker while the next frame
+        # is drawn: Pillow releases the GIL there, so it costs no wall time.
+        self._palettes = ThreadPoolExecutor(max_workers=1)
+
+    def finish(self):
+        self._frames = [frame.result() for frame in self._frames]
+        self._palettes.shutdown()
+        super().finish()
 
     def grab_frame(self, **savefig_kwargs):
         canvas = self.fig.canvas
@@ -150,8 +164,22 @@ class BlittingPillowWriter(PillowWriter):
         for artist in self._animated:
             self.fig.draw_artist(artist)
         # PillowWriter keeps its frames in _frames and writes them in finish().
-        self._frames.append(Image.frombuffer("RGBA", canvas.get_width_height(),
-                                             bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1))
+        frame = Image.frombuffer("RGBA", canvas.get_width_height(), bytes(canvas.buffer_rgba()),
+                                 "raw", "RGBA", 0, 1)
+        self._frames.append(self._palettes.submit(_gif_frame, frame))
+
+
+def _gif_frame(frame):
+    """``frame`` as Pillow's GIF writer would convert it (GifImagePlugin's
+    ``_normalize_mode``: an adaptive palette, a fully transparent colour as
+    the GIF's transparency), so that it writes the same file."""
+    frame = frame.convert("P", palette=Image.Palette.ADAPTIVE)
+    if frame.palette.mode == "RGBA":
+        for rgba, index in frame.palette.colors.items():
+            if rgba[3] == 0:
+                frame.info["transparency"] = index
+                break
+    return frame
 
 
 #: Body axes as the per-axis figures name them (not roll, pitch and yaw,
