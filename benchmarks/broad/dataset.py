@@ -31,6 +31,7 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
+from sensors.declared import load_declared
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -146,7 +147,9 @@ class BroadDataset:
         def refuse(rule: str):
             raise InvalidParameterError("trial" if self.parameter == "broad"
                                         else f"{self.parameter} trial", shown, rule)
-        if path.suffix == ".npz":
+        if path.suffix == ".toml":
+            recording = load_declared(path)
+        elif path.suffix == ".npz":
             try:
                 recording = load_recording(path, name)
             except InvalidParameterError as err:
@@ -173,7 +176,8 @@ class BroadDataset:
         rule = runnable_rule(recording)
         if rule:
             refuse(rule)
-        _note_dropouts(recording, path)
+        if path.suffix != ".toml":       # there, a sensor on its own clock reads at some samples
+            _note_dropouts(recording, path)
         return recording
 
 
@@ -244,11 +248,17 @@ def open_broad(folder, parameter: str = "broad") -> BroadDataset:
 
     def refuse(rule: str):
         raise InvalidParameterError(parameter, str(folder), rule)
+    if folder.suffix == ".toml" and folder.is_file():
+        return declared_dataset([folder], folder.parent, parameter)
     if not folder.is_dir():
-        refuse("is not a folder")
+        refuse("is not a folder, nor a [recording] .toml file")
     index = folder / "trials.json"
     if not index.is_file():
-        refuse("has no trials.json (the dataset's index of trials and groups)")
+        declared = sorted(folder.glob("*.toml"))
+        if declared:
+            return declared_dataset(declared, folder, parameter)
+        refuse("has no trials.json (the dataset's index of trials and groups) and no "
+               "[recording] .toml files")
     groups, trials = read_index(index, refuse)
     for sub, suffix in LAYOUTS:
         files = {path.stem: path for path in sorted((folder / sub).glob(f"*{suffix}"))
@@ -258,6 +268,20 @@ def open_broad(folder, parameter: str = "broad") -> BroadDataset:
                                 parameter=parameter)
     refuse("holds none of the trials its trials.json names (looked in data_mat/*.mat, "
            "data_hdf5/*.hdf5 and *.npz)")
+
+
+#: The one group of a dataset of declared recordings.
+RECORDINGS_GROUP = Group("recordings", 1, "your recordings")
+
+
+def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
+    """A dataset of ``[recording]`` files (:mod:`sensors.declared`), one
+    trial each, named by its file, all in one group."""
+    files = {path.stem: path for path in paths}
+    trials = {name: {"description": f"declared by {path.name}",
+                     "groups": [RECORDINGS_GROUP.name]} for name, path in files.items()}
+    return BroadDataset(folder=folder, groups=(RECORDINGS_GROUP,), trials=trials, files=files,
+                        parameter=parameter)
 
 
 #: What ``trials.json`` must hold, in words (the published index's layout).

@@ -29,7 +29,8 @@ def arguments(commands, defaults) -> None:
         "broad_trials.csv, broad_groups.csv, broad.png and broad_trial.png")
     broad.add_argument("--broad", "--test", type=Path, metavar="DIR",
                        help="a BROAD folder (trials.json with data_mat/, data_hdf5/ or .npz "
-                       "trials; default: $ATTITUDE_BENCH_BROAD, else the two shipped trials)")
+                       "trials), a [recording] .toml file declaring your own log, or a folder "
+                       "of them (default: $ATTITUDE_BENCH_BROAD, else the two shipped trials)")
     broad.add_argument("--train", type=Path, metavar="DIR",
                        help="tune every estimator on all the trials of this other folder "
                        "(the same layout) and score the settings on --broad's: will they "

@@ -1,0 +1,411 @@
+"""A logger's file, declared rather than converted: a ``[recording]`` TOML
+names the file and, for each sensor, its time column, its columns, its unit
+(and for the reference its convention and frame); :func:`load_declared`
+reads it into a checked :class:`~sensors.recording.Recording`.
+
+.. code-block:: toml
+
+    [recording]
+    file = "phone.csv"          # beside this file, or an absolute path
+    time_unit = "s"             # of every time column: s, ms, us or ns
+
+    [recording.gyro]            # required: its samples are the recording's clock
+    time = "t"
+    columns = ["gx", "gy", "gz"]
+    unit = "deg/s"              # rad/s or deg/s
+
+    [recording.accelerometer]   # unit: m/s^2 or g
+    [recording.magnetometer]    # unit: uT, nT, gauss or mT
+    [recording.reference]       # quaternion: 4 columns, order = "wxyz" or "xyzw";
+                                # or Euler angles: 3 columns, sequence = "ZYX", unit
+                                # = "deg" or "rad"; frame = "ENU" (default) or "NED"
+
+The formats: CSV and Parquet (pandas), ``.npz`` (numpy), ``.mat`` (scipy)
+and HDF5 (h5py); a column is a 1-D array, or ``columns`` names one (N, 3)
+or (N, 4) array. Each sensor keeps its own timestamps: the gyro's samples
+are the recording's steps (its rate the median of their intervals), and
+every other reading is taken at the first gyro sample at or after its time,
+as the star tracker's readings are (:mod:`sensors.star_tracker`); a sample
+with no reading of a sensor holds none (a row of zeros: a dropout, which
+the filters skip). A row of empty cells (NaN) is no reading, as a table that
+merges sensors on their own clocks holds. The reference is interpolated on
+the gyro's times (spherical, between readings not further apart than
+:data:`REFERENCE_GAP_FACTOR` of its typical interval), NaN elsewhere.
+
+What a logger gets wrong is one line each: an unknown column (the file's
+columns are listed), times that go back or a gap in the gyro's clock, a row
+that is partly empty, and a unit that cannot be right (rates beyond any
+gyro's range; gravity far from 9.8 m/s², or a field far from the Earth's, in
+the declared unit, with the unit that would fit).
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from dynamics.environment import STANDARD_GRAVITY_MPS2
+from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
+from sensors.recording import Recording, VECTOR_LIMITS
+
+#: Each time unit in seconds.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: Each sensor's units: name → factor to the toolkit's unit (rad/s, m/s², µT).
+UNITS = {
+    "gyro": {"rad/s": 1.0, "deg/s": math.pi / 180.0},
+    "accelerometer": {"m/s^2": 1.0, "g": STANDARD_GRAVITY_MPS2},
+    "magnetometer": {"uT": 1.0, "nT": 1e-3, "gauss": 100.0, "mT": 1e3},
+}
+SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
+#: A gap in the gyro's clock: an interval this many times its median.
+GAP_FACTOR = 3.0
+#: The reference is interpolated between readings at most this many of its
+#: typical intervals apart (a longer one is a gap: the markers were not seen).
+REFERENCE_GAP_FACTOR = 1.5
+#: Plausible medians of each vector sensor's norm in its toolkit unit: in
+#: motion an accelerometer's median stays near g; the Earth's field is 25 to
+#: 65 µT, a room's or a vehicle's disturbances allowed for.
+PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: Frames of the reference's world frame, as rotations to East-North-Up.
+FRAMES = ("ENU", "NED")
+
+
+def load_declared(path) -> Recording:
+    """The recording that the ``[recording]`` TOML at ``path`` declares,
+    checked; :class:`InvalidParameterError` names the file and the key."""
+    path = Path(path)
+    declaration = _declaration(path)
+    table = read_table(_data_file(path, declaration))
+    clock_unit = _choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
+                         TIME_UNITS)
+    sections = {name: declaration[name] for name in SENSORS if name in declaration}
+    if "gyro" not in sections:
+        _refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
+                "recording's clock")
+    read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit])
+            for name, section in sections.items()}
+    gyro_time, gyro = read["gyro"]
+    rate = 1.0 / float(np.median(np.diff(gyro_time)))
+    channels = {name: _on_clock(gyro_time, *read[name]) for name in ("accelerometer",
+                                                                     "magnetometer")
+                if name in read}
+    for name, values in channels.items():
+        _check_norm(path, name, values, sections[name]["unit"])
+    if "accelerometer" in channels:
+        _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
+                       sections["gyro"]["unit"])
+    reference = (_reference(path, gyro_time, *read["reference"], sections["reference"])
+                 if "reference" in read else np.full((len(gyro_time), 4), np.nan))
+    return Recording(name=path.stem, gyro_radps=gyro,
+                     reference_quat=reference,
+                     movement=~np.isnan(reference).any(axis=1), rate_hz=rate,
+                     info=str(declaration.get("description", "")),
+                     accelerometer_mps2=channels.get("accelerometer"),
+                     magnetometer_uT=channels.get("magnetometer"))
+
+
+def _refuse(path: Path, key: str, value, rule: str):
+    where = f"{path.name}: {key}" if key else path.name
+    raise InvalidParameterError(where, value, rule)
+
+
+def _declaration(path: Path) -> dict:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise InvalidParameterError("recording", str(path), f"cannot be read "
+                                    f"({type(err).__name__}: {err})") from None
+    try:
+        declared = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        _refuse(path, "", str(path), f"is not TOML ({err})")
+    if not isinstance(declared.get("recording"), dict):
+        _refuse(path, "recording", None, "must be a [recording] section naming the file "
+                "and its sensors' columns")
+    known = {"file", "description", "time_unit", *SENSORS}
+    unknown = sorted(set(declared["recording"]) - known)
+    if unknown:
+        _refuse(path, f"recording.{unknown[0]}", declared["recording"][unknown[0]],
+                f"is not a [recording] key; known: {', '.join(sorted(known))}")
+    return declared["recording"]
+
+
+def _data_file(path: Path, declaration: dict) -> Path:
+    given = declaration.get("file")
+    if not isinstance(given, str) or not given:
+        _refuse(path, "recording.file", given, "must name the logged file")
+    data = Path(given) if Path(given).is_absolute() else path.parent / given
+    if not data.is_file():
+        _refuse(path, "recording.file", given, f"is not a file (looked for {data})")
+    return data
+
+
+def read_table(data: Path) -> dict:
+    """The file's columns, name → array (a CSV's or Parquet's columns, an
+    archive's arrays, a MATLAB file's variables, an HDF5 file's datasets)."""
+    suffix = data.suffix.lower()
+    try:
+        if suffix in (".csv", ".txt"):
+            import pandas as pd
+            frame = pd.read_csv(data)
+            return {str(name): frame[name].to_numpy() for name in frame.columns}
+        if suffix == ".parquet":
+            import pandas as pd
+            frame = pd.read_parquet(data)
+            return {str(name): frame[name].to_numpy() for name in frame.columns}
+        if suffix == ".npz":
+            with np.load(data, allow_pickle=False) as archive:
+                return {key: archive[key] for key in archive.files}
+        if suffix == ".mat":
+            from scipy.io import loadmat
+            return {key: value for key, value in loadmat(data).items()
+                    if not key.startswith("__")}
+        if suffix in (".h5", ".hdf5"):
+            return _read_hdf5(data)
+    except ImportError as err:
+        raise InvalidParameterError("recording.file", str(data), f"needs {err.name}, which is "
+                                    "not installed (pip install it)") from None
+    except Exception as err:     # a corrupt or foreign file: one line, whatever the reader
+        raise InvalidParameterError("recording.file", str(data), f"cannot be read "
+                                    f"({type(err).__name__}: {err})") from None
+    raise InvalidParameterError("recording.file", str(data), "must be .csv, .parquet, .npz, "
+                                ".mat, .h5 or .hdf5")
+
+
+def _read_hdf5(data: Path) -> dict:
+    import h5py
+    found = {}
+    with h5py.File(data, "r") as handle:
+        handle.visititems(lambda name, item: found.__setitem__(name, item[()])
+                          if isinstance(item, h5py.Dataset) else None)
+    return found
+
+
+def _choice(path: Path, key: str, value, choices) -> str:
+    if value not in choices:
+        _refuse(path, key, value, f"must be one of {', '.join(choices)}")
+    return value
+
+
+def _sensor(path: Path, table: dict, name: str, section, time_scale: float):
+    """``(times s, values)`` of one declared sensor: its rows with a reading
+    (a row of empty cells is none), converted to the toolkit's unit."""
+    key = f"recording.{name}"
+    if not isinstance(section, dict):
+        _refuse(path, key, section, "must be a section with time, columns and unit")
+    known = {"time", "columns", "unit", "order", "sequence", "frame"}
+    unknown = sorted(set(section) - known)
+    if unknown:
+        _refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
+                f"is not a key of a sensor; known: {', '.join(sorted(known))}")
+    times = _column(path, table, f"{key}.time", section.get("time")) * time_scale
+    width = 4 if name == "reference" and "sequence" not in section else 3
+    values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
+    if len(values) != len(times):
+        _refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
+                f"its time column {section.get('time')!r} holds {len(times)}")
+    empty = np.isnan(values).all(axis=1) | np.isnan(times)
+    partly = np.flatnonzero(np.isnan(values).any(axis=1) & ~empty)
+    if len(partly):
+        _refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
+                f"empty ({values[partly[0]].tolist()}); a row is a reading or empty")
+    times, values = times[~empty], values[~empty]
+    if not len(times):
+        _refuse(path, f"{key}.columns", section.get("columns"), "hold no reading")
+    if name != "reference":
+        unit = _choice(path, f"{key}.unit", section.get("unit"), UNITS[name])
+        values = values * UNITS[name][unit]
+    if name == "gyro":
+        _check_clock(path, times)
+        _check_rates(path, values, section["unit"])
+    else:
+        _check_increasing(path, f"{key}.time", times)
+    return times, values
+
+
+def _column(path: Path, table: dict, key: str, name) -> np.ndarray:
+    if not isinstance(name, str) or name not in table:
+        _refuse(path, key, name, f"must name a column of the file; it has "
+                f"{_listed(table)}")
+    column = np.asarray(table[name])
+    if column.dtype.kind not in "iuf" or column.squeeze().ndim != 1:
+        _refuse(path, key, name, f"must be one column of numbers; it holds {column.dtype} "
+                f"of shape {column.shape}")
+    return column.astype(float).reshape(-1)
+
+
+def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray:
+    """``names`` (a list of ``width`` columns, or one (N, width) array's name)."""
+    if isinstance(names, str) and names in table:
+        array = np.asarray(table[names], dtype=float)
+        if array.ndim == 2 and array.shape[0] == width and array.shape[1] != width:
+            array = array.T               # stored one row per axis (MATLAB, HDF5)
+        if array.ndim != 2 or array.shape[1] != width:
+            _refuse(path, key, names, f"must be an (N, {width}) array; it is {array.shape}")
+        return array
+    if not isinstance(names, list) or len(names) != width:
+        _refuse(path, key, names, f"must be a list of {width} columns, or the name of one "
+                f"(N, {width}) array; the file has {_listed(table)}")
+    return np.column_stack([_column(path, table, key, name) for name in names])
+
+
+def _listed(table: dict) -> str:
+    names = list(table)
+    return ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
+
+
+def _check_increasing(path: Path, key: str, times: np.ndarray) -> None:
+    back = np.flatnonzero(np.diff(times) <= 0)
+    if len(back):
+        row = int(back[0]) + 1
+        _refuse(path, key, float(times[row]), f"goes back or repeats at reading {row} (after "
+                f"{times[row - 1]:.9g} s); times must increase")
+
+
+def _check_clock(path: Path, times: np.ndarray) -> None:
+    """The gyro's times: increasing, without a gap (:data:`GAP_FACTOR`)."""
+    _check_increasing(path, "recording.gyro.time", times)
+    if len(times) < 2:
+        _refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
+                "at least two")
+    steps = np.diff(times)
+    typical = float(np.median(steps))
+    gaps = np.flatnonzero(steps > GAP_FACTOR * typical)
+    if len(gaps):
+        row = int(gaps[0])
+        _refuse(path, "recording.gyro.time", float(times[row + 1]), f"jumps by "
+                f"{steps[row]:.6g} s after reading {row} ({times[row]:.9g} s), "
+                f"{steps[row] / typical:.0f} times its typical {typical:.6g} s; a recording "
+                "is one unbroken gyro log: split the file at the gap")
+
+
+def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
+    fastest = float(np.abs(rates).max())
+    if fastest > MAX_MEASURED_RATE_RADPS:
+        hint = (" (were they deg/s? unit = \"deg/s\")" if unit == "rad/s" and
+                fastest * math.pi / 180 <= MAX_MEASURED_RATE_RADPS else "")
+        _refuse(path, "recording.gyro.unit", unit, f"gives rates up to {fastest:.4g} rad/s, "
+                f"beyond any gyro's range ({MAX_MEASURED_RATE_RADPS:g} rad/s){hint}")
+
+
+#: The gyro's unit is checked against the accelerometer's turning: gravity
+#: seen from the body turns as ``ȧ = -ω × a``. Both are averaged over blocks
+#: this long, s (the accelerometer's noise, differentiated, would drown the
+#: turning); where the two agree in shape (correlation above this; a turn
+#: about the vertical turns no gravity, and is no evidence), the scale that
+#: fits them must be within this factor of 1 (a unit's mistake is 57).
+TURNING_WINDOW_S, TURNING_CORRELATION, TURNING_FACTOR = 0.1, 0.3, 10.0
+
+
+def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
+                   unit: str) -> None:
+    """Refuse a gyro whose rates, in the declared unit, turn gravity 57
+    times faster or slower than the accelerometer sees it turn."""
+    if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
+        return                            # too few accelerometer readings on the clock
+    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+    blocks = len(rates) // steps
+    if blocks < 3:
+        return
+    force = specific_force[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
+    rate = rates[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
+    change = np.diff(force, axis=0) / (steps * dt)
+    turning = -np.cross((rate[1:] + rate[:-1]) / 2, (force[1:] + force[:-1]) / 2)
+    seen, predicted = float(np.sum(change * change)), float(np.sum(turning * turning))
+    if seen == 0.0 or predicted == 0.0:
+        return
+    fit = float(np.sum(change * turning))
+    if fit / math.sqrt(seen * predicted) < TURNING_CORRELATION:
+        return                            # the turning is not seen clearly enough to judge
+    scale = fit / predicted
+    if 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR:
+        return
+    fitting = [other for other, factor in UNITS["gyro"].items()
+               if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]
+    hint = f" (were they {fitting[0]}? unit = \"{fitting[0]}\")" if fitting else ""
+    _refuse(path, "recording.gyro.unit", unit, f"turns gravity {1 / scale:.3g} times as fast "
+            f"as the accelerometer sees it turn{hint}")
+
+
+def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
+    """A vector sensor's median norm, where it read, plausible in its unit."""
+    norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
+    median = float(np.median(norms))
+    low, high = PLAUSIBLE_NORMS[name]
+    limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]
+    if low <= median <= high and np.abs(values).max() <= limit:
+        return
+    fitting = [other for other, factor in UNITS[name].items() if other != unit and
+               low <= median / UNITS[name][unit] * factor <= high]
+    hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""
+    _refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
+            f"{shown}, not within {low:g} to {high:g} {shown} as "
+            f"{'gravity' if name == 'accelerometer' else 'the Earth field'} would be{hint}")
+
+
+def _on_clock(clock: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` read at ``times``, each at the first ``clock`` sample at or
+    after it (the last of several there); zeros where none was read."""
+    period = float(np.median(np.diff(clock)))
+    index = np.searchsorted(clock, times, side="left")
+    kept = (index < len(clock)) & (times >= clock[0] - period)
+    index, values = index[kept], values[kept]
+    last = len(index) - 1 - np.unique(index[::-1], return_index=True)[1]
+    placed = np.zeros((len(clock), 3))
+    placed[index[last]] = values[last]
+    return placed
+
+
+#: The rotation from a North-East-Down world frame to East-North-Up.
+NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _reference(path: Path, clock: np.ndarray, times: np.ndarray, values: np.ndarray,
+               section: dict) -> np.ndarray:
+    """The reference attitude (body → ENU, scalar first) at the gyro's
+    times: interpolated on the shortest arc between consecutive readings
+    not further apart than :data:`REFERENCE_GAP_FACTOR` of its typical
+    interval; NaN elsewhere (across a gap, and before or after it)."""
+    from scipy.spatial.transform import Rotation, Slerp
+    rotations = _reference_rotations(path, values, section)
+    frame = _choice(path, "recording.reference.frame", section.get("frame", "ENU"), FRAMES)
+    if frame == "NED":
+        rotations = Rotation.from_matrix(NED_TO_ENU) * rotations
+    if len(times) < 2:
+        _refuse(path, "recording.reference.columns", None, "hold one reading; the reference "
+                "needs two to be interpolated")
+    within = (clock >= times[0]) & (clock <= times[-1])
+    after = np.clip(np.searchsorted(times, clock, side="left"), 1, len(times) - 1)
+    exact = np.isin(clock, times)
+    typical = float(np.median(np.diff(times)))
+    close = (times[after] - times[after - 1]) <= REFERENCE_GAP_FACTOR * typical
+    valid = within & (close | exact)
+    quat = np.full((len(clock), 4), np.nan)
+    between = valid & ~exact
+    if between.any():
+        at = Slerp(times, rotations)(clock[between])
+        quat[between] = at.as_quat(canonical=True, scalar_first=True)
+    quat[exact] = rotations[np.searchsorted(times, clock[exact])].as_quat(scalar_first=True)
+    return quat
+
+
+def _reference_rotations(path: Path, values: np.ndarray, section: dict):
+    from scipy.spatial.transform import Rotation
+    if "sequence" in section:
+        unit = _choice(path, "recording.reference.unit", section.get("unit", "deg"),
+                       ("deg", "rad"))
+        try:
+            return Rotation.from_euler(str(section["sequence"]), values, degrees=unit == "deg")
+        except ValueError as err:
+            _refuse(path, "recording.reference.sequence", section["sequence"],
+                    f"is not an Euler sequence ({err})")
+    order = _choice(path, "recording.reference.order", section.get("order", "wxyz"),
+                    ("wxyz", "xyzw"))
+    norms = np.linalg.norm(values, axis=1)
+    off = np.flatnonzero(np.abs(norms - 1.0) > 0.01)
+    if len(off):
+        _refuse(path, "recording.reference.columns", section.get("columns"), f"row "
+                f"{off[0]} has norm {norms[off[0]]:.4g}; a reference quaternion has norm 1")
+    return Rotation.from_quat(values, scalar_first=order == "wxyz")

@@ -1,0 +1,252 @@
+"""A logger's file declared by a [recording] TOML (issue 30): the same data
+gives the same numbers whatever its format, sensors on their own clocks
+and in their own units reach the scored table, and each mistake a logger
+makes is one line."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks.cli import main
+from dynamics.validation import InvalidParameterError
+from sensors.declared import load_declared, read_table
+from sensors.recording import load_recording
+
+TRIAL = Path(__file__).resolve().parents[1] / "datasets" / "broad" / \
+    "02_undisturbed_slow_rotation_B.npz"
+SECONDS = 40.0          # of the trial: enough for a rest, the start and a movement
+
+
+@pytest.fixture(scope="module")
+def trial():
+    recording = load_recording(TRIAL)
+    keep = int(SECONDS * recording.rate_hz)
+    return recording, keep
+
+
+def _table(trial, whole: bool = False) -> dict:
+    """The trial's first SECONDS (or all of it) as one table on the gyro's
+    clock, SI units."""
+    recording, keep = trial
+    keep = recording.n_samples if whole else keep
+    table = {"t": recording.time_s[:keep]}
+    for prefix, channel in (("g", recording.gyro_radps), ("a", recording.accelerometer_mps2),
+                            ("m", recording.magnetometer_uT)):
+        table.update({f"{prefix}{axis}": channel[:keep, i] for i, axis in enumerate("xyz")})
+    table.update({f"q{part}": recording.reference_quat[:keep, i]
+                  for i, part in enumerate("wxyz")})
+    return table
+
+
+DECLARATION = """[recording]
+file = "{file}"
+time_unit = "{time_unit}"
+
+[recording.gyro]
+time = "t"
+columns = ["gx", "gy", "gz"]
+unit = "{gyro_unit}"
+
+[recording.accelerometer]
+time = "t"
+columns = ["ax", "ay", "az"]
+unit = "{acc_unit}"
+
+[recording.magnetometer]
+time = "{mag_time}"
+columns = ["mx", "my", "mz"]
+unit = "{mag_unit}"
+
+[recording.reference]
+time = "t"
+columns = {reference}
+{reference_keys}
+"""
+
+
+def _declare(folder: Path, file: str, **given) -> Path:
+    keys = dict(time_unit="s", gyro_unit="rad/s", acc_unit="m/s^2", mag_unit="uT",
+                mag_time="t", reference='["qw", "qx", "qy", "qz"]', reference_keys="")
+    keys.update(given)
+    path = folder / f"{Path(file).stem}.toml"
+    path.write_text(DECLARATION.format(file=file, **keys))
+    return path
+
+
+def _csv(folder: Path, table: dict, name: str = "log.csv") -> str:
+    pd.DataFrame(table).to_csv(folder / name, index=False, float_format="%.17g")
+    return name
+
+
+def test_the_same_data_in_any_format_is_the_same_recording(trial, tmp_path):
+    recording, keep = trial
+    table = _table(trial)
+    files = {"log.csv": None, "log.npz": None, "log.mat": None, "log.h5": None}
+    _csv(tmp_path, table)
+    np.savez(tmp_path / "log.npz", **table)
+    from scipy.io import savemat
+    savemat(tmp_path / "log.mat", table)
+    import h5py
+    with h5py.File(tmp_path / "log.h5", "w") as handle:
+        for key, value in table.items():
+            handle[key] = value
+    for file in files:
+        files[file] = load_declared(_declare(tmp_path, file))
+    for file, declared in files.items():
+        assert declared.rate_hz == pytest.approx(recording.rate_hz, rel=1e-9), file
+        assert np.array_equal(declared.gyro_radps, recording.gyro_radps[:keep]), file
+        assert np.array_equal(declared.magnetometer_uT, recording.magnetometer_uT[:keep]), file
+        reference = recording.reference_quat[:keep]
+        seen = ~np.isnan(reference).any(axis=1)
+        assert np.array_equal(seen, ~np.isnan(declared.reference_quat).any(axis=1)), file
+        assert np.allclose(declared.reference_quat[seen], reference[seen], atol=1e-15), file
+        assert np.array_equal(declared.movement, seen), file
+
+
+def test_a_declared_csv_scores_as_its_npz_does(trial, tmp_path):
+    # The same samples through a CSV and a [recording] file, and as the
+    # toolkit's own .npz: the broad command's numbers agree to rounding.
+    recording, keep = trial
+    declared = _declare(tmp_path, _csv(tmp_path, _table(trial)))
+    archive = tmp_path / "npz"
+    archive.mkdir()
+    with np.load(TRIAL) as data:
+        arrays = {key: data[key][:keep] if data[key].ndim and len(data[key]) > keep else data[key]
+                  for key in data.files}
+    arrays["movement"] = ~np.isnan(arrays["opt_quat"]).any(axis=1)
+    arrays["movement"][0] = False
+    np.savez(archive / f"{declared.stem}.npz", **arrays)
+    (archive / "trials.json").write_text(
+        '{"groups": [{"name": "recordings", "level": 1}], "trials": {"%s": '
+        '{"groups": ["recordings"]}}}' % declared.stem)
+    scores = {}
+    for label, source in (("declared", declared), ("npz", archive)):
+        out = tmp_path / f"out_{label}"
+        assert main(["broad", "--broad", str(source), "--estimators", "mekf,madgwick",
+                     "--out", str(out), "--quiet"]) == 0
+        scores[label] = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
+    total = [c for c in scores["npz"].columns if c.startswith("total")][0]
+    assert np.allclose(scores["declared"][total], scores["npz"][total], rtol=1e-6, atol=1e-9)
+    assert np.isfinite(scores["declared"][total]).all()
+
+
+def _phone(trial, jitter: float = 0.2, seed: int = 1) -> pd.DataFrame:
+    """The trial as a phone logs it: the gyro's clock jittered (±``jitter`` of
+    a step, times in ms), the accelerometer in g, the magnetometer at a
+    quarter of the gyro's rate on its own clock in nT, the reference every
+    second sample in x, y, z, w order; one merged table, empty cells where a
+    sensor did not read."""
+    recording, keep = trial
+    table = _table(trial)
+    step = 1.0 / recording.rate_hz
+    rng = np.random.default_rng(seed)
+    t = table["t"] + rng.uniform(-jitter, jitter, keep) * step
+    frame = pd.DataFrame({"t_ms": t * 1e3})
+    for axis in "xyz":
+        frame[f"g{axis}"] = table[f"g{axis}"]
+        frame[f"a{axis}"] = table[f"a{axis}"] / 9.80665
+        magnetometer = np.full(keep, np.nan)
+        magnetometer[::4] = table[f"m{axis}"][::4] * 1e3
+        frame[f"m{axis}"] = magnetometer
+    for part in "xyzw":
+        reference = np.array(table[f"q{part}"])
+        reference[1::2] = np.nan
+        frame[f"q{part}"] = reference
+    return frame
+
+
+def test_a_phone_log_on_its_own_clocks_and_units_reaches_the_scored_table(trial, tmp_path):
+    frame = _phone(trial)
+    frame.to_csv(tmp_path / "phone.csv", index=False, float_format="%.17g")
+    declared = _declare(tmp_path, "phone.csv", time_unit="ms", acc_unit="g", mag_unit="nT",
+                        reference='["qx", "qy", "qz", "qw"]', reference_keys='order = "xyzw"')
+    declared.write_text(declared.read_text().replace('time = "t"', 'time = "t_ms"'))
+    recording = load_declared(declared)
+    assert recording.rate_hz == pytest.approx(trial[0].rate_hz, rel=0.02)
+    read = np.any(recording.magnetometer_uT != 0, axis=1)
+    assert abs(read.mean() - 0.25) < 0.02          # a quarter of the samples, each once
+    scores = {}
+    for label, source in (("phone", declared),
+                          ("one clock", _declare(tmp_path, _csv(tmp_path, _table(trial))))):
+        out = tmp_path / label.replace(" ", "_")
+        assert main(["broad", "--broad", str(source), "--estimators", "mekf", "--out",
+                     str(out), "--quiet"]) == 0
+        scored = pd.read_csv(out / "broad_trials.csv")
+        scores[label] = float(scored.filter(like="total").iloc[0, 0])
+    # The same motion, its magnetometer at a quarter of the rate and each
+    # reading up to a fifth of a step late: the MEKF's score moves by far
+    # less than a tenth of a degree (measured 1.027° against 1.021°).
+    assert abs(scores["phone"] - scores["one clock"]) < 0.1
+
+
+def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_path):
+    from scipy.spatial.transform import Rotation
+    from sensors.declared import NED_TO_ENU
+    recording, keep = trial
+    table = _table(trial)
+    quat = recording.reference_quat[:keep]
+    seen = ~np.isnan(quat).any(axis=1)
+    in_ned = Rotation.from_matrix(NED_TO_ENU).inv() * Rotation.from_quat(quat[seen],
+                                                                         scalar_first=True)
+    angles = np.full((keep, 3), np.nan)
+    angles[seen] = in_ned.as_euler("ZYX", degrees=True)
+    for i, name in enumerate(("yaw", "pitch", "roll")):
+        table[name] = angles[:, i]
+    _csv(tmp_path, table)
+    declared = load_declared(_declare(
+        tmp_path, "log.csv", reference='["yaw", "pitch", "roll"]',
+        reference_keys='sequence = "ZYX"\nunit = "deg"\nframe = "NED"'))
+    expected = Rotation.from_quat(quat[seen], scalar_first=True)
+    got = Rotation.from_quat(declared.reference_quat[seen], scalar_first=True)
+    assert np.degrees((expected.inv() * got).magnitude()).max() < 1e-9
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(gyro_unit="rad/s", scale_gyro=180 / math.pi),
+     'gyro.unit = .rad/s.: turns gravity 5.\\.. times as fast .*unit = "deg/s"'),
+    (dict(gyro_unit="deg/s"), 'gyro.unit = .deg/s.: turns gravity 0.01.. times .*unit = "rad/s"'),
+    (dict(gyro_unit="rad/s", scale_gyro=1e6), "gyro.unit = .rad/s.: gives rates up to"),
+    (dict(acc_unit="m/s^2", scale_acc=1 / 9.80665),
+     'accelerometer.unit = .m/s\\^2.: makes the median .* unit = "g" would fit'),
+    (dict(mag_unit="uT", scale_mag=1e3), 'magnetometer.unit = .uT.: .* unit = "nT" would fit'),
+    (dict(reference='["qw", "qx", "qy", "nope"]'), "must name a column of the file; it has t, "),
+    (dict(back=True), "gyro.time = .*: goes back or repeats at reading 100"),
+    (dict(gap=True), "gyro.time = .*: jumps by .* split the file at the gap"),
+    (dict(partly=True), "accelerometer.columns = .*: row 7 is partly empty"),
+    (dict(time_unit="minutes"), "time_unit = 'minutes': must be one of s, ms, us, ns"),
+])
+def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, capsys, change,
+                                                               message):
+    import re
+    # The whole trial: its first seconds turn about the vertical only, which
+    # turns no gravity and tells nothing of the gyro's unit.
+    table = {key: np.array(value, dtype=float) for key, value in _table(trial, True).items()}
+    for sensor, prefix in (("gyro", "g"), ("acc", "a"), ("mag", "m")):
+        factor = change.pop(f"scale_{sensor}", 1.0)
+        for axis in "xyz":
+            table[f"{prefix}{axis}"] *= factor
+    if change.pop("back", False):
+        table["t"][100] = table["t"][98]
+    if change.pop("gap", False):
+        table["t"][500:] += 2.0
+    if change.pop("partly", False):
+        table["ay"][7] = np.nan
+    declared = _declare(tmp_path, _csv(tmp_path, table), **change)
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out", str(out),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("attitude-bench: error: log.toml: recording.")
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_read_table_names_a_file_it_cannot_read(tmp_path):
+    (tmp_path / "log.xlsx").write_text("not a table")
+    with pytest.raises(InvalidParameterError, match="must be .csv, .parquet, .npz"):
+        read_table(tmp_path / "log.xlsx")
+    (tmp_path / "log.npz").write_text("not an archive")
+    with pytest.raises(InvalidParameterError, match="cannot be read"):
+        read_table(tmp_path / "log.npz")
