@@ -76,8 +76,13 @@ def load_declared(path) -> Recording:
     """The recording that the ``[recording]`` TOML at ``path`` declares,
     checked; :class:`InvalidParameterError` names the file and the key."""
     path = Path(path)
-    declaration = _declaration(path)
-    table = read_table(_data_file(path, declaration))
+    declaration = read_declaration(path)
+    return declared_recording(declaration, read_table(data_file(path, declaration)), path)
+
+
+def declared_recording(declaration: dict, table: dict, path: Path) -> Recording:
+    """The recording ``declaration`` (a ``[recording]`` section) makes of
+    ``table`` (:func:`read_table`); errors name ``path``, the declaration."""
     clock_unit = _choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
                          TIME_UNITS)
     sections = {name: declaration[name] for name in SENSORS if name in declaration}
@@ -111,7 +116,7 @@ def _refuse(path: Path, key: str, value, rule: str):
     raise InvalidParameterError(where, value, rule)
 
 
-def _declaration(path: Path) -> dict:
+def read_declaration(path: Path) -> dict:
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as err:
@@ -132,7 +137,7 @@ def _declaration(path: Path) -> dict:
     return declared["recording"]
 
 
-def _data_file(path: Path, declaration: dict) -> Path:
+def data_file(path: Path, declaration: dict) -> Path:
     given = declaration.get("file")
     if not isinstance(given, str) or not given:
         _refuse(path, "recording.file", given, "must name the logged file")
@@ -299,28 +304,35 @@ def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
 TURNING_WINDOW_S, TURNING_CORRELATION, TURNING_FACTOR = 0.1, 0.3, 10.0
 
 
-def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
-                   unit: str) -> None:
-    """Refuse a gyro whose rates, in the declared unit, turn gravity 57
-    times faster or slower than the accelerometer sees it turn."""
+def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
+    """The factor by which ``rates`` must be multiplied to turn gravity as
+    the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
+    None where the turning is not seen clearly enough to say."""
     if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
-        return                            # too few accelerometer readings on the clock
+        return None                       # too few accelerometer readings on the clock
     steps = max(1, int(round(TURNING_WINDOW_S / dt)))
     blocks = len(rates) // steps
     if blocks < 3:
-        return
+        return None
     force = specific_force[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
     rate = rates[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
     change = np.diff(force, axis=0) / (steps * dt)
     turning = -np.cross((rate[1:] + rate[:-1]) / 2, (force[1:] + force[:-1]) / 2)
     seen, predicted = float(np.sum(change * change)), float(np.sum(turning * turning))
     if seen == 0.0 or predicted == 0.0:
-        return
+        return None
     fit = float(np.sum(change * turning))
     if fit / math.sqrt(seen * predicted) < TURNING_CORRELATION:
-        return                            # the turning is not seen clearly enough to judge
-    scale = fit / predicted
-    if 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR:
+        return None
+    return fit / predicted
+
+
+def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
+                   unit: str) -> None:
+    """Refuse a gyro whose rates, in the declared unit, turn gravity 57
+    times faster or slower than the accelerometer sees it turn."""
+    scale = turning_scale(rates, specific_force, dt)
+    if scale is None or 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR:
         return
     fitting = [other for other, factor in UNITS["gyro"].items()
                if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]

@@ -33,6 +33,7 @@ COMMAND_MODULES = {
     "show-config": "show_config",
     "convergence": "convergence",
     "wahba": "wahba",
+    "inspect": "inspect",
 }
 
 

@@ -55,7 +55,7 @@ def allowed_imports(args: argparse.Namespace) -> list[str]:
 def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     """The scenario file (or defaults) with the command-line overrides applied
     (None for ``replay``, whose scenario comes from its recording)."""
-    if args.command in ("replay", "wahba", "broad"):
+    if args.command in ("replay", "wahba", "broad", "inspect"):
         return None
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "

@@ -5,6 +5,7 @@ module                 what it does
 =====================  ===============================================
 ``runs``               one run, a comparison, a sweep, the animation
 ``sweep_parameters``   the settings a sweep can vary
+``inspection``         what a logged file holds, and its declaration
 ``tuning``             Activity 3b: fminbnd-style tuning of pc_exponent
 ``landscape``          the loss landscape over pc_exponent
 ``consistency``        NEES/NIS campaigns, verdicts, efficiency

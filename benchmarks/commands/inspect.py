@@ -1,0 +1,66 @@
+"""``attitude-bench inspect FILE``: what a logged file holds — each sensor's
+rate, jitter and gaps, clipping, rest, gravity, the field — and, for a file
+with no declaration yet, the ``[recording]`` file its columns suggest
+(written beside it, or into ``--out``, for the user to check and edit)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from benchmarks.commands.options import PROG, UsageError, add_divergence_option
+
+OUTPUTS = ()
+memory = None
+
+
+def arguments(commands, defaults) -> None:
+    """The ``inspect`` command's arguments."""
+    inspect = commands.add_parser(
+        "inspect", help="what a logged file holds (rates, jitter, gaps, clipping, rest, "
+        "gravity, the field) and the [recording] declaration it suggests; writes FILE.toml")
+    inspect.add_argument("file", type=Path, metavar="FILE",
+                         help="the log (.csv, .parquet, .npz, .mat, .h5, .hdf5), or a "
+                         "[recording] .toml declaring one")
+    inspect.add_argument("--out", type=Path, default=None, metavar="DIR",
+                         help="where the suggested declaration goes (default: beside FILE)")
+    inspect.add_argument("--quiet", action="store_true", help="accepted, as by every command")
+    add_divergence_option(inspect)
+
+
+def run(args, _scenario):
+    from dynamics.validation import InvalidParameterError
+    from sensors.declared import data_file, declared_recording, read_declaration, read_table
+    from benchmarks.experiments.inspection import declaration_toml, findings, guess_declaration
+    if not args.file.is_file():
+        raise UsageError(f"file = {str(args.file)!r}: is not a file")
+    declared = args.file.suffix.lower() == ".toml"
+    target = None
+    if declared:
+        declaration = read_declaration(args.file)
+        data = data_file(args.file, declaration)
+        table, notes = read_table(data), []
+    else:
+        target = (args.out or args.file.parent) / f"{args.file.stem}.toml"
+        if target.exists():
+            raise UsageError(f"out = {str(target.parent)!r}: already holds {target.name}; "
+                             "inspect does not overwrite it: remove it or give --out DIR")
+        data, table = args.file, read_table(args.file)
+        relative = os.path.relpath(args.file.resolve(), target.parent.resolve())
+        declaration, notes = guess_declaration(table, relative)
+    print(f"{data.name}: {len(table)} columns ({', '.join(list(table)[:12])}"
+          f"{', …' if len(table) > 12 else ''})")
+    try:
+        recording = declared_recording(declaration, table, target or args.file)
+    except InvalidParameterError as err:
+        recording = None
+        notes.append(f"as {'declared' if declared else 'suggested'}, it does not load: {err}")
+    if recording is not None:
+        for line in findings(recording, table, declaration):
+            print(f"  {line}")
+    for note in notes:
+        print(f"{PROG}: note: {note}")
+    if target is not None:
+        from benchmarks.output import write_text
+        write_text(target, declaration_toml(declaration, args.file.name))
+        print(f"wrote {target}: check it, then run: {PROG} broad --broad {target}")
+    return None

@@ -1,0 +1,299 @@
+"""What a logged file holds, before anything runs on it (``attitude-bench
+inspect``): each sensor's rate, the jitter and the gaps of its clock, readings
+at the sensor's rail (clipped), the rest periods, gravity, the field's norm
+and dip; and, for a file with no declaration yet, the ``[recording]``
+declaration (:mod:`sensors.declared`) its columns suggest, to edit.
+
+The guess reads the columns' names (a prefix naming the sensor, ``gyr``,
+``acc``, ``mag``, ``quat`` …, and the axes ``x, y, z`` or ``w, x, y, z``;
+an (N, 3) or (N, 4) array's own name) and their sizes (the unit that puts
+the gyro's turning, gravity and the Earth's field where they belong: the
+same checks :mod:`sensors.declared` makes). Where it cannot tell, it says so
+and leaves the section out for the user to write.
+"""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
+from sensors.declared import (GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
+                              turning_scale)
+
+#: Name tokens of each sensor's columns (the prefix before the axis letter).
+SENSOR_TOKENS = {
+    "gyro": ("gyr", "gyro", "omega", "angvel", "rate", "g", "w"),
+    "accelerometer": ("acc", "accel", "a", "f"),
+    "magnetometer": ("mag", "magn", "m", "b", "field", "compass"),
+    "reference": ("q", "quat", "opt", "ref", "orient", "att", "mocap"),
+}
+#: Name tokens of a time column.
+TIME_TOKENS = ("t", "time", "times", "timestamp", "ts", "sec", "seconds", "ms")
+_AXIS = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<axis>[wxyz])$", re.IGNORECASE)
+
+
+def _tokens(name: str) -> set:
+    return {token for token in re.split(r"[^a-z]+", name.lower()) if token}
+
+
+def _sensor_of(prefix: str) -> str | None:
+    """The sensor a column prefix names, if exactly one."""
+    tokens = _tokens(prefix) | {prefix.lower()}
+    named = [sensor for sensor, words in SENSOR_TOKENS.items()
+             if tokens & set(words) or any(token.startswith(words[0]) for token in tokens)]
+    return named[0] if len(named) == 1 else None
+
+
+def sensor_columns(table: dict) -> dict:
+    """Sensor → its columns (a list of 3, or 4 for the reference, in the
+    file's order; or one array's name) as the names suggest."""
+    groups = {}
+    for name, values in table.items():
+        array = np.asarray(values)
+        if array.ndim == 2 and 3 in array.shape or array.ndim == 2 and 4 in array.shape:
+            width = 4 if 4 in array.shape else 3
+            sensor = _sensor_of(name)
+            if sensor and (sensor == "reference") == (width == 4):
+                groups.setdefault(sensor, name)
+            continue
+        match = _AXIS.match(name)
+        if match and array.ndim == 1:
+            groups.setdefault(match["prefix"], {})[match["axis"].lower()] = name
+    found = {}
+    for prefix, axes in groups.items():
+        if isinstance(axes, str):
+            found.setdefault(prefix, axes)
+            continue
+        sensor = _sensor_of(prefix)
+        wanted = "wxyz" if sensor == "reference" else "xyz"
+        if sensor and set(axes) >= set(wanted) and sensor not in found:
+            found[sensor] = [axes[axis] for axis in wanted]
+    return found
+
+
+def time_columns(table: dict) -> list[str]:
+    """The columns named as times whose readings increase."""
+    names = []
+    for name, values in table.items():
+        array = np.asarray(values, dtype=float).reshape(-1) if np.asarray(values).dtype.kind \
+            in "iuf" and np.asarray(values).squeeze().ndim == 1 else None
+        if array is None or not _tokens(name) & set(TIME_TOKENS):
+            continue
+        present = array[~np.isnan(array)]
+        if len(present) > 1 and np.all(np.diff(present) > 0):
+            names.append(name)
+    return names
+
+
+def time_unit(intervals: np.ndarray) -> str:
+    """The unit in which an IMU's sample interval (1 ms to 1 s) reads as given."""
+    typical = float(np.median(intervals))
+    for unit, seconds in TIME_UNITS.items():
+        if 1e-4 <= typical * seconds <= 1.0:
+            return unit
+    return "s"
+
+
+def clock(times: np.ndarray) -> dict:
+    """A sensor's clock: its readings, rate, jitter and gaps."""
+    times = times[~np.isnan(times)]
+    intervals = np.diff(times)
+    typical = float(np.median(intervals))
+    return {"readings": len(times), "interval": typical,
+            "jitter": float(np.std(intervals) / typical), "longest": float(intervals.max()),
+            "gaps": int(np.count_nonzero(intervals > GAP_FACTOR * typical))}
+
+
+def fitting_unit(sensor: str, values: np.ndarray) -> str | None:
+    """The unit of ``sensor`` that puts its median norm where it belongs."""
+    norms = np.linalg.norm(values[~np.isnan(values).any(axis=1)], axis=1)
+    median = float(np.median(norms[norms > 0])) if np.any(norms > 0) else 0.0
+    low, high = PLAUSIBLE_NORMS[sensor]
+    best = sorted(UNITS[sensor].items(), key=lambda item: abs(math.log(
+        max(median * item[1], 1e-300) / math.sqrt(low * high))))
+    unit, factor = best[0]
+    return unit if low <= median * factor <= high else None
+
+
+def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -> str:
+    """rad/s or deg/s: the one that turns gravity as the accelerometer sees
+    it turn (:func:`sensors.declared.turning_scale`), else by the rates'
+    size (a hand-held or vehicle IMU's rates rarely pass 20 rad/s)."""
+    if specific_force is not None:
+        scale = turning_scale(rates, specific_force, dt)
+        if scale is not None:
+            return min(UNITS["gyro"], key=lambda unit: abs(math.log(
+                scale / UNITS["gyro"][unit])))
+    return "deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"
+
+
+def rest_periods(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> list:
+    """(start, stop) s of the stretches at rest: for at least VQF's
+    :data:`~estimators.imu.rest.MIN_DURATION_S`, every reading within its
+    thresholds of the stretch's mean (Laidig & Seel 2023, §3.4)."""
+    steps = max(1, int(round(MIN_DURATION_S / dt / 4)))        # quarter windows
+    blocks = len(rates) // steps
+    still = np.zeros(blocks, dtype=bool)
+    for i in range(blocks):
+        part = slice(i * steps, (i + 1) * steps)
+        rate, force = rates[part], specific_force[part]
+        still[i] = (np.linalg.norm(rate - rate.mean(axis=0), axis=1).max() < GYRO_THRESHOLD_RADPS
+                    and np.abs(rate.mean(axis=0)).max() < GYRO_THRESHOLD_RADPS
+                    and np.linalg.norm(force - force.mean(axis=0), axis=1).max()
+                    < ACC_THRESHOLD_MPS2)
+    periods, start = [], None
+    for i, flag in enumerate(np.append(still, False)):
+        if flag and start is None:
+            start = i
+        elif not flag and start is not None:
+            if (i - start) * steps * dt >= MIN_DURATION_S:
+                periods.append((start * steps * dt, i * steps * dt))
+            start = None
+    return periods
+
+
+def clipped(values: np.ndarray) -> tuple[int, float]:
+    """(readings at the channel's extreme on some axis, that extreme) when
+    three or more sit exactly there: the sensor's rail, where it clips."""
+    present = values[~np.isnan(values).any(axis=1)]
+    if not len(present):
+        return 0, 0.0
+    extreme = float(np.abs(present).max())
+    count = int(np.count_nonzero(np.any(np.abs(present) == extreme, axis=1)))
+    return (count, extreme) if count >= 3 and extreme > 0 else (0, extreme)
+
+
+def _values(table: dict, columns) -> np.ndarray:
+    if isinstance(columns, str):
+        array = np.asarray(table[columns], dtype=float)
+        return array.T if array.shape[0] in (3, 4) and array.shape[1] not in (3, 4) else array
+    return np.column_stack([np.asarray(table[name], dtype=float).reshape(-1)
+                            for name in columns])
+
+
+def _time_for(columns, times: list) -> str:
+    """The time column that names the sensor's prefix, else the first."""
+    names = [columns] if isinstance(columns, str) else columns
+    words = set().union(*(_tokens(name) for name in names)) - set("wxyz")
+    named = [time for time in times if (_tokens(time) - set(TIME_TOKENS)) & words]
+    return (named or times)[0]
+
+
+def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
+    """``(declaration, notes)``: the ``[recording]`` section the columns
+    suggest (units by size, :func:`fitting_unit`, :func:`gyro_unit`) and
+    what could not be told, one line each."""
+    columns, times = sensor_columns(table), time_columns(table)
+    notes, declaration = [], {"file": file_name}
+    missing = [sensor for sensor in ("gyro", "accelerometer", "magnetometer", "reference")
+               if sensor not in columns]
+    if missing:
+        notes.append(f"no columns recognised as {', '.join(missing)}: declare them by hand "
+                     "if the file has them")
+    if not times:
+        notes.append("no time column recognised (a column named t, time or timestamp whose "
+                     "values increase): declare each sensor's time by hand")
+        return declaration, notes
+    if "gyro" in columns:
+        gyro_time = np.asarray(table[_time_for(columns["gyro"], times)], dtype=float)
+        declaration["time_unit"] = time_unit(np.diff(gyro_time[~np.isnan(gyro_time)]))
+    seconds = TIME_UNITS[declaration.get("time_unit", "s")]
+    for sensor, chosen in columns.items():
+        section = {"time": _time_for(chosen, times), "columns": chosen}
+        values = _values(table, chosen)
+        if sensor in ("accelerometer", "magnetometer"):
+            unit = fitting_unit(sensor, values)
+            if unit is None:
+                notes.append(f"{sensor}: no unit puts its readings where "
+                             f"{'gravity' if sensor == 'accelerometer' else 'the field'} "
+                             "belongs: check the columns and give its unit")
+            section["unit"] = unit or next(iter(UNITS[sensor]))
+        if sensor == "reference":
+            section["order"] = "wxyz"        # the columns are listed w, x, y, z
+            if isinstance(chosen, str):
+                notes.append("reference: one array; its order (w, x, y, z or x, y, z, w) "
+                             "cannot be told from its name: wxyz assumed, check it")
+        declaration[sensor] = section
+    if "gyro" in declaration:
+        gyro = declaration["gyro"]
+        force = None
+        accelerometer = declaration.get("accelerometer")
+        if accelerometer and accelerometer["time"] == gyro["time"]:
+            force = _values(table, accelerometer["columns"]) * \
+                UNITS["accelerometer"][accelerometer["unit"]]
+            force = np.nan_to_num(force)
+        rates = np.nan_to_num(_values(table, gyro["columns"]))
+        step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
+        gyro["unit"] = gyro_unit(rates, force, step)
+    return declaration, notes
+
+
+def declaration_toml(declaration: dict, source: str) -> str:
+    """``declaration`` as the ``[recording]`` file a user edits."""
+    lines = [f"# The [recording] that attitude-bench inspect suggests for {source}:",
+             "# check each column and unit, then run: attitude-bench broad --broad THIS_FILE",
+             "[recording]"]
+    lines += [f"{key} = {_toml(value)}" for key, value in declaration.items()
+              if not isinstance(value, dict)]
+    for sensor in ("gyro", "accelerometer", "magnetometer", "reference"):
+        if sensor in declaration:
+            lines += ["", f"[recording.{sensor}]"]
+            lines += [f"{key} = {_toml(value)}" for key, value in declaration[sensor].items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml(value) -> str:
+    import json
+    if isinstance(value, list):
+        return "[" + ", ".join(json.dumps(str(item)) for item in value) + "]"
+    return json.dumps(str(value))
+
+
+def findings(recording, table: dict, declaration: dict) -> list[str]:
+    """What the file holds, one line each: every sensor's clock, clipping,
+    the rest periods, gravity and the field (on the loaded ``recording``)."""
+    seconds = TIME_UNITS[declaration.get("time_unit", "s")]
+    lines = []
+    for sensor in ("gyro", "accelerometer", "magnetometer", "reference"):
+        if sensor not in declaration:
+            continue
+        section = declaration[sensor]
+        values = _values(table, section["columns"])
+        times = np.asarray(table[section["time"]], dtype=float)
+        times = times[~np.isnan(values).all(axis=1)] * seconds
+        clock_of = clock(times)
+        lines.append(f"{sensor:<14} {clock_of['readings']:>9,} readings, "
+                     f"{1 / clock_of['interval']:8.2f} Hz, jitter {clock_of['jitter']:6.1%}, "
+                     f"longest interval {clock_of['longest'] * 1e3:8.2f} ms, "
+                     f"{clock_of['gaps']} gap{'s' if clock_of['gaps'] != 1 else ''}")
+        count, extreme = clipped(values) if sensor != "reference" else (0, 0.0)
+        if count:
+            lines.append(f"{'':<14} {count:,} readings at ±{extreme:.6g} (its rail: clipped?)")
+    return lines + _physics(recording)
+
+
+def _physics(recording) -> list[str]:
+    """Rest, gravity and the field, on the gyro's clock."""
+    if recording.accelerometer_mps2 is None:
+        return ["rest, gravity: no accelerometer"]
+    force = recording.accelerometer_mps2
+    read = np.any(force != 0, axis=1)
+    periods = rest_periods(recording.gyro_radps[read], force[read], recording.dt)
+    rest = (f"{len(periods)} period{'s' if len(periods) != 1 else ''} at rest, "
+            f"{sum(b - a for a, b in periods):.1f} s in all (first {periods[0][0]:.1f} to "
+            f"{periods[0][1]:.1f} s)" if periods else
+            "no rest found: nothing needs one (the filters start without it)")
+    lines = [f"rest: {rest}",
+             f"gravity: {np.median(np.linalg.norm(force[read], axis=1)):.3f} m/s² "
+             "(median norm)"]
+    if recording.magnetometer_uT is not None:
+        field = recording.magnetometer_uT
+        both = read & np.any(field != 0, axis=1)
+        up = force[both] / np.linalg.norm(force[both], axis=1)[:, None]
+        norms = np.linalg.norm(field[both], axis=1)
+        dip = np.degrees(-np.arcsin(np.clip(np.sum(field[both] * up, axis=1) / norms, -1, 1)))
+        lines.append(f"field: {np.median(norms):.1f} µT, dip {np.median(dip):.1f}° (medians "
+                     "where both read; the Earth's: 25 to 65 µT)")
+    return lines

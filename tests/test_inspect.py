@@ -1,0 +1,114 @@
+"""``attitude-bench inspect``: what a logged file holds, and the [recording]
+declaration it suggests, which then runs as written (issue 30)."""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from benchmarks.cli import main
+from sensors.declared import UNITS, load_declared
+from benchmarks.experiments.inspection import clipped, fitting_unit, rest_periods, time_unit
+from sensors.recording import load_recording
+
+TRIAL = Path(__file__).resolve().parents[1] / "datasets" / "broad" / \
+    "02_undisturbed_slow_rotation_B.npz"
+
+
+@pytest.fixture(scope="module")
+def phone_csv(tmp_path_factory):
+    """A shipped trial's first 60 s as a phone logs it: time in ms with
+    jitter, the gyro in deg/s, the accelerometer in g, the magnetometer at a
+    quarter of the rate in nT, the reference every second sample as x, y, z, w."""
+    recording = load_recording(TRIAL)
+    keep = int(60 * recording.rate_hz)
+    rng = np.random.default_rng(3)
+    frame = pd.DataFrame({"timestamp_ms": (recording.time_s[:keep] + rng.uniform(
+        -0.2, 0.2, keep) / recording.rate_hz) * 1e3})
+    for i, axis in enumerate("xyz"):
+        frame[f"gyro_{axis}"] = np.degrees(recording.gyro_radps[:keep, i])
+        frame[f"acc_{axis}"] = recording.accelerometer_mps2[:keep, i] / 9.80665
+        field = np.full(keep, np.nan)
+        field[::4] = recording.magnetometer_uT[:keep:4, i] * 1e3
+        frame[f"mag_{axis}"] = field
+    for axis in "xyzw":
+        part = recording.reference_quat[:keep, "wxyz".index(axis)].copy()
+        part[1::2] = np.nan
+        frame[f"quat_{axis}"] = part
+    folder = tmp_path_factory.mktemp("phone")
+    frame.to_csv(folder / "phone.csv", index=False, float_format="%.17g")
+    return folder / "phone.csv", recording
+
+
+def test_inspect_reports_the_clocks_and_suggests_a_declaration_that_runs(phone_csv, capsys):
+    path, recording = phone_csv
+    assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    rates = {line.split()[0]: float(line.split("readings,")[1].split("Hz")[0])
+             for line in out.splitlines() if "readings," in line}
+    assert rates["gyro"] == pytest.approx(recording.rate_hz, rel=0.01)
+    assert rates["magnetometer"] == pytest.approx(recording.rate_hz / 4, rel=0.01)
+    assert "rest: " in out and "(first 0.0 to" in out     # BROAD's trials begin at rest
+    declared = path.with_suffix(".toml")
+    text = declared.read_text()
+    for expected in ('time_unit = "ms"', 'unit = "deg/s"', 'unit = "g"', 'unit = "nT"',
+                     'columns = ["quat_w", "quat_x", "quat_y", "quat_z"]', 'order = "wxyz"'):
+        assert expected in text, expected
+    suggested = load_declared(declared)
+    assert np.allclose(suggested.gyro_radps, recording.gyro_radps[:len(suggested.gyro_radps)],
+                       rtol=1e-12, atol=1e-15)
+    seen = ~np.isnan(suggested.reference_quat).any(axis=1)
+    assert seen.mean() > 0.9                      # every second sample interpolated
+    out_folder = path.parent / "scored"
+    assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out",
+                 str(out_folder), "--quiet"]) == 0
+    assert (out_folder / "broad_trials.csv").exists()
+
+
+def test_inspect_never_overwrites_a_declaration(phone_csv, capsys, tmp_path):
+    path, _ = phone_csv
+    (tmp_path / "phone.toml").write_text("# mine\n")
+    assert main(["inspect", str(path), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "already holds phone.toml" in err
+    assert (tmp_path / "phone.toml").read_text() == "# mine\n"
+
+
+def test_inspect_says_what_it_cannot_tell(tmp_path, capsys):
+    pd.DataFrame({"when": np.arange(10.0), "u": np.ones(10)}).to_csv(tmp_path / "odd.csv",
+                                                                     index=False)
+    assert main(["inspect", str(tmp_path / "odd.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "no columns recognised as gyro" in out and "no time column recognised" in out
+    assert "does not load" in out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(25.0, 65.0), st.sampled_from(sorted(UNITS["magnetometer"])),
+       st.integers(0, 2**32 - 1))
+def test_the_unit_that_puts_an_earth_field_in_place_is_found(norm_uT, unit, seed):
+    # Any field of the Earth's size (25 to 65 µT), in any direction, written
+    # in any of the units: the unit is recovered (they differ by 10 or more).
+    directions = np.random.default_rng(seed).standard_normal((50, 3))
+    field = norm_uT * directions / np.linalg.norm(directions, axis=1)[:, None]
+    assert fitting_unit("magnetometer", field / UNITS["magnetometer"][unit]) == unit
+
+
+def test_time_units_clipping_and_rest_on_made_data():
+    assert time_unit(np.full(5, 5.0)) == "ms" and time_unit(np.full(5, 0.005)) == "s"
+    assert time_unit(np.full(5, 5e6)) == "ns"
+    rail = np.zeros((100, 3))
+    rail[10:15, 0] = 34.9
+    assert clipped(rail) == (5, 34.9)
+    assert clipped(rail[:12]) == (0, 34.9)          # two at the extreme: no rail
+    dt = 0.01
+    rates = np.zeros((1000, 3))
+    rates[400:, 2] = 1.0                              # turning from 4 s on
+    force = np.tile([0.0, 0.0, 9.81], (1000, 1))
+    periods = rest_periods(rates, force, dt)
+    assert len(periods) == 1 and periods[0][0] == 0.0 and 3.5 <= periods[0][1] <= 4.0
+    assert rest_periods(rates[400:], force[400:], dt) == []
+    assert fitting_unit("accelerometer", force / 9.80665) == "g"
+    assert fitting_unit("accelerometer", force) == "m/s^2"
