@@ -74,15 +74,31 @@ FRAMES = ("ENU", "NED")
 
 def load_declared(path) -> Recording:
     """The recording that the ``[recording]`` TOML at ``path`` declares,
-    checked; :class:`InvalidParameterError` names the file and the key."""
+    checked; :class:`InvalidParameterError` names the file and the key (and
+    a gap in the gyro's clock: :func:`load_parts` splits the file there)."""
+    parts = load_parts(path)
+    if len(parts) > 1:
+        second = parts[1]
+        _refuse(Path(path), "recording.gyro.time", None, f"has {len(parts) - 1} gap(s) "
+                f"(the first after {parts[0].n_samples} readings, before part "
+                f"{second.name}); a recording is one unbroken gyro log: load_parts splits "
+                "it there")
+    return parts[0]
+
+
+def load_parts(path) -> list[Recording]:
+    """The recordings the TOML at ``path`` declares: one, or one per part
+    of the gyro's clock between its gaps (``NAME_part1``, ``NAME_part2``,
+    …), each with the readings of the other sensors in its span."""
     path = Path(path)
     declaration = read_declaration(path)
-    return declared_recording(declaration, read_table(data_file(path, declaration)), path)
+    return declared_recordings(declaration, read_table(data_file(path, declaration)), path)
 
 
-def declared_recording(declaration: dict, table: dict, path: Path) -> Recording:
-    """The recording ``declaration`` (a ``[recording]`` section) makes of
-    ``table`` (:func:`read_table`); errors name ``path``, the declaration."""
+def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Recording]:
+    """The recordings ``declaration`` (a ``[recording]`` section) makes of
+    ``table`` (:func:`read_table`), split at the gyro's gaps; errors name
+    ``path``, the declaration."""
     clock_unit = _choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
                          TIME_UNITS)
     sections = {name: declaration[name] for name in SENSORS if name in declaration}
@@ -92,19 +108,32 @@ def declared_recording(declaration: dict, table: dict, path: Path) -> Recording:
     read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit])
             for name, section in sections.items()}
     gyro_time, gyro = read["gyro"]
+    starts = part_starts(gyro_time)
+    bounds = list(zip(starts, list(starts[1:]) + [len(gyro_time)]))
+    names = [path.stem] if len(bounds) == 1 else \
+        [f"{path.stem}_part{i + 1}" for i in range(len(bounds))]
+    return [_part(path, name, declaration, sections, read, slice(a, b))
+            for name, (a, b) in zip(names, bounds)]
+
+
+def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
+          span: slice) -> Recording:
+    """One unbroken stretch ``span`` of the gyro's clock as a recording."""
+    gyro_time, gyro = read["gyro"][0][span], read["gyro"][1][span]
+    if len(gyro_time) < 2:
+        _refuse(path, "recording.gyro.time", float(gyro_time[0]), "starts a part of one "
+                "reading between two gaps; a part needs at least two")
     rate = 1.0 / float(np.median(np.diff(gyro_time)))
-    channels = {name: _on_clock(gyro_time, *read[name]) for name in ("accelerometer",
-                                                                     "magnetometer")
-                if name in read}
-    for name, values in channels.items():
-        _check_norm(path, name, values, sections[name]["unit"])
+    channels = {sensor: _on_clock(gyro_time, *read[sensor])
+                for sensor in ("accelerometer", "magnetometer") if sensor in read}
+    for sensor, values in channels.items():
+        _check_norm(path, sensor, values, sections[sensor]["unit"])
     if "accelerometer" in channels:
         _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
                        sections["gyro"]["unit"])
     reference = (_reference(path, gyro_time, *read["reference"], sections["reference"])
                  if "reference" in read else np.full((len(gyro_time), 4), np.nan))
-    return Recording(name=path.stem, gyro_radps=gyro,
-                     reference_quat=reference,
+    return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
                      movement=~np.isnan(reference).any(axis=1), rate_hz=rate,
                      info=str(declaration.get("description", "")),
                      accelerometer_mps2=channels.get("accelerometer"),
@@ -270,20 +299,18 @@ def _check_increasing(path: Path, key: str, times: np.ndarray) -> None:
 
 
 def _check_clock(path: Path, times: np.ndarray) -> None:
-    """The gyro's times: increasing, without a gap (:data:`GAP_FACTOR`)."""
+    """The gyro's times: increasing, two at least."""
     _check_increasing(path, "recording.gyro.time", times)
     if len(times) < 2:
         _refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
                 "at least two")
+
+
+def part_starts(times: np.ndarray) -> np.ndarray:
+    """Where the gyro's clock starts anew: the first sample after each gap
+    (an interval over :data:`GAP_FACTOR` times the typical one), and 0."""
     steps = np.diff(times)
-    typical = float(np.median(steps))
-    gaps = np.flatnonzero(steps > GAP_FACTOR * typical)
-    if len(gaps):
-        row = int(gaps[0])
-        _refuse(path, "recording.gyro.time", float(times[row + 1]), f"jumps by "
-                f"{steps[row]:.6g} s after reading {row} ({times[row]:.9g} s), "
-                f"{steps[row] / typical:.0f} times its typical {typical:.6g} s; a recording "
-                "is one unbroken gyro log: split the file at the gap")
+    return np.concatenate([[0], np.flatnonzero(steps > GAP_FACTOR * np.median(steps)) + 1])
 
 
 def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:

@@ -213,7 +213,6 @@ def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_p
     (dict(mag_unit="uT", scale_mag=1e3), 'magnetometer.unit = .uT.: .* unit = "nT" would fit'),
     (dict(reference='["qw", "qx", "qy", "nope"]'), "must name a column of the file; it has t, "),
     (dict(back=True), "gyro.time = .*: goes back or repeats at reading 100"),
-    (dict(gap=True), "gyro.time = .*: jumps by .* split the file at the gap"),
     (dict(partly=True), "accelerometer.columns = .*: row 7 is partly empty"),
     (dict(time_unit="minutes"), "time_unit = 'minutes': must be one of s, ms, us, ns"),
 ])
@@ -229,8 +228,6 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
             table[f"{prefix}{axis}"] *= factor
     if change.pop("back", False):
         table["t"][100] = table["t"][98]
-    if change.pop("gap", False):
-        table["t"][500:] += 2.0
     if change.pop("partly", False):
         table["ay"][7] = np.nan
     declared = _declare(tmp_path, _csv(tmp_path, table), **change)
@@ -241,6 +238,47 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
     assert err.count("\n") == 1 and err.startswith("attitude-bench: error: log.toml: recording.")
     assert re.search(message, err), err
     assert not out.exists()
+
+
+def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path):
+    # The gyro's clock stops for 2 s: the file is two parts, each a trial of
+    # its own, each scored exactly as the same samples in the toolkit's .npz.
+    from sensors.declared import load_parts
+    recording, keep = trial
+    split = keep // 2
+    table = {key: np.array(value, dtype=float) for key, value in _table(trial).items()}
+    for part in "wxyz":
+        table[f"q{part}"][split] = np.nan         # each part starts without a reference
+    table["t"][split:] += 2.0
+    declared = _declare(tmp_path, _csv(tmp_path, table))
+    with pytest.raises(InvalidParameterError, match="has 1 gap.*load_parts splits"):
+        load_declared(declared)
+    parts = load_parts(declared)
+    assert [p.name for p in parts] == ["log_part1", "log_part2"]
+    assert [p.n_samples for p in parts] == [split, keep - split]
+    archive = tmp_path / "npz"
+    archive.mkdir()
+    with np.load(TRIAL) as data:
+        arrays = {key: data[key] for key in data.files}
+    arrays["opt_quat"] = arrays["opt_quat"].copy()
+    arrays["opt_quat"][split] = np.nan
+    for name, span in (("log_part1", slice(0, split)), ("log_part2", slice(split, keep))):
+        part = {key: value[span] if value.ndim and len(value) == recording.n_samples else value
+                for key, value in arrays.items()}
+        part["movement"] = ~np.isnan(part["opt_quat"]).any(axis=1)
+        np.savez(archive / f"{name}.npz", **part)
+    (archive / "trials.json").write_text(
+        '{"groups": [{"name": "recordings", "level": 1}], "trials": {"log_part1": '
+        '{"groups": ["recordings"]}, "log_part2": {"groups": ["recordings"]}}}')
+    scores = {}
+    for label, source in (("declared", declared), ("npz", archive)):
+        out = tmp_path / f"out_{label}"
+        assert main(["broad", "--broad", str(source), "--estimators", "mekf", "--out",
+                     str(out), "--quiet"]) == 0
+        scores[label] = pd.read_csv(out / "broad_trials.csv").set_index("trial")
+    total = [c for c in scores["npz"].columns if c.startswith("total")][0]
+    assert len(scores["declared"]) == 2
+    assert np.allclose(scores["declared"][total], scores["npz"][total], rtol=1e-6, atol=1e-9)
 
 
 def test_read_table_names_a_file_it_cannot_read(tmp_path):

@@ -31,7 +31,7 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
-from sensors.declared import load_declared
+from sensors.declared import load_parts
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -148,7 +148,7 @@ class BroadDataset:
             raise InvalidParameterError("trial" if self.parameter == "broad"
                                         else f"{self.parameter} trial", shown, rule)
         if path.suffix == ".toml":
-            recording = load_declared(path)
+            recording = next(part for part in declared_parts(path) if part.name == name)
         elif path.suffix == ".npz":
             try:
                 recording = load_recording(path, name)
@@ -275,13 +275,36 @@ RECORDINGS_GROUP = Group("recordings", 1, "your recordings")
 
 
 def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
-    """A dataset of ``[recording]`` files (:mod:`sensors.declared`), one
-    trial each, named by its file, all in one group."""
-    files = {path.stem: path for path in paths}
+    """A dataset of ``[recording]`` files (:mod:`sensors.declared`), a trial
+    for each unbroken part of each (named by its file, and its part where
+    the gyro's clock has gaps: :func:`sensors.declared.load_parts`), all in
+    one group; a part too short to run is left out, and a note says so."""
+    files = {}
+    for path in paths:
+        for part in declared_parts(path):
+            rule = runnable_rule(part)
+            if rule:
+                warnings.warn(f"{path.name}: part {part.name} left out: {rule}", stacklevel=2)
+            else:
+                files[part.name] = path
+    if not files:
+        raise InvalidParameterError(parameter, str(folder), "holds no recording long enough to "
+                                    "run (each part of each [recording] file was left out)")
     trials = {name: {"description": f"declared by {path.name}",
                      "groups": [RECORDINGS_GROUP.name]} for name, path in files.items()}
     return BroadDataset(folder=folder, groups=(RECORDINGS_GROUP,), trials=trials, files=files,
                         parameter=parameter)
+
+
+def declared_parts(path: Path) -> tuple:
+    """The parts of the ``[recording]`` at ``path``, read once while the
+    file is unchanged (the dataset lists them, then loads each)."""
+    return _declared_parts(path, path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=16)
+def _declared_parts(path: Path, _modified_ns: int) -> tuple:
+    return tuple(load_parts(path))
 
 
 #: What ``trials.json`` must hold, in words (the published index's layout).

@@ -29,7 +29,7 @@ def arguments(commands, defaults) -> None:
 
 def run(args, _scenario):
     from dynamics.validation import InvalidParameterError
-    from sensors.declared import data_file, declared_recording, read_declaration, read_table
+    from sensors.declared import data_file, declared_recordings, read_declaration, read_table
     from benchmarks.experiments.inspection import declaration_toml, findings, guess_declaration
     if not args.file.is_file():
         raise UsageError(f"file = {str(args.file)!r}: is not a file")
@@ -50,12 +50,12 @@ def run(args, _scenario):
     print(f"{data.name}: {len(table)} columns ({', '.join(list(table)[:12])}"
           f"{', …' if len(table) > 12 else ''})")
     try:
-        recording = declared_recording(declaration, table, target or args.file)
+        parts = declared_recordings(declaration, table, target or args.file)
     except InvalidParameterError as err:
-        recording = None
+        parts = None
         notes.append(f"as {'declared' if declared else 'suggested'}, it does not load: {err}")
-    if recording is not None:
-        for line in findings(recording, table, declaration):
+    if parts is not None:
+        for line in findings(parts, table, declaration):
             print(f"  {line}")
     for note in notes:
         print(f"{PROG}: note: {note}")

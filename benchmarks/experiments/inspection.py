@@ -251,9 +251,10 @@ def _toml(value) -> str:
     return json.dumps(str(value))
 
 
-def findings(recording, table: dict, declaration: dict) -> list[str]:
+def findings(parts, table: dict, declaration: dict) -> list[str]:
     """What the file holds, one line each: every sensor's clock, clipping,
-    the rest periods, gravity and the field (on the loaded ``recording``)."""
+    and for each part of the loaded recording (``parts``: split at the
+    gyro's gaps) the rest periods, gravity and the field."""
     seconds = TIME_UNITS[declaration.get("time_unit", "s")]
     lines = []
     for sensor in ("gyro", "accelerometer", "magnetometer", "reference"):
@@ -271,7 +272,14 @@ def findings(recording, table: dict, declaration: dict) -> list[str]:
         count, extreme = clipped(values) if sensor != "reference" else (0, 0.0)
         if count:
             lines.append(f"{'':<14} {count:,} readings at ±{extreme:.6g} (its rail: clipped?)")
-    return lines + _physics(recording)
+    if len(parts) == 1:
+        return lines + _physics(parts[0])
+    lines.append(f"the gyro's clock has {len(parts) - 1} gap{'s' if len(parts) > 2 else ''}: "
+                 f"{len(parts)} parts, each a trial of its own")
+    for part in parts:
+        lines += [f"{part.name} ({part.n_samples:,} samples): {line}"
+                  for line in _physics(part)]
+    return lines
 
 
 def _physics(recording) -> list[str]:
