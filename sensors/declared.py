@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -105,24 +106,41 @@ def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Reco
     if "gyro" not in sections:
         _refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
-    read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit])
+    origin = _time_origin(table, sections)
+    read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit], origin)
             for name, section in sections.items()}
     gyro_time, gyro = read["gyro"]
     starts = part_starts(gyro_time)
-    bounds = list(zip(starts, list(starts[1:]) + [len(gyro_time)]))
+    bounds = [(a, b) for a, b in zip(starts, list(starts[1:]) + [len(gyro_time)]) if b - a > 1]
+    if len(bounds) < len(starts):
+        warnings.warn(f"{path.name}: {len(starts) - len(bounds)} gyro reading(s) alone between "
+                      "gaps left out (a part needs two)", stacklevel=2)
+    if not bounds:
+        _refuse(path, "recording.gyro.time", None, "has a gap after every reading: no two "
+                "readings make a part")
     names = [path.stem] if len(bounds) == 1 else \
         [f"{path.stem}_part{i + 1}" for i in range(len(bounds))]
     return [_part(path, name, declaration, sections, read, slice(a, b))
             for name, (a, b) in zip(names, bounds)]
 
 
+def _time_origin(table: dict, sections: dict) -> int:
+    """The earliest first value of the declared integer time columns (0 if
+    any is not integer): every sensor's times are counted from it."""
+    firsts = []
+    for section in sections.values():
+        column = np.asarray(table.get(section.get("time"), [])) if isinstance(section, dict) \
+            and isinstance(section.get("time"), str) else np.asarray([])
+        if column.size == 0 or column.dtype.kind not in "iu":
+            return 0
+        firsts.append(int(column.reshape(-1)[0]))
+    return min(firsts) if firsts else 0
+
+
 def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
           span: slice) -> Recording:
     """One unbroken stretch ``span`` of the gyro's clock as a recording."""
     gyro_time, gyro = read["gyro"][0][span], read["gyro"][1][span]
-    if len(gyro_time) < 2:
-        _refuse(path, "recording.gyro.time", float(gyro_time[0]), "starts a part of one "
-                "reading between two gaps; a part needs at least two")
     rate = 1.0 / float(np.median(np.diff(gyro_time)))
     channels = {sensor: _on_clock(gyro_time, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
@@ -218,23 +236,24 @@ def _read_hdf5(data: Path) -> dict:
 
 
 def _choice(path: Path, key: str, value, choices) -> str:
-    if value not in choices:
+    if not isinstance(value, str) or value not in choices:
         _refuse(path, key, value, f"must be one of {', '.join(choices)}")
     return value
 
 
-def _sensor(path: Path, table: dict, name: str, section, time_scale: float):
+def _sensor(path: Path, table: dict, name: str, section, time_scale: float, origin: int = 0):
     """``(times s, values)`` of one declared sensor: its rows with a reading
     (a row of empty cells is none), converted to the toolkit's unit."""
     key = f"recording.{name}"
     if not isinstance(section, dict):
         _refuse(path, key, section, "must be a section with time, columns and unit")
-    known = {"time", "columns", "unit", "order", "sequence", "frame"}
+    known = {"time", "columns", "unit"} | ({"order", "sequence", "frame"}
+                                           if name == "reference" else set())
     unknown = sorted(set(section) - known)
     if unknown:
         _refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
-                f"is not a key of a sensor; known: {', '.join(sorted(known))}")
-    times = _column(path, table, f"{key}.time", section.get("time")) * time_scale
+                f"is not a key of the {name}'s section; known: {', '.join(sorted(known))}")
+    times = _column(path, table, f"{key}.time", section.get("time"), origin) * time_scale
     width = 4 if name == "reference" and "sequence" not in section else 3
     values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
     if len(values) != len(times):
@@ -259,21 +278,37 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float):
     return times, values
 
 
-def _column(path: Path, table: dict, key: str, name) -> np.ndarray:
+def _column(path: Path, table: dict, key: str, name, origin: int = 0) -> np.ndarray:
+    """Column ``name`` as floats, less ``origin`` (for times: integer epoch
+    nanoseconds are counted from a common origin before they become floats,
+    which would keep only a quarter of a microsecond)."""
     if not isinstance(name, str) or name not in table:
         _refuse(path, key, name, f"must name a column of the file; it has "
                 f"{_listed(table)}")
     column = np.asarray(table[name])
-    if column.dtype.kind not in "iuf" or column.squeeze().ndim != 1:
-        _refuse(path, key, name, f"must be one column of numbers; it holds {column.dtype} "
+    if column.size == 0:
+        _refuse(path, key, name, "holds no rows")
+    if column.dtype.kind not in "iuf" or sum(size > 1 for size in column.shape) > 1:
+        _refuse(path, key, name, f"must be one column of numbers; it holds {_held(column)} "
                 f"of shape {column.shape}")
-    return column.astype(float).reshape(-1)
+    column = column.reshape(-1)
+    if column.dtype.kind in "iu":
+        return (column.astype(np.int64) - origin).astype(float)
+    return column.astype(float) - origin
+
+
+def _held(array: np.ndarray) -> str:
+    return {"O": "text or mixed cells", "U": "text", "S": "bytes", "b": "true/false"}.get(
+        array.dtype.kind, f"{array.dtype} numbers")
 
 
 def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray:
     """``names`` (a list of ``width`` columns, or one (N, width) array's name)."""
     if isinstance(names, str) and names in table:
-        array = np.asarray(table[names], dtype=float)
+        array = np.asarray(table[names])
+        if array.dtype.kind not in "iuf":
+            _refuse(path, key, names, f"must hold numbers; it holds {_held(array)}")
+        array = array.astype(float)
         if array.ndim == 2 and array.shape[0] == width and array.shape[1] != width:
             array = array.T               # stored one row per axis (MATLAB, HDF5)
         if array.ndim != 2 or array.shape[1] != width:
@@ -282,7 +317,12 @@ def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray
     if not isinstance(names, list) or len(names) != width:
         _refuse(path, key, names, f"must be a list of {width} columns, or the name of one "
                 f"(N, {width}) array; the file has {_listed(table)}")
-    return np.column_stack([_column(path, table, key, name) for name in names])
+    columns = [_column(path, table, key, name) for name in names]
+    lengths = {name: len(column) for name, column in zip(names, columns)}
+    if len(set(lengths.values())) > 1:
+        _refuse(path, key, names, f"must be columns of one length; they hold "
+                f"{', '.join(f'{name} {n}' for name, n in lengths.items())} rows")
+    return np.column_stack(columns)
 
 
 def _listed(table: dict) -> str:
@@ -371,6 +411,9 @@ def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt
 def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
     """A vector sensor's median norm, where it read, plausible in its unit."""
     norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
+    if not len(norms):
+        _refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
+                "the gyro's span: no reading at all")
     median = float(np.median(norms))
     low, high = PLAUSIBLE_NORMS[name]
     limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]
@@ -426,7 +469,8 @@ def _reference(path: Path, clock: np.ndarray, times: np.ndarray, values: np.ndar
     if between.any():
         at = Slerp(times, rotations)(clock[between])
         quat[between] = at.as_quat(canonical=True, scalar_first=True)
-    quat[exact] = rotations[np.searchsorted(times, clock[exact])].as_quat(scalar_first=True)
+    quat[exact] = rotations[np.searchsorted(times, clock[exact])].as_quat(canonical=True,
+                                                                          scalar_first=True)
     return quat
 
 

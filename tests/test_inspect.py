@@ -80,9 +80,9 @@ def test_inspect_says_what_it_cannot_tell(tmp_path, capsys):
     pd.DataFrame({"when": np.arange(10.0), "u": np.ones(10)}).to_csv(tmp_path / "odd.csv",
                                                                      index=False)
     assert main(["inspect", str(tmp_path / "odd.csv")]) == 0
-    out = capsys.readouterr().out
-    assert "no columns recognised as gyro" in out and "no time column recognised" in out
-    assert "does not load" in out
+    err = capsys.readouterr().err
+    assert "no columns recognised as gyro" in err and "no time column recognised" in err
+    assert "does not load" in err
 
 
 @settings(max_examples=40, deadline=None)
@@ -99,10 +99,15 @@ def test_the_unit_that_puts_an_earth_field_in_place_is_found(norm_uT, unit, seed
 def test_time_units_clipping_and_rest_on_made_data():
     assert time_unit(np.full(5, 5.0)) == "ms" and time_unit(np.full(5, 0.005)) == "s"
     assert time_unit(np.full(5, 5e6)) == "ns"
+    # 1 kHz in ms and in µs, 2 kHz in ns, 10 Hz in s: each unit a thousand apart
+    assert [time_unit(np.full(5, v)) for v in (1.0, 1000.0, 5e5, 0.1)] == ["ms", "us", "ns", "s"]
     rail = np.zeros((100, 3))
     rail[10:15, 0] = 34.9
     assert clipped(rail) == (5, 34.9)
     assert clipped(rail[:12]) == (0, 34.9)          # two at the extreme: no rail
+    quantised = np.zeros((100, 3))
+    quantised[10:20:2, 0] = 43.0                    # the extreme now and then, never on end
+    assert clipped(quantised) == (0, 43.0)
     dt = 0.01
     rates = np.zeros((1000, 3))
     rates[400:, 2] = 1.0                              # turning from 4 s on

@@ -31,7 +31,7 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
-from sensors.declared import load_parts
+from sensors.declared import data_file, load_parts, read_declaration
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -148,7 +148,9 @@ class BroadDataset:
             raise InvalidParameterError("trial" if self.parameter == "broad"
                                         else f"{self.parameter} trial", shown, rule)
         if path.suffix == ".toml":
-            recording = next(part for part in declared_parts(path) if part.name == name)
+            recording = next((part for part in declared_parts(path) if part.name == name), None)
+            if recording is None:
+                refuse(f"no longer holds part {name} (the file changed since it was listed)")
         elif path.suffix == ".npz":
             try:
                 recording = load_recording(path, name)
@@ -282,6 +284,10 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
     files = {}
     for path in paths:
         for part in declared_parts(path):
+            if not part.has_vectors:
+                raise InvalidParameterError(
+                    parameter, str(path), "declares no [recording.accelerometer] or no "
+                    "[recording.magnetometer]; the IMU filters scored here need both")
             rule = runnable_rule(part)
             if rule:
                 warnings.warn(f"{path.name}: part {part.name} left out: {rule}", stacklevel=2)
@@ -299,11 +305,12 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
 def declared_parts(path: Path) -> tuple:
     """The parts of the ``[recording]`` at ``path``, read once while the
     file is unchanged (the dataset lists them, then loads each)."""
-    return _declared_parts(path, path.stat().st_mtime_ns)
+    data = data_file(path, read_declaration(path))
+    return _declared_parts(path, path.stat().st_mtime_ns, data.stat().st_mtime_ns)
 
 
 @functools.lru_cache(maxsize=16)
-def _declared_parts(path: Path, _modified_ns: int) -> tuple:
+def _declared_parts(path: Path, _modified_ns: int, _data_modified_ns: int) -> tuple:
     return tuple(load_parts(path))
 
 

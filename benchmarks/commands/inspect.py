@@ -5,6 +5,7 @@ with no declaration yet, the ``[recording]`` file its columns suggest
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from benchmarks.commands.options import PROG, UsageError, add_divergence_option
@@ -52,13 +53,15 @@ def run(args, _scenario):
     try:
         parts = declared_recordings(declaration, table, target or args.file)
     except InvalidParameterError as err:
+        if declared:
+            raise                          # the user's own declaration: its error, exit 2
         parts = None
-        notes.append(f"as {'declared' if declared else 'suggested'}, it does not load: {err}")
+        notes.append(f"as suggested, it does not load: {err}")
     if parts is not None:
         for line in findings(parts, table, declaration):
             print(f"  {line}")
     for note in notes:
-        print(f"{PROG}: note: {note}")
+        print(f"{PROG}: note: {note}", file=sys.stderr)
     if target is not None:
         from benchmarks.output import write_text
         write_text(target, declaration_toml(declaration, args.file.name))

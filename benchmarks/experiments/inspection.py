@@ -52,7 +52,11 @@ def sensor_columns(table: dict) -> dict:
     groups = {}
     for name, values in table.items():
         array = np.asarray(values)
-        if array.ndim == 2 and 3 in array.shape or array.ndim == 2 and 4 in array.shape:
+        if array.dtype.kind not in "iuf":
+            continue                       # text or mixed cells: no sensor's column
+        if sum(size > 1 for size in array.shape) == 1:
+            array = array.reshape(-1)      # MATLAB keeps a vector as (1, N)
+        if array.ndim == 2 and (3 in array.shape or 4 in array.shape):
             width = 4 if 4 in array.shape else 3
             sensor = _sensor_of(name)
             if sensor and (sensor == "reference") == (width == 4):
@@ -68,7 +72,8 @@ def sensor_columns(table: dict) -> dict:
             continue
         sensor = _sensor_of(prefix)
         wanted = "wxyz" if sensor == "reference" else "xyz"
-        if sensor and set(axes) >= set(wanted) and sensor not in found:
+        lengths = {np.asarray(table[axes[axis]]).size for axis in wanted if axis in axes}
+        if sensor and set(axes) >= set(wanted) and sensor not in found and len(lengths) == 1:
             found[sensor] = [axes[axis] for axis in wanted]
     return found
 
@@ -77,8 +82,9 @@ def time_columns(table: dict) -> list[str]:
     """The columns named as times whose readings increase."""
     names = []
     for name, values in table.items():
-        array = np.asarray(values, dtype=float).reshape(-1) if np.asarray(values).dtype.kind \
-            in "iuf" and np.asarray(values).squeeze().ndim == 1 else None
+        raw = np.asarray(values)
+        array = raw.astype(float).reshape(-1) if raw.dtype.kind in "iuf" and \
+            sum(size > 1 for size in raw.shape) == 1 else None
         if array is None or not _tokens(name) & set(TIME_TOKENS):
             continue
         present = array[~np.isnan(array)]
@@ -88,18 +94,21 @@ def time_columns(table: dict) -> list[str]:
 
 
 def time_unit(intervals: np.ndarray) -> str:
-    """The unit in which an IMU's sample interval (1 ms to 1 s) reads as given."""
+    """The unit that makes an IMU's sample interval most like one: the
+    unit whose reading of the median interval is nearest (on a log scale)
+    to 5 ms, an IMU's 200 Hz; the units are a thousand apart, so a clock of
+    0.16 to 160 ms, 6 kHz to 6 Hz, reads right."""
     typical = float(np.median(intervals))
-    for unit, seconds in TIME_UNITS.items():
-        if 1e-4 <= typical * seconds <= 1.0:
-            return unit
-    return "s"
+    return min(TIME_UNITS, key=lambda unit: abs(math.log(max(typical * TIME_UNITS[unit],
+                                                             1e-300) / 5e-3)))
 
 
 def clock(times: np.ndarray) -> dict:
     """A sensor's clock: its readings, rate, jitter and gaps."""
     times = times[~np.isnan(times)]
     intervals = np.diff(times)
+    if not len(intervals):
+        return {"readings": len(times)}
     typical = float(np.median(intervals))
     return {"readings": len(times), "interval": typical,
             "jitter": float(np.std(intervals) / typical), "longest": float(intervals.max()),
@@ -156,13 +165,16 @@ def rest_periods(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> li
 
 def clipped(values: np.ndarray) -> tuple[int, float]:
     """(readings at the channel's extreme on some axis, that extreme) when
-    three or more sit exactly there: the sensor's rail, where it clips."""
+    three in a row sit exactly there: the sensor's rail, where it clips (a
+    quantised sensor reaches its extreme now and then, not three times on end)."""
     present = values[~np.isnan(values).any(axis=1)]
     if not len(present):
         return 0, 0.0
     extreme = float(np.abs(present).max())
-    count = int(np.count_nonzero(np.any(np.abs(present) == extreme, axis=1)))
-    return (count, extreme) if count >= 3 and extreme > 0 else (0, extreme)
+    at = np.any(np.abs(present) == extreme, axis=1)
+    run = np.convolve(at, np.ones(3), mode="valid") == 3      # three in a row: a rail
+    count = int(np.count_nonzero(at))
+    return (count, extreme) if run.any() and extreme > 0 else (0, extreme)
 
 
 def _values(table: dict, columns) -> np.ndarray:
@@ -265,6 +277,9 @@ def findings(parts, table: dict, declaration: dict) -> list[str]:
         times = np.asarray(table[section["time"]], dtype=float)
         times = times[~np.isnan(values).all(axis=1)] * seconds
         clock_of = clock(times)
+        if "interval" not in clock_of:
+            lines.append(f"{sensor:<14} {clock_of['readings']:>9,} reading(s): no rate to tell")
+            continue
         lines.append(f"{sensor:<14} {clock_of['readings']:>9,} readings, "
                      f"{1 / clock_of['interval']:8.2f} Hz, jitter {clock_of['jitter']:6.1%}, "
                      f"longest interval {clock_of['longest'] * 1e3:8.2f} ms, "
@@ -288,7 +303,10 @@ def _physics(recording) -> list[str]:
         return ["rest, gravity: no accelerometer"]
     force = recording.accelerometer_mps2
     read = np.any(force != 0, axis=1)
-    periods = rest_periods(recording.gyro_radps[read], force[read], recording.dt)
+    # The accelerometer may read at fewer samples than the gyro: its own step.
+    step = recording.dt * float(np.median(np.diff(np.flatnonzero(read)))) if read.sum() > 1 \
+        else recording.dt
+    periods = rest_periods(recording.gyro_radps[read], force[read], step)
     rest = (f"{len(periods)} period{'s' if len(periods) != 1 else ''} at rest, "
             f"{sum(b - a for a, b in periods):.1f} s in all (first {periods[0][0]:.1f} to "
             f"{periods[0][1]:.1f} s)" if periods else
@@ -299,6 +317,9 @@ def _physics(recording) -> list[str]:
     if recording.magnetometer_uT is not None:
         field = recording.magnetometer_uT
         both = read & np.any(field != 0, axis=1)
+        if not both.any():
+            return lines + ["field: the accelerometer and the magnetometer never read at the "
+                            "same sample: no dip to tell"]
         up = force[both] / np.linalg.norm(force[both], axis=1)[:, None]
         norms = np.linalg.norm(field[both], axis=1)
         dip = np.degrees(-np.arcsin(np.clip(np.sum(field[both] * up, axis=1) / norms, -1, 1)))
