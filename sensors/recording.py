@@ -95,8 +95,10 @@ class Recording:
         return slice(0, int(np.argmax(self.movement)) if self.movement.any() else self.n_samples)
 
     def rest_gyro_mean_radps(self) -> np.ndarray:
-        """The gyro's mean over the initial rest: its bias at switch-on (rad/s)."""
-        return self.gyro_radps[self.rest_samples].mean(axis=0)
+        """The gyro's mean over the initial rest: its bias at switch-on (rad/s);
+        NaN where the recording has none (it moves from its first sample)."""
+        rest = self.gyro_radps[self.rest_samples]
+        return rest.mean(axis=0) if len(rest) else np.full(3, np.nan)
 
     def reference_gaps(self) -> list[tuple[int, int]]:
         """Runs of samples without a reference, as ``[start, stop)`` index pairs."""

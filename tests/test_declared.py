@@ -364,6 +364,26 @@ def test_integer_epoch_nanoseconds_keep_the_clock(trial, tmp_path):
     assert declared.rate_hz == pytest.approx(1e9 / step_ns, rel=1e-12)
 
 
+def test_replay_takes_a_declared_recording_as_its_npz(trial, tmp_path):
+    # The gyro-only replay (a pseudo star tracker made from the reference)
+    # on a declared CSV and on the same samples as the toolkit's .npz.
+    recording, keep = trial
+    declared = _declare(tmp_path, _csv(tmp_path, _table(trial)))
+    with np.load(TRIAL) as data:
+        arrays = {key: data[key][:keep] if data[key].ndim and len(data[key]) > keep else data[key]
+                  for key in data.files}
+    arrays["movement"] = ~np.isnan(arrays["opt_quat"]).any(axis=1)
+    np.savez(tmp_path / "same.npz", **arrays)
+    summaries = {}
+    for label, source in (("declared", declared), ("npz", tmp_path / "same.npz")):
+        out = tmp_path / f"replay_{label}"
+        assert main(["replay", "--dataset", str(source), "--estimators", "mekf", "--out",
+                     str(out), "--quiet"]) == 0
+        summaries[label] = pd.read_csv(out / "summary.csv").set_index("estimator")
+    columns = ["rms_movement_deg", "mean_deg", "max_deg", "final_deg"]
+    assert np.allclose(summaries["declared"][columns], summaries["npz"][columns], rtol=1e-6)
+
+
 def test_read_table_names_a_file_it_cannot_read(tmp_path):
     (tmp_path / "log.xlsx").write_text("not a table")
     with pytest.raises(InvalidParameterError, match="must be .csv, .parquet, .npz"):

@@ -163,7 +163,7 @@ def test_bad_recordings_are_refused_in_one_line(tmp_path, capsys, changes, messa
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--dataset", "broad-99"], "must be one of broad-02, broad-07 or a path to a .npz"),
+    (["--dataset", "broad-99"], "must be one of broad-02, broad-07, a path to a .npz recording or a [recording] .toml"),
     (["--dataset", "missing.npz"], "file does not exist"),
     (["--star-tracker-interval", "0"], "star_tracker_interval = 0.0: must be > 0"),
     (["--star-tracker-noise-deg", "-1"], "star_tracker_noise_deg = -1.0: must be > 0"),

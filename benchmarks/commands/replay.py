@@ -28,7 +28,8 @@ def arguments(commands, defaults) -> None:
         "dataset or your .npz); write replay.png and summary.csv")
     replay.add_argument("--dataset", default="broad-02", metavar="NAME_OR_PATH",
                         help="broad-02 (slow rotation, default), broad-07 (fast rotation), or "
-                        "a .npz recording with the same keys")
+                        "a .npz recording with the same keys, or a [recording] .toml declaring "
+                        "your log")
     estimators_option(replay, "dead reckoning, the EKF and the MEKF")
     replay.add_argument("--star-tracker-interval", type=number, default=1.0, metavar="SECONDS",
                         help="seconds between pseudo star tracker readings, rounded to whole "

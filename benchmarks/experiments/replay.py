@@ -66,17 +66,22 @@ SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "fina
 
 
 def open_dataset(dataset: str) -> tuple[Recording, str | None]:
-    """The recording ``dataset`` names — ``broad-02``, ``broad-07`` or a path
-    to an ``.npz`` — and the attribution it must carry (None for a user's)."""
+    """The recording ``dataset`` names — ``broad-02``, ``broad-07``, a path
+    to an ``.npz``, or a ``[recording]`` ``.toml`` declaring a logger's file
+    (:mod:`sensors.declared`) — and the attribution it must carry (None for
+    a user's)."""
     if dataset in DATASETS:
         try:
             path = shipped_file(DATASETS[dataset])
         except FileNotFoundError as err:
             raise InvalidParameterError("dataset", dataset, str(err)) from None
         return load_recording(path, name=dataset), ATTRIBUTION
+    if str(dataset).endswith(".toml"):
+        from sensors.declared import load_declared
+        return load_declared(dataset), None
     if not str(dataset).endswith(".npz"):
-        raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)} "
-                                    "or a path to a .npz recording")
+        raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)}, "
+                                    "a path to a .npz recording or a [recording] .toml")
     return load_recording(dataset), None
 
 
@@ -85,11 +90,15 @@ def dataset_source(dataset: str) -> tuple:
     (a SHA-256 of its file), so that one file named two ways (``broad-02``
     and its path, a copy) is known for one recording."""
     import hashlib
-    if dataset not in DATASETS and not str(dataset).endswith(".npz"):
+    if dataset not in DATASETS and not str(dataset).endswith((".npz", ".toml")):
         open_dataset(dataset)           # its refusal, one line
     try:
         path = shipped_file(DATASETS[dataset]) if dataset in DATASETS else Path(dataset)
-        digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        digest = hashlib.sha256(Path(path).read_bytes())
+        if str(dataset).endswith(".toml"):      # the declaration and the file it reads
+            from sensors.declared import data_file, read_declaration
+            digest.update(data_file(path, read_declaration(path)).read_bytes())
+        digest = digest.hexdigest()
     except OSError as err:
         raise InvalidParameterError("dataset", dataset, f"cannot be read "
                                     f"({err.strerror or err})") from None
