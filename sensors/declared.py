@@ -49,7 +49,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
-from sensors.recording import Recording, VECTOR_LIMITS
+from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
 
 #: Each time unit in seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -199,13 +199,9 @@ def read_table(data: Path) -> dict:
     archive's arrays, a MATLAB file's variables, an HDF5 file's datasets)."""
     suffix = data.suffix.lower()
     try:
-        if suffix in (".csv", ".txt"):
+        if suffix in (".csv", ".txt", ".parquet"):
             import pandas as pd
-            frame = pd.read_csv(data)
-            return {str(name): frame[name].to_numpy() for name in frame.columns}
-        if suffix == ".parquet":
-            import pandas as pd
-            frame = pd.read_parquet(data)
+            frame = (pd.read_parquet if suffix == ".parquet" else pd.read_csv)(data)
             return {str(name): frame[name].to_numpy() for name in frame.columns}
         if suffix == ".npz":
             with np.load(data, allow_pickle=False) as archive:
@@ -298,8 +294,9 @@ def _column(path: Path, table: dict, key: str, name, origin: int = 0) -> np.ndar
 
 
 def _held(array: np.ndarray) -> str:
-    return {"O": "text or mixed cells", "U": "text", "S": "bytes", "b": "true/false"}.get(
-        array.dtype.kind, f"{array.dtype} numbers")
+    """What a column holds, in words: a table's object column is text or
+    mixed cells (:func:`sensors.recording.kind_in_words` for the rest)."""
+    return "text or mixed cells" if array.dtype.kind == "O" else kind_in_words(array)
 
 
 def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray:

@@ -162,7 +162,7 @@ def checked_recording(data: dict, name: str, refuse) -> Recording:
     if movement.dtype != bool and (movement.dtype.kind not in "iu"
                                    or not np.isin(movement, (0, 1)).all()):
         refuse(f"movement must be true/false (or the integers 0/1) per sample; it holds "
-               f"{_kind(movement)}")
+               f"{kind_in_words(movement)}")
     if movement[0]:
         refuse("movement is true from the first sample on; a recording must begin at rest "
                "(false), since the gyro's bias at switch-on is its mean over the initial rest")
@@ -238,7 +238,7 @@ def _read_archive(path: Path, refuse) -> dict:
     return data
 
 
-def _kind(array: np.ndarray) -> str:
+def kind_in_words(array: np.ndarray) -> str:
     """What an array holds, in words."""
     kinds = {"b": "true/false", "c": "complex numbers", "U": "text", "S": "bytes",
              "O": "Python objects", "V": "raw records", "M": "dates", "m": "time spans"}
@@ -248,4 +248,4 @@ def _kind(array: np.ndarray) -> str:
 def _check_numbers(key: str, array: np.ndarray, refuse) -> None:
     """``key`` holds real numbers: not true/false, complex numbers, text, objects."""
     if array.dtype.kind not in "iuf":
-        refuse(f"{key} must hold real numbers; it holds {_kind(array)}")
+        refuse(f"{key} must hold real numbers; it holds {kind_in_words(array)}")
