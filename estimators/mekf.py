@@ -129,7 +129,7 @@ from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, rela
 from estimators import imu
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
                              gate_probability_setting, norm_tolerance_setting)
-from estimators.imu.updates import ImuUpdates
+from estimators.imu.updates import ErrorStateUpdates
 from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
 _I3 = np.eye(3)
@@ -190,7 +190,7 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
-class MultiplicativeEKF(ImuUpdates, AttitudeAndBiasEstimator):
+class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
     Parameters

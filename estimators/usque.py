@@ -62,8 +62,31 @@ propagation) the mean's :math:`\delta p` moves into the reference,
 :math:`\hat q \leftarrow \hat q \otimes \delta q(\delta p)`,
 :math:`\delta p \leftarrow 0` (eq. 45), keeping :math:`P`.
 
+.. _usque-imu:
+
+**IMU models** (:mod:`estimators.imu`, the MEKF's; ``gravity_model``,
+``magnetometer_model``, ``rest_updates`` as there): each model's reading
+becomes a measurement function of the sigma points, so that the unscented
+transform, not a Jacobian, carries it (Crassidis & Markley 2003, §III):
+
+* gravity's low-passed direction :math:`z`:
+  :math:`h(\chi) = A(\hat q \otimes \delta q(\delta p))^\mathsf{T} e_z
+  + D(\beta - \bar\beta)`, with :math:`D` the strapdown's drift
+  (:func:`estimators.imu.gravity.drift_jacobian`), the MEKF's bias columns;
+* the zero-rate update at rest: :math:`h(\chi) = \beta`, linear, so its
+  unscented update is the Kalman update exactly;
+* the heading: each point's heading error, measured as zero; the gain's
+  attitude rows projected on the vertical and its bias rows kept only for a
+  validated field, as the MEKF's, so the covariance takes the general
+  gain's form :math:`P - K P_{xz}^\mathsf{T} - P_{xz} K^\mathsf{T} + K S K^\mathsf{T}`
+  (the only update filterpy's ``update`` cannot make: its gain is the
+  optimal one).
+
+The models read the mean attitude :math:`\hat q \otimes \delta q(\delta p)`,
+and the strapdown turns by the mean's bias-corrected rate.
+
 Where filterpy could not express a step: none of the filter's arithmetic is
-replaced. The class only supplies ``fx``, ``hx`` and ``residual_x``/``residual_z``
+replaced but the heading's projected gain. The class only supplies ``fx``, ``hx`` and ``residual_x``/``residual_z``
 (plain differences: all sigma points share one reference), keeps the
 reference quaternion beside filterpy's ``x``, and does the reset.
 filterpy 2.0 redraws the sigma points from :math:`(x^-, P^-)` after ``predict``
@@ -72,14 +95,20 @@ updates, and the tests run on the version this project resolves.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_from_rotvec,
                                  quat_multiply, relative_rotation, to_body_frame)
 from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
+from estimators import imu
+from estimators.imu import gravity
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
                              gate_probability_setting, norm_tolerance_setting)
+from estimators.imu.updates import UP, ImuUpdates
 from estimators.mekf import discrete_error_model
+from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
 #: n, the filter's state: the attitude error's GRPs and the gyro bias.
 STATE_SIZE = 6
@@ -95,6 +124,17 @@ MIN_SCALED_VARIANCE = 1e-300
 
 def _unit(q: np.ndarray) -> np.ndarray:
     return q / np.sqrt(q @ q)
+
+
+def _heading(q: np.ndarray, field: np.ndarray) -> float:
+    """The heading of a body-frame field seen through ``q`` (rad from north, east positive)."""
+    turned = np.empty(3)
+    gravity.rotate(q, field, turned)
+    return math.atan2(turned[0], turned[1])
+
+
+def _wrapped(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _scaling(alpha, beta, kappa) -> tuple[float, float, float, float]:
@@ -133,7 +173,7 @@ def _check_sigma_spread(name: str, value, spread: float) -> None:
                 "(n + lambda) P")
 
 
-class USQUE(AttitudeAndBiasEstimator):
+class USQUE(ImuUpdates, AttitudeAndBiasEstimator):
     """Unscented quaternion estimator (Crassidis & Markley 2003) on filterpy's UKF.
 
     Parameters
@@ -141,8 +181,10 @@ class USQUE(AttitudeAndBiasEstimator):
     dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
     initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance,
-    rate_interpolation, on_invalid
-        As for :class:`~estimators.MultiplicativeEKF`.
+    rate_interpolation, gravity_model, magnetometer_model, rest_updates,
+    gravity_density, heading_density, rest_density, on_invalid
+        As for :class:`~estimators.MultiplicativeEKF` (the IMU models'
+        updates made on the sigma points: :ref:`IMU models <usque-imu>` below).
     alpha, beta, kappa : float
         The scaled sigma points' spread, prior-knowledge and secondary
         scaling parameters (Van der Merwe): ``λ = α² (n + κ) − n``.
@@ -159,6 +201,8 @@ class USQUE(AttitudeAndBiasEstimator):
 
     name = "usque"
     label = "USQUE (UKF)"
+    #: The filters' tunables, and the IMU models' densities (named only).
+    tunable = AttitudeAndBiasEstimator.tunable + (GRAVITY_DENSITY, HEADING_DENSITY)
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
                  gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
@@ -167,9 +211,15 @@ class USQUE(AttitudeAndBiasEstimator):
                  kappa: float = 0.0, output: str = "posterior",
                  gate_probability: float | None = None,
                  magnetic_norm_tolerance: float | None = None, rate_interpolation: str = "hold",
-                 on_invalid: str = "raise"):
+                 gravity_model: str = "reading", magnetometer_model: str = "vector",
+                 rest_updates: bool = False, gravity_density: float = imu.GRAVITY_DENSITY,
+                 heading_density: float = imu.HEADING_DENSITY,
+                 rest_density: float = imu.REST_DENSITY, on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
+        self._configure_imu(gravity_model=gravity_model, magnetometer_model=magnetometer_model,
+                            rest_updates=rest_updates, gravity_density=gravity_density,
+                            heading_density=heading_density, rest_density=rest_density)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
@@ -197,6 +247,8 @@ class USQUE(AttitudeAndBiasEstimator):
         self.filter.sigmas_f = self.filter.points_fn.sigma_points(self.filter.x, self.filter.P)
         self._updated = False
         self._restart_rates()
+        if self.imu is not None:
+            self.imu.reset(self.q_hat)
         self._record()
 
     def _record(self) -> None:
@@ -244,7 +296,13 @@ class USQUE(AttitudeAndBiasEstimator):
         self._updated = True
 
     def correct_vector(self, observation) -> None:
-        """filterpy's unscented update with one vector reading, then the reset."""
+        """filterpy's unscented update with one vector reading, then the reset
+        (or the IMU models' updates, where the settings ask)."""
+        if self.imu is not None and self._imu_reading(observation):
+            if np.any(self.filter.x[:3]):     # an untrusted field: no update, the reset all the same
+                self._reset()
+            self._updated = True
+            return
         self._fresh_sigma_points()
         reference = np.asarray(observation.reference, dtype=float)
         R = observation.variance * np.eye(3)
@@ -261,6 +319,74 @@ class USQUE(AttitudeAndBiasEstimator):
     def _hx_vector(self, x, reference):
         """A sigma point's predicted body vector ``A(q̂ ⊗ δq(δp))ᵀ r``."""
         return to_body_frame(_unit(quat_multiply(self.q_hat, quat_from_grp(x[:3]))), reference)
+
+    # The IMU models' updates (estimators.imu.updates), on the sigma points.
+    @property
+    def estimate(self) -> np.ndarray:
+        """The attitude the IMU models read: ``q̂ ⊗ δq(δp)`` of the mean."""
+        x = self.filter.x
+        if not np.any(x[:3]):
+            return self.q_hat
+        return _unit(quat_multiply(self.q_hat, quat_from_grp(x[:3])))
+
+    def _gravity_update(self, up, variance: float, dof: int) -> None:
+        """Gravity's low-passed direction: ``h(χ) = A(q̂ ⊗ δq(δp))ᵀ e_z + D (β − β̄)``."""
+        self._imu_update(up, variance * np.eye(3), self._hx_gravity, dof, "accelerometer",
+                         drift=self.imu.drift, mean_bias=self.filter.x[3:].copy())
+
+    def _hx_gravity(self, x, drift, mean_bias):
+        return self._hx_vector(x, UP) + drift @ (x[3:] - mean_bias)
+
+    def _rest_update(self, rate, variance: float) -> None:
+        """The zero-rate update: ``h(χ) = β``, never gated."""
+        self._imu_update(np.asarray(rate, dtype=float), variance * np.eye(3), self._hx_bias, 3,
+                         "rest", gated=False)
+
+    @staticmethod
+    def _hx_bias(x):
+        return x[3:]
+
+    def _imu_update(self, z, R, hx, dof: int, sensor: str, gated: bool = True,
+                    **hx_args) -> None:
+        """filterpy's unscented update with ``hx``, gated as the vector
+        readings are, then the reset."""
+        self._fresh_sigma_points()
+        if not gated or self.gate_probability is None or self._gate(z, hx, R, dof, sensor,
+                                                                     **hx_args):
+            self.filter.update(z, R=R, hx=hx, **hx_args)
+        self._reset()
+        self._updated = True
+
+    def _heading_update(self, psi: float, variance: float, validated: bool, field,
+                        reference) -> None:
+        """The heading-only update: each sigma point's heading error
+        ``h(χ) = ψ + [ψ(χ) − ψ(x̄)]`` (wrapped), measured 0; the attitude gain
+        projected on the vertical ``v`` and the bias gain zeroed unless the
+        field is validated, so the covariance takes the general gain's form
+        ``P − K P_xzᵀ − P_xz Kᵀ + K S Kᵀ``."""
+        self._fresh_sigma_points()
+        f = self.filter
+        mean_heading = _heading(self.estimate, field)
+        h = np.array([[psi + _wrapped(_heading(self._sigma_attitude(s), field) - mean_heading)]
+                      for s in f.sigmas_f])
+        zp = f.Wm @ h
+        S = f.Wc @ ((h - zp) ** 2) + variance
+        y = -zp
+        if self.gate_probability is None or self.accepts(y, S[None], 1, "magnetometer"):
+            Pxz = (f.Wc[:, None] * (f.sigmas_f - f.x)).T @ (h - zp)
+            K = Pxz / S
+            v = to_body_frame(self.estimate, UP)
+            K[:3] = np.outer(v, v @ K[:3])
+            if not validated:
+                K[3:] = 0.0
+            f.x = f.x + (K @ y)
+            f.P = f.P - K @ Pxz.T - Pxz @ K.T + K @ (S[None] * K.T)
+            f.y, f.S, f.K = y, S[None], K
+        self._reset()
+        self._updated = True
+
+    def _sigma_attitude(self, sigma) -> np.ndarray:
+        return _unit(quat_multiply(self.q_hat, quat_from_grp(sigma[:3])))
 
     def _fresh_sigma_points(self) -> None:
         """Sigma points about the current ``(x, P)`` for a second update within
@@ -289,6 +415,8 @@ class USQUE(AttitudeAndBiasEstimator):
         _, self.filter.Q = discrete_error_model(omega_hat, dt, self.gyro_noise,
                                                 self.gyro_bias_random_walk)
         self.filter.predict(dt=dt, omega_meas_radps=omega, q_reference_next=q_next)
+        if self.imu is not None:
+            self.imu.propagate(omega_hat * dt, dt)
         # The prior mean's δp stays in x until the next update or reset: the
         # sigma points filterpy drew for the update are relative to q_next.
         self.q_hat = q_next

@@ -1,5 +1,5 @@
 """The IMU models (:mod:`estimators.imu`) against their equations, the MEKF
-that runs them against its kernel, and the smoother
+and USQUE that run them against their kernels, and the smoother
 (:mod:`estimators.smoother`) against filterpy's RTS smoother.
 
 Every model's default is VQF's published one (Laidig & Seel, "VQF",
@@ -15,7 +15,7 @@ from hypothesis import given, settings, strategies as st
 from scipy.signal import lfilter, lfilter_zi
 
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_body_frame
-from estimators import MekfSmoother, MultiplicativeEKF
+from estimators import USQUE, MekfSmoother, MultiplicativeEKF
 from estimators.imu import ImuModels, heading, lowpass, rest
 from estimators.smoother import fuse, reversed_rates
 from sensors.vector import VectorReadings
@@ -106,20 +106,21 @@ def test_rest_is_found_after_its_minimum_time_and_ends_with_the_movement():
     assert not _detect(np.tile(np.radians([3.0, 0, 0]), (400, 1)), acc[:400], dt).any()
 
 
-def test_at_rest_the_mekf_learns_the_gyros_bias():
+@pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])
+def test_at_rest_the_filter_learns_the_gyros_bias(filter_class):
     dt, n = 0.01, 3000
     bias = np.radians([0.4, -0.3, 0.2])
     rng = np.random.default_rng(3)
     gyro = bias + rng.normal(0, 1e-3, (n, 3))
     acc = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.02, (n, 3))
     mag = np.array([0.0, 20.0, -40.0]) + rng.normal(0, 0.2, (n, 3))
-    mekf = MultiplicativeEKF(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
-                             initial_bias_sigma_radps=math.radians(1.0),
-                             gravity_model="lowpass", magnetometer_model="heading",
-                             rest_updates=True, rate_interpolation="end")
-    mekf.run(gyro, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool),
-             vectors=_readings(acc, mag, n))
-    np.testing.assert_allclose(mekf.beta_hat, bias, atol=math.radians(0.01))
+    kalman = filter_class(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
+                          initial_bias_sigma_radps=math.radians(1.0),
+                          gravity_model="lowpass", magnetometer_model="heading",
+                          rest_updates=True, rate_interpolation="end")
+    kalman.run(gyro, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool),
+               vectors=_readings(acc, mag, n))
+    np.testing.assert_allclose(kalman.bias_radps, bias, atol=math.radians(0.01))
 
 
 def _readings(acc, mag, n, every=1, known=False):
@@ -162,6 +163,31 @@ def test_a_heading_update_leaves_the_inclination_unchanged(attitude, bias, psi, 
     np.testing.assert_allclose(_inclination(mekf.q_hat), before, atol=1e-12)
     # ...and it does turn the heading, by a share of psi of psi's sign.
     assert abs(psi) < 1e-9 or np.linalg.norm(mekf.q_hat[1:]) > 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+       st.floats(-1.0, 1.0), st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6),
+       st.booleans())
+def test_usques_heading_update_leaves_the_inclination_unchanged(attitude, psi, correlation,
+                                                                 validated):
+    # USQUE's heading update on its sigma points: the gain's attitude rows
+    # projected on the vertical turn the estimate about it alone.
+    usque = USQUE(dt=0.01, magnetometer_model="heading",
+                  initial_attitude=quat_from_rotvec(np.array(attitude)))
+    L = np.eye(6) * 0.1
+    L[3:, :3] = np.reshape(correlation, (3, 2)).repeat(2, axis=1)[:, :3] * 0.05
+    usque.filter.P = L @ L.T + 1e-6 * np.eye(6)
+    usque._updated = True                       # sigma points from this P
+    before, bias = _inclination(usque.q_hat), usque.filter.x[3:].copy()
+    field = to_body_frame(usque.q_hat, np.array([0.0, 20.0, -40.0]))
+    usque._heading_update(psi, 1e-4, validated, field, np.array([0.0, 20.0, -40.0]))
+    np.testing.assert_allclose(_inclination(usque.q_hat), before, atol=1e-12)
+    # It turns the heading toward the reading, and the bias only for a validated field.
+    assert abs(psi) < 1e-6 or np.linalg.norm(usque.q_hat - quat_from_rotvec(
+        np.array(attitude))) > 1e-9
+    if not validated:
+        np.testing.assert_array_equal(usque.filter.x[3:], bias)
 
 
 def test_the_field_is_trusted_within_its_norm_and_dip_and_after_its_hold():
@@ -231,7 +257,9 @@ def test_a_candidate_for_the_first_field_outlives_a_brief_disagreement_not_a_las
 
 # --- the MEKF with the IMU models: per-run and kernel ---------------------------------
 
-def test_the_kernel_runs_the_imu_models_as_the_per_run_mekf_does():
+@pytest.mark.parametrize("filter_class, gate", [(MultiplicativeEKF, None), (USQUE, None),
+                                                (USQUE, 0.5)])
+def test_the_kernel_runs_the_imu_models_as_the_per_run_filter_does(filter_class, gate):
     from benchmarks.engine.recorded import run_recorded
     dt, n = 1 / 200, 1600
     rng = np.random.default_rng(4)
@@ -249,15 +277,20 @@ def test_the_kernel_runs_the_imu_models_as_the_per_run_mekf_does():
     vectors = _readings(acc, mag, n, every=4)                              # quarter rate
     settings_ = dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
                      initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
-                     magnetometer_model="heading", rest_updates=True, rate_interpolation="end")
-    per_run = MultiplicativeEKF(**settings_)
+                     magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
+                     gate_probability=gate)
+    per_run = filter_class(**settings_)
     reference = per_run.run(gyro, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool),
                             vectors=vectors)
-    run = run_recorded(MultiplicativeEKF(**settings_), gyro, vectors)
+    run = run_recorded(filter_class(**settings_), gyro, vectors)
     assert run.path == "kernel"
     np.testing.assert_allclose(run.estimates, reference, rtol=0, atol=1e-9)
     assert run.rejected == dict(per_run.rejected)
     assert run.rejected.get("magnetometer", 0) > 0        # the disturbance was refused
+    if gate is not None:            # a tight gate, so that it acts on gravity too
+        assert run.rejected.get("accelerometer", 0) > 0
+    if filter_class is not MultiplicativeEKF:
+        return
     smoother = MekfSmoother(**settings_)
     smoothed = smoother.run(gyro, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool),
                             vectors=vectors)

@@ -70,7 +70,7 @@ def _textbook(scenario, name="mekf", **options):
     textbook = {"gravity_model": "reading", "magnetometer_model": "vector",
                 "rest_updates": False, "gate_probability": 0.9999}
     merged = dict(scenario.estimator_options)
-    merged[name] = {**merged.get(name, {}), **(textbook if name == "mekf" else {}), **options}
+    merged[name] = {**merged.get(name, {}), **textbook, **options}
     return scenario.replace(estimator_options=merged)
 
 

@@ -1,7 +1,7 @@
 """What each IMU model of the MEKF buys on BROAD: each switched off in turn.
 
 The MEKF on an IMU recording runs the models of :mod:`estimators.imu`
-(:data:`benchmarks.broad.inputs.IMU_MEKF`). Here it runs on every trial
+(:data:`benchmarks.broad.inputs.IMU_MODELS`). Here it runs on every trial
 with all of them, then with one at a time replaced by the textbook's
 reading of that sensor, then with none (the textbook MEKF: the
 accelerometer and the magnetometer as vector readings behind a 99.99 % χ²
@@ -18,14 +18,14 @@ import sys
 
 import pandas as pd
 
-from benchmarks.broad.inputs import imu_inputs
+from benchmarks.broad.inputs import GATE_PROBABILITY, MAGNETIC_NORM_TOLERANCE, imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.broad.without_rest import cut, script_parser, trial_rows, write_table
 from benchmarks.engine.recorded import run_recorded
 from estimators import MultiplicativeEKF
 
 #: The textbook's reading of each sensor, and its tests.
-GATES = {"gate_probability": 0.9999, "magnetic_norm_tolerance": 0.1}
+GATES = {"gate_probability": GATE_PROBABILITY, "magnetic_norm_tolerance": MAGNETIC_NORM_TOLERANCE}
 #: Variant → the MEKF's settings over the recording's.
 VARIANTS = {
     "all IMU models": {},

@@ -52,12 +52,10 @@ FOLDS = 2
 GRIDS = {"madgwick": {"beta": MADGWICK_BETAS}, "madgwick-broad": {"beta": MADGWICK_BETAS}}
 #: The settings tuned where the declared defaults would add one that does
 #: nothing on BROAD (the ``measurement_scale`` scales the star tracker's R;
-#: there is no tracker here) or leave out what acts here: USQUE's gates, the
-#: MEKF's IMU models' densities (it gates nothing on an IMU recording).
-PARAMETERS = {"usque": ("gyro_noise", "gyro_bias_random_walk", "gate_probability",
-                        "magnetic_norm_tolerance"),
-              **{name: ("gyro_noise", "gyro_bias_random_walk", "gravity_density",
-                        "heading_density") for name in ("mekf", "mekf-smoother")}}
+#: there is no tracker here; the gates: the IMU models gate nothing on an
+#: IMU recording) or leave out what acts here: the IMU models' densities.
+PARAMETERS = {name: ("gyro_noise", "gyro_bias_random_walk", "gravity_density",
+                     "heading_density") for name in ("mekf", "mekf-smoother", "usque")}
 MAX_EVALUATIONS = 60
 #: How the table names each mode's numbers.
 MODE_LABELS = {"none": "default settings",

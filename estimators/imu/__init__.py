@@ -19,9 +19,10 @@ module         what it models
 =============  ================================================================
 
 :class:`ImuModels` holds their state for one filter run; the filters
-(:class:`estimators.MultiplicativeEKF`) call it where their settings ask
-(``gravity_model``, ``magnetometer_model``, ``rest_updates``). Its
-functions work on plain arrays so that the engine compiles the same ones.
+(:class:`estimators.MultiplicativeEKF`, :class:`estimators.USQUE`) call it
+where their settings ask (``gravity_model``, ``magnetometer_model``,
+``rest_updates``). Its functions work on plain arrays so that the engine
+compiles the same ones.
 """
 from __future__ import annotations
 

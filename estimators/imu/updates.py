@@ -1,6 +1,6 @@
-r"""The IMU models' measurement updates of an error-state filter (the
-MEKF's: :class:`estimators.MultiplicativeEKF`), each as its model's
-docstring gives it:
+r"""The IMU models' measurement updates of a six-state attitude and bias
+filter, each as its model's docstring gives it, in the error state
+:math:`[\delta\theta, \Delta\beta]`:
 
 * gravity's low-passed direction (:mod:`estimators.imu.gravity`):
   :math:`y = z - A(\hat q)^\mathsf{T} e_z`, :math:`H = [[A^\mathsf{T}e_z\times]\ D]`
@@ -12,8 +12,14 @@ docstring gives it:
   :math:`H = [v^\mathsf{T}\ 0]`, the attitude gain projected on :math:`v`,
   the bias rows kept only where the field is validated.
 
-Every update is the Kalman update of the error state in Joseph form
-(Markley & Crassidis 2014, §6.2), then the filter's reset.
+:class:`ImuUpdates` reads the sensors through the models and decides which
+update applies; each filter makes the update its own way:
+
+* the MEKF (:class:`ErrorStateUpdates`): the Kalman update of the error
+  state in Joseph form (Markley & Crassidis 2014, §6.2), then its reset;
+* USQUE (:class:`estimators.usque.USQUE`): the same models as measurement
+  functions of its sigma points (Crassidis & Markley 2003; the unscented
+  transform of a model linear in the state is that model's Kalman update).
 """
 from __future__ import annotations
 
@@ -23,13 +29,16 @@ from dynamics.quaternion import skew, to_body_frame
 from dynamics.validation import boolean, finite_number, one_of
 from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels
 
-_UP = np.array([0.0, 0.0, 1.0])
+UP = np.array([0.0, 0.0, 1.0])
 
 
 class ImuUpdates:
-    """What a six-state error filter with :attr:`imu` (an
+    """What a six-state filter with :attr:`imu` (an
     :class:`~estimators.imu.ImuModels`, or None) does with an IMU's
-    accelerometer and magnetometer readings where its settings ask."""
+    accelerometer and magnetometer readings where its settings ask. The
+    filter supplies :meth:`_gravity_update`, :meth:`_rest_update`,
+    :meth:`_heading_update` and :attr:`estimate` (the attitude the models
+    read)."""
 
     imu: ImuModels | None = None
     gravity_model = "reading"
@@ -81,34 +90,51 @@ class ImuUpdates:
         interval = self.imu.gravity_reading(np.asarray(observation.body, dtype=float), up)
         used = self.gravity_model == "lowpass"
         if used:
-            predicted = to_body_frame(self.q_hat, _UP)
-            H = np.zeros((3, 6))
-            H[:, :3] = skew(predicted)
-            H[:, 3:] = self.imu.drift
-            self._error_update(up - predicted, H, self.gravity_density / interval * np.eye(3),
-                               observation.dof, "accelerometer")
+            self._gravity_update(up, self.gravity_density / interval, observation.dof)
         if self.rest_updates and self.imu.at_rest:
-            H = np.zeros((3, 6))
-            H[:, 3:] = np.eye(3)
-            self._error_update(self.imu.rate_lp - self.beta_hat, H,
-                               self.rest_density / interval * np.eye(3), 3, "rest", gated=False)
+            self._rest_update(self.imu.rate_lp, self.rest_density / interval)
         return used
 
     def _heading(self, observation) -> None:
         """The heading-only update, as far as the field is trusted."""
+        field = np.asarray(observation.body, dtype=float)
+        reference = np.asarray(observation.reference, dtype=float)
         psi, interval, trust, validated = self.imu.field_reading(
-            self.q_hat, np.asarray(observation.body, dtype=float),
-            np.asarray(observation.reference, dtype=float),
-            getattr(observation, "reference_known", True))
+            self.estimate, field, reference, getattr(observation, "reference_known", True))
         if trust == 0.0:
             self._reject("magnetometer")
             return
-        v = to_body_frame(self.q_hat, _UP)
+        self._heading_update(psi, trust * trust * self.heading_density / interval, validated,
+                             field, reference)
+
+
+class ErrorStateUpdates(ImuUpdates):
+    """The IMU models' updates of the MEKF's error state (module docstring)."""
+
+    @property
+    def estimate(self) -> np.ndarray:
+        return self.q_hat
+
+    def _gravity_update(self, up, variance: float, dof: int) -> None:
+        predicted = to_body_frame(self.q_hat, UP)
+        H = np.zeros((3, 6))
+        H[:, :3] = skew(predicted)
+        H[:, 3:] = self.imu.drift
+        self._error_update(up - predicted, H, variance * np.eye(3), dof, "accelerometer")
+
+    def _rest_update(self, rate, variance: float) -> None:
+        H = np.zeros((3, 6))
+        H[:, 3:] = np.eye(3)
+        self._error_update(rate - self.beta_hat, H, variance * np.eye(3), 3, "rest",
+                           gated=False)
+
+    def _heading_update(self, psi: float, variance: float, validated: bool, field,
+                        reference) -> None:
+        v = to_body_frame(self.q_hat, UP)
         H = np.zeros((1, 6))
         H[0, :3] = v
-        R = np.array([[trust * trust * self.heading_density / interval]])
-        self._error_update(np.array([psi]), H, R, 1, "magnetometer", heading_axis=v,
-                           bias=validated)
+        self._error_update(np.array([psi]), H, np.array([[variance]]), 1, "magnetometer",
+                           heading_axis=v, bias=validated)
 
     def _error_update(self, y, H, R, dof: int, sensor: str, heading_axis=None,
                       bias: bool = True, gated: bool = True) -> None:

@@ -109,11 +109,14 @@ def gyro_reading(counts, detector, rate_lp, run, rate, dt):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def accelerometer_reading(counts, detector, strapdown, gravity_state, rotation, run,
-                          specific_force, dt, scratch, up, drift):
-    """:meth:`estimators.imu.ImuModels.gravity_reading`: gravity's direction
-    into ``up`` and the bias columns of its H into ``drift``; returns the
-    interval and whether the body is at rest."""
+def accelerometer_reading(state, run, specific_force, dt):
+    """:meth:`estimators.imu.ImuModels.gravity_reading` on the ``imu_*``
+    arrays of a kernel's ``state``: ``(up, drift, interval, at_rest)`` —
+    gravity's direction, the bias columns of its H, the interval and whether
+    the body is at rest."""
+    counts, detector, strapdown = state.imu_counts, state.imu_detector, state.imu_strapdown
+    gravity_state, rotation = state.imu_gravity, state.imu_rotation
+    up, scratch, drift = np.empty(3), np.empty((2, 3)), np.empty((3, 3))
     interval = max(counts[run, SINCE_ACC], 1) * dt
     counts[run, SINCE_ACC] = 0
     at_rest = rest_acc_step(specific_force,
@@ -125,7 +128,7 @@ def accelerometer_reading(counts, detector, strapdown, gravity_state, rotation, 
     drift_jacobian(strapdown[run], scratch[1], rotation[run, 0], coeffs,
                    gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:], np.empty(9),
                    drift)
-    return interval, at_rest
+    return up, drift, interval, at_rest
 
 
 @njit(cache=True, error_model="numpy")

@@ -279,10 +279,8 @@ def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, k
     (estimators.imu.updates.ImuUpdates._imu_reading): True if they took it."""
     densities = state.imu_densities[run]
     if gravity[s]:
-        up, spare, drift = np.empty(3), np.empty((2, 3)), np.empty((3, 3))
-        interval, at_rest = imu.accelerometer_reading(
-            state.imu_counts, state.imu_detector, state.imu_strapdown, state.imu_gravity,
-            state.imu_rotation, run, body[run, j, s], dt, spare, up, drift)
+        force = body[run, j, s]
+        up, drift, interval, at_rest = imu.accelerometer_reading(state, run, force, dt)
         last, kept = (0.0, 0.0), True
         if state.imu_lowpass:
             nis, applied, determinant = _gravity_update(
