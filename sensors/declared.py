@@ -15,7 +15,9 @@ reads it into a checked :class:`~sensors.recording.Recording`.
     unit = "deg/s"              # rad/s or deg/s
 
     [recording.accelerometer]   # unit: m/s^2 or g
-    [recording.magnetometer]    # unit: uT, nT, gauss or mT
+    [recording.magnetometer]    # unit: uT, nT, gauss or mT; calibrate = true fits
+                                # its hard and soft iron, or declare hard_iron = [x,
+                                # y, z] (its unit) and soft_iron = [[…], […], […]]
     [recording.reference]       # quaternion: 4 columns, order = "wxyz" or "xyzw";
                                 # or Euler angles: 3 columns, sequence = "ZYX", unit
                                 # = "deg" or "rad"; frame = "ENU" (default) or "NED"
@@ -49,6 +51,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
+from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
 
 #: Each time unit in seconds.
@@ -69,6 +72,9 @@ REFERENCE_GAP_FACTOR = 1.5
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: The keys of a sensor's section beside time, columns and unit.
+EXTRA_KEYS = {"reference": {"order", "sequence", "frame"},
+              "magnetometer": {"calibrate", "hard_iron", "soft_iron"}}
 #: Frames of the reference's world frame, as rotations to East-North-Up.
 FRAMES = ("ENU", "NED")
 
@@ -243,8 +249,7 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     key = f"recording.{name}"
     if not isinstance(section, dict):
         _refuse(path, key, section, "must be a section with time, columns and unit")
-    known = {"time", "columns", "unit"} | ({"order", "sequence", "frame"}
-                                           if name == "reference" else set())
+    known = {"time", "columns", "unit"} | EXTRA_KEYS.get(name, set())
     unknown = sorted(set(section) - known)
     if unknown:
         _refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
@@ -271,6 +276,9 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
         _check_rates(path, values, section["unit"])
     else:
         _check_increasing(path, f"{key}.time", times)
+    if name == "magnetometer":
+        values = calibrated(values, section, UNITS[name][section["unit"]],
+                            f"{path.name}: {key}")
     return times, values
 
 

@@ -298,6 +298,27 @@ def findings(parts, table: dict, declaration: dict) -> list[str]:
 
 
 def _physics(recording) -> list[str]:
+    """Rest, gravity, the field and the magnetometer's calibration."""
+    lines = _motion(recording)
+    if recording.magnetometer_uT is not None:
+        lines.append(_calibration(recording.magnetometer_uT))
+    return lines
+
+
+def _calibration(field: np.ndarray) -> str:
+    """The magnetometer's hard and soft iron as an ellipsoid fit finds them
+    (:mod:`sensors.magnetometer_calibration`), or why it cannot."""
+    from dynamics.validation import InvalidParameterError
+    from sensors.magnetometer_calibration import fit_ellipsoid
+    try:
+        found = fit_ellipsoid(field, name="the magnetometer's readings")
+    except InvalidParameterError as err:
+        return f"calibration: no ellipsoid fit: {err.value}: {err.rule}"
+    return (f"calibration: {found.describe('µT')}; to apply it: calibrate = true in "
+            "[recording.magnetometer]")
+
+
+def _motion(recording) -> list[str]:
     """Rest, gravity and the field, on the gyro's clock."""
     if recording.accelerometer_mps2 is None:
         return ["rest, gravity: no accelerometer"]
