@@ -224,7 +224,7 @@ def finite_state(q, n_q, P, n):
     return math.isfinite(total) and math.isfinite(trace)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def record_error(run, k, q_true_k, q, stats, hist, first_bits, traces, keep_traces,
                  error_every, samples, diverged, bits, bits_int):
     """Error of estimate ``q`` at step ``k``, folded into the run's accumulators
@@ -292,7 +292,7 @@ def joseph_covariance(P, IK, KRK, T):
             P[i, j] = first + KRK[i, j]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def gauss_jordan(S, inverse, n):
     """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
     partial pivoting; S is positive definite. Returns det S (the pivots'
@@ -323,6 +323,16 @@ def gauss_jordan(S, inverse, n):
                     S[row, j] -= factor * S[col, j]
                     inverse[row, j] -= factor * inverse[col, j]
     return determinant
+
+
+# Inlined copies for the small kernels (the EKF's, dead reckoning's), where
+# inlining costs little compile time and spares a call a step. The MEKF's and
+# USQUE's kernels call them from several places: there inlining doubled their
+# first compile (about a minute each on a cold machine) for no measured speed.
+record_error_inlined = njit(cache=True, inline="always",
+                            error_model="numpy")(record_error.py_func)
+gauss_jordan_inlined = njit(cache=True, inline="always",
+                            error_model="numpy")(gauss_jordan.py_func)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -21,11 +21,11 @@ from estimators.complementary import madgwick_step, mahony_step
 #: The registry names these kernels twin.
 NAMES = ("madgwick", "madgwick-broad", "mahony")
 
-_madgwick = njit(cache=True, inline="always", error_model="numpy")(madgwick_step)
-_mahony = njit(cache=True, inline="always", error_model="numpy")(mahony_step)
+_madgwick = njit(cache=True, error_model="numpy")(madgwick_step)
+_mahony = njit(cache=True, error_model="numpy")(mahony_step)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _reading(channel, available, k):
     """Sample ``k`` of a ``(N, 3)`` channel as a tuple, or the per-run
     classes' absent reading (zeros) where it is not available."""

@@ -99,7 +99,7 @@ IMU_FIELDS = ("imu_on", "imu_lowpass", "imu_heading", "imu_rest", "imu_densities
               "imu_counts", "imu_rotation", "imu_field")
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def gyro_reading(counts, detector, rate_lp, run, rate, dt):
     """:meth:`estimators.imu.ImuModels.gyro_reading`."""
     counts[run, SINCE_ACC] += 1
@@ -108,7 +108,7 @@ def gyro_reading(counts, detector, rate_lp, run, rate, dt):
                    rate_lp[run])
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def accelerometer_reading(state, run, specific_force, dt):
     """:meth:`estimators.imu.ImuModels.gravity_reading` on the ``imu_*``
     arrays of a kernel's ``state``: ``(up, drift, interval, at_rest)`` —
@@ -229,7 +229,7 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     return psi * psi / s, s
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _apply(q, beta, dx, dq):
     """The reset: ``q ← q ⊗ δq(δθ)``, ``β ← β + δβ``."""
     quat_exp(dx[0], dx[1], dx[2], dq)
@@ -238,7 +238,7 @@ def _apply(q, beta, dx, dq):
         beta[i] += dx[3 + i]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _invert3(S, inverse):
     """The inverse of a symmetric positive definite 3x3 ``S`` (its adjugate over
     its determinant)."""

@@ -30,7 +30,7 @@ def initial_state(estimators) -> State:
                  step_average=first.rate_timing == "step-average", align_sign=first.align_sign)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _predict(q, w, previous_rate, k, step_average, half_dt, out, F):
     """out = q propagated as the per-run class propagates it at step ``k``."""
     if not step_average:

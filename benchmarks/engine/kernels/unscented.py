@@ -18,7 +18,7 @@ from estimators.usque import STATE_SIZE
 N_SIGMAS = 2 * STATE_SIZE + 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def product(a0, a1, a2, a3, b0, b1, b2, b3):
     """a ⊗ b (dynamics.quaternion.quat_multiply), not normalised."""
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
@@ -27,7 +27,7 @@ def product(a0, a1, a2, a3, b0, b1, b2, b3):
             a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def quat_from_grp(p0, p1, p2):
     """dynamics.quaternion.quat_from_grp (a = 1, f = 4)."""
     norm2 = p0 * p0 + p1 * p1 + p2 * p2
@@ -37,7 +37,7 @@ def quat_from_grp(p0, p1, p2):
     return w, s * p0, s * p1, s * p2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def grp_from_quat(e):
     """dynamics.quaternion.grp_from_quat, sign-aligned to w >= 0 first."""
     w, x, y, z = e
@@ -46,14 +46,14 @@ def grp_from_quat(e):
     return GRP_F * x / (GRP_A + w), GRP_F * y / (GRP_A + w), GRP_F * z / (GRP_A + w)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def unit(p):
     w, x, y, z = p
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     return w / norm, x / norm, y / norm, z / norm
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def fold_reference(q, x):
     """q̂ ← q̂ ⊗ δq(δp) normalised, δp ← 0 (USQUE._reset, eq. 45)."""
     g0, g1, g2, g3 = quat_from_grp(x[0], x[1], x[2])
@@ -61,7 +61,7 @@ def fold_reference(q, x):
     x[0], x[1], x[2] = 0.0, 0.0, 0.0
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def output(q, x, out):
     """USQUE._record's estimate: q̂, or q̂ ⊗ δq(δp) normalised while δp ≠ 0."""
     if x[0] == 0.0 and x[1] == 0.0 and x[2] == 0.0:
@@ -101,7 +101,7 @@ def sigma_points(x, P, spread, sigmas, L):
     return True
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def unscented_mean(sigmas, Wm, rows, mean):
     """Σ Wm_i χ_i over the first ``rows`` columns of the sigma points."""
     for m in range(rows):

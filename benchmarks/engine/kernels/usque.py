@@ -133,7 +133,7 @@ def final(state, estimators) -> dict:
     return {"bias_radps": state.beta_last, "covariance": state.P_last}
 
 
-_transition_coefficients = njit(cache=True, inline="always",
+_transition_coefficients = njit(cache=True,
                                 error_model="numpy")(transition_coefficients)
 
 
@@ -222,7 +222,7 @@ def _vector_update(q, x, P, sigmas, body, reference, variance, Wm, Wc, gating, t
                              gating, threshold, scratch)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _any_reading(available, run, j):
     """Whether any vector sensor reads at the block's step ``j``."""
     for s in range(available.shape[2]):

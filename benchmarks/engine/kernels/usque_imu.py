@@ -29,7 +29,7 @@ from benchmarks.engine.kernels.unscented import (N_SIGMAS, fold_reference, outpu
 from estimators.usque import STATE_SIZE
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_strapdown(strapdown, rotation, rate, x, dt):
     """The IMU models' strapdown by the mean's bias-corrected rotation
     (``USQUE.propagate``), before the sigma points move."""
@@ -40,13 +40,13 @@ def propagate_strapdown(strapdown, rotation, rate, x, dt):
     imu.integrate_rotation(strapdown, dt, rotation)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _sigma_attitude(q, sigma):
     g0, g1, g2, g3 = quat_from_grp(sigma[0], sigma[1], sigma[2])
     return unit(product(q[0], q[1], q[2], q[3], g0, g1, g2, g3))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _heading(a, field, turned):
     """``estimators.usque._heading``: the field's heading through ``a``."""
     imu._rotate(a, field, turned)
@@ -80,7 +80,7 @@ def rest_update(x, P, sigmas, rate, variance, Wm, Wc, scratch, predicted, R):
                             False, 0.0, scratch)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _diagonal(R, variance):
     for a in range(3):
         for b in range(3):
