@@ -53,3 +53,15 @@ def pytest_sessionstart(session):
         warm_up()
     except Exception as err:      # the tests then compile, and report, what failed here
         warnings.warn(f"the kernels could not be compiled ahead of the tests: {err!r}")
+
+
+def npz_declaration(**sensors) -> str:
+    """A ``[recording]`` declaration of ``log.npz``: its ``t``, its
+    ``gyro`` in rad/s and, for each of ``sensors`` (name = ``(array, unit)``
+    or ``(array, unit, extra lines)``), that sensor's section."""
+    sections = {"gyro": ("gyro", "rad/s"), **sensors}
+    text = '[recording]\nfile = "log.npz"\n'
+    for name, (array, unit, *extra) in sections.items():
+        text += (f'\n[recording.{name}]\ntime = "t"\ncolumns = "{array}"\nunit = "{unit}"\n'
+                 + "".join(f"{line}\n" for line in extra))
+    return text

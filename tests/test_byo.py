@@ -3,6 +3,7 @@ import textwrap
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from benchmarks.cli import main
 
@@ -118,6 +119,7 @@ def test_a_module_in_the_current_folder_imports_from_the_command_line(tmp_path, 
     assert list(summary["estimator"]) == ["ekf", "myfilters:Complementary"]
 
 
+@pytest.mark.slow
 def test_dask_workers_import_a_users_module_from_the_main_process_path(tmp_path, monkeypatch):
     __import__("pytest").importorskip("distributed")
     spec = user_module(tmp_path, monkeypatch)          # on sys.path only, not PYTHONPATH

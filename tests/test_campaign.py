@@ -37,6 +37,7 @@ def test_campaign_equals_one_batch_whatever_the_chunk_size(tmp_path):
         assert len(list((tmp_path / f"c{chunk}" / CHUNKS).iterdir())) == -(-37 // chunk)
 
 
+@pytest.mark.slow
 def test_two_worker_dask_cluster_gives_identical_results(tmp_path):
     pytest.importorskip("distributed")
     campaign = Campaign(SCENARIO, ESTIMATORS, runs=24, base_seed=100, chunk_runs=5)
@@ -45,6 +46,7 @@ def test_two_worker_dask_cluster_gives_identical_results(tmp_path):
     pd.testing.assert_frame_equal(on_dask, in_process, check_exact=True)
 
 
+@pytest.mark.slow
 def test_killed_campaign_resumes_without_redoing_chunks(tmp_path):
     out = tmp_path / "campaign"
     argv = ["montecarlo", "--runs", "400", "--chunk-size", "8", "--seed", "3",

@@ -385,6 +385,7 @@ def test_recordings_beyond_what_an_estimator_takes_are_refused(tmp_path, capsys,
     assert rule in err and err.count("\n") == 1 and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_animate_and_workshop_report_divergence(tmp_path, capsys):
     assert main(["animate", "--estimator", "ekf", "--pc-exponent", "709", "--tstop", "1",
                  "--quiet", "--out", str(tmp_path / "a")]) == EXIT_DIVERGED

@@ -106,6 +106,7 @@ def test_animate_rejects_bad_every(tmp_path, capsys):
     assert "every" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_workshop_writes_report_with_every_figure(tmp_path):
     assert main(["workshop", "--out", str(tmp_path), "--tstop", "1", "--quiet"]) == 0
     report = (tmp_path / "report.md").read_text()
@@ -123,9 +124,13 @@ def test_notebook_script_runs_as_plain_python(tmp_path):
     script = (Path(__file__).resolve().parents[1] / "benchmarks" / "experiments"
               / "workshop_notebook.py")
     assert script.read_text().count("# %%") >= 8
+    # PYTHONPATH: the source tree's package, whose kernels the suite has
+    # compiled (an installed copy would compile them again: 45 s).
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                           env={"ATTITUDE_BENCH_TSTOP": "1", "ATTITUDE_BENCH_OUT": str(tmp_path),
-                               "PATH": "", "MPLBACKEND": "Agg"}, cwd=tmp_path, timeout=300)
+                               "PATH": "", "MPLBACKEND": "Agg",
+                               "PYTHONPATH": str(script.parents[2])}, cwd=tmp_path,
+                          timeout=300)
     assert done.returncode == 0, done.stderr
     assert "pc_exponent =" in done.stdout
     assert (tmp_path / "compare.png").is_file() and (tmp_path / "landscape.png").is_file()

@@ -106,6 +106,7 @@ def test_rest_is_found_after_its_minimum_time_and_ends_with_the_movement():
     assert not _detect(np.tile(np.radians([3.0, 0, 0]), (400, 1)), acc[:400], dt).any()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])
 def test_at_rest_the_filter_learns_the_gyros_bias(filter_class):
     dt, n = 0.01, 3000

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
+from conftest import npz_declaration
 from dynamics.validation import InvalidParameterError
 from sensors.declared import load_declared
 from sensors.magnetometer_calibration import (MIN_COVERAGE, MagnetometerCalibration, coverage,
@@ -120,20 +121,6 @@ def test_a_reading_of_zeros_stays_no_reading():
 TRIAL = Path(__file__).resolve().parents[1] / "datasets" / "broad" / \
     "02_undisturbed_slow_rotation_B.npz"
 
-DECLARATION = """[recording]
-file = "log.npz"
-
-[recording.gyro]
-time = "t"
-columns = "gyro"
-unit = "rad/s"
-
-[recording.magnetometer]
-time = "t"
-columns = "mag"
-unit = "nT"
-{calibration}
-"""
 
 
 @pytest.fixture(scope="module")
@@ -150,7 +137,7 @@ def distorted(tmp_path_factory):
 
 def _load(folder: Path, calibration: str):
     path = folder / "log.toml"
-    path.write_text(DECLARATION.format(calibration=calibration))
+    path.write_text(npz_declaration(magnetometer=("mag", "nT", calibration)))
     return load_declared(path).magnetometer_uT
 
 

@@ -1,5 +1,6 @@
 """Property-based tests (hypothesis): invariants that hold for all inputs."""
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -185,6 +186,7 @@ def engine_cases(draw):
 
 
 # Every case costs a few hundred steps on both paths (1,000 cases passed once).
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(engine_cases())
 def test_engine_equals_the_per_run_path_on_random_scenarios(case):

@@ -35,6 +35,7 @@ def ten_times_wrong(scenario, *names):
                                                         for name in names}})
 
 
+@pytest.mark.slow
 def test_likelihood_tuning_recovers_the_gyro_noise_and_bias_walk_without_truth():
     # Maximum likelihood on the innovations alone, from a filter 10x wrong in
     # both σ: over 4 seeds the estimates came within 6 % of the simulator's
@@ -344,6 +345,7 @@ def short_trial(path: Path, source: str, rest: int, moving: int) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_replay_tuned_trains_on_the_other_recording(tmp_path, capsys):
     # The EKF tuned for the likelihood (no reference read) on 3 s of trial 02
     # (1 s of rest, 2 s of movement) and replayed on 3 s of trial 07: the training

@@ -133,6 +133,7 @@ def _cubesat_nees(name, runs, tstop):
     return np.mean(averages), math.degrees(math.sqrt(np.mean(rms))) / bound
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, runs", [("mekf", 12), ("usque", 6)])
 def test_mekf_and_usque_are_consistent_and_near_the_bound_on_the_cubesat(name, runs):
     # ANEES over `runs` seeds of 600 s (after 100 s to settle) against the

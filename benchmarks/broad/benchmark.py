@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from benchmarks.broad.agreement import AGAINST, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import METRICS, errors_deg, rmse_of, scored_samples, \
@@ -45,7 +46,7 @@ TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, "us_per_sample", "sampl
                  "movement_samples", "scored_samples",
                  "rejected_accelerometer", "rejected_magnetometer",
                  "rejected_accelerometer_share", "rejected_magnetometer_share",
-                 "diverged_step", "path")
+                 "diverged_step", "path", *AGREEMENT)
 GROUP_COLUMNS = ("group", "level", "estimator", "trials", "scored_trials", *METRICS,
                  "left_out", "nan_on")
 #: The trial figure's curves: the total error's RMS over windows this long, s.
@@ -71,6 +72,9 @@ class BroadResult:
     curve_trial: str
     tuning: str = "none"         # how the settings were chosen (benchmarks.broad.tuning.MODES)
     curve_movement: np.ndarray | None = None     # that trial's movement flags (N,)
+    #: What the scores are taken against: the reference, or (no trial has
+    #: one) :data:`benchmarks.broad.agreement.AGAINST`.
+    against: str = "the reference"
 
     @property
     def dt(self) -> float:
@@ -92,7 +96,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
     sensors = inputs.sensors
     readings = {v.sensor: int(np.count_nonzero(v.available)) for v in sensors.vectors}
     scored = int(np.count_nonzero(scored_samples(recording.reference_quat, recording.movement)))
-    rows, curves, labels = [], {}, {}
+    rows, curves, labels, estimates, members = [], {}, {}, {}, []
     for name in estimators:
         estimator = resolve_estimator(name).from_scenario(inputs.scenario,
                                                           **(options or {}).get(name, {}))
@@ -124,6 +128,14 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         curves[name] = (recording.time_s, errors["total" if heading else "inclination"])
         labels[name] = estimator.label + ("" if heading else " [inclination only]") + (
             " [offline]" if estimator.mode == "offline" else "")
+        estimates[name] = run.estimates
+        if heading and run.diverged_step is None:
+            members.append(name)
+    agreement, agreement_curves = agreement_scores(estimates, members)
+    for row in rows:
+        row.update(agreement[row["estimator"]])
+    if not np.isfinite(recording.reference_quat).all(axis=1).any():
+        curves = {name: (recording.time_s, curve) for name, curve in agreement_curves.items()}
     return rows, curves, labels
 
 
@@ -221,13 +233,38 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
     frame = pd.DataFrame(rows, columns=list(TRIAL_COLUMNS))
     unscored = unscored_trials(frame)
     if len(unscored) == len(trials):
-        raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
-                                    "score: " + "; ".join(f"{t} {why}"
-                                                          for t, why in unscored.items()))
+        return _by_agreement(dataset, trials, frame, labels, results, tuning, unscored)
     shown = next(i for i, trial in enumerate(trials) if trial not in unscored)
     return BroadResult(trials=frame, groups=group_means(dataset, frame), labels=labels,
                        curves=results[shown][1], curve_trial=trials[shown], tuning=tuning,
                        curve_movement=dataset.load(trials[shown]).movement)
+
+
+def _against(result: BroadResult) -> str:
+    """A figure title's second line where the scores are not against the
+    reference."""
+    return "" if result.against == "the reference" else \
+        f"\nno reference: against {result.against} (agreement, not accuracy)"
+
+
+def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> BroadResult:
+    """Nothing to score against a reference: the estimators ranked by their
+    agreement with the others (:mod:`benchmarks.broad.agreement`), every
+    sample of every trial scored against the others' mean, said as such;
+    an error if no two estimators observe the heading."""
+    if not np.isfinite(frame[list(AGREEMENT)].to_numpy(dtype=float)).any():
+        raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
+                                    "score: " + "; ".join(f"{t} {why}"
+                                                          for t, why in unscored.items()) +
+                                    "; and fewer than two estimators observe the heading, so "
+                                    "they cannot be ranked by their agreement either")
+    scored = frame.copy()
+    scored[list(METRICS)] = frame[list(AGREEMENT)].to_numpy()
+    scored["movement_samples"] = scored["scored_samples"] = scored["samples"]
+    return BroadResult(trials=scored, groups=group_means(dataset, scored), labels=labels,
+                       curves=results[0][1], curve_trial=trials[0], tuning=tuning,
+                       curve_movement=np.ones(int(frame["samples"].iloc[0]), dtype=bool),
+                       against=AGAINST)
 
 
 def group_header(group: str, trials: int, scored: int) -> str:
@@ -358,7 +395,7 @@ def groups_figure(result: BroadResult):
         label.set_rotation(30)
         label.set_horizontalalignment("right")
     figure.suptitle("BROAD: error during the movement per group, the mean over the trials "
-                    "counted under its name")
+                    "counted under its name" + _against(result))
     legend_outside(figure, axes[:1], columns=min(len(names), 5),
                    note="; ".join(group_notes(result)))
     return figure
@@ -433,6 +470,6 @@ def trial_figure(result: BroadResult):
     axis.set_xlabel("time (s)")
     axis.set_ylabel("total error (°, RMS per window, log)")
     axis.set_title(f"BROAD {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
-                   "windows (the reference's gaps blank)")
+                   "windows (the reference's gaps blank)" + _against(result))
     legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))
     return figure

@@ -100,8 +100,10 @@ class BroadDataset:
         twice in every mean, and a tuning would score it on settings tuned on
         itself), any trial :meth:`load` refuses, and a selection with nothing
         to score (every trial :func:`~benchmarks.broad.metric.unscored_reason`
-        names). A trial with nothing to score beside others that have is
-        run, and left out of the group means by name
+        names) unless no trial has a reference at all: those are ranked by
+        the estimators' agreement (:mod:`benchmarks.broad.agreement`). A
+        trial with nothing to score beside others that have is run, and left
+        out of the group means by name
         (:func:`benchmarks.broad.benchmark.group_means`)."""
         if not names:
             trials = self.available
@@ -116,7 +118,8 @@ class BroadDataset:
                 given[name] = text
                 trials.append(name)
         reasons = {name: self.unscored(name) for name in trials}
-        if all(reasons.values()):
+        unreferenced = not any(self.load(name).has_reference.any() for name in trials)
+        if all(reasons.values()) and not unreferenced:
             raise InvalidParameterError(
                 "trials", ",".join(trial_label(name) for name in trials),
                 "nothing to score: " + "; ".join(f"{name} {why}" for name, why in

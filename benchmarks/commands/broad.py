@@ -87,6 +87,10 @@ def run(args, _scenario):
               if value is not None}
     checked_sigmas(sigmas)
     mode, train = _training(args, dataset, trials)
+    if mode != "none" and not any(dataset.load(trial).has_reference.any() for trial in trials):
+        raise UsageError(f"--{'train' if train is not None else 'tune'} scores settings "
+                         "against a reference, and no trial here has one: leave it out (the "
+                         "filters are then ranked by their agreement)")
     options, tunings = tuning.tuned_options(dataset, trials, args.estimators, mode,
                                             args.gyro_delay, sigmas, args.workers, args.quiet,
                                             train=train)
@@ -94,11 +98,16 @@ def run(args, _scenario):
                                  quiet=args.quiet, workers=args.workers, options=options,
                                  tuning=mode)
     print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
+    against = "" if result.against == "the reference" else " against the others' median"
+    if against:
+        print(f"No trial has a reference: every score below is the RMS angle to "
+              f"{result.against}, sample by sample. That is agreement, not accuracy: filters "
+              "that share a model share its errors.")
     print(benchmark.format_trials(result))
     if len(tunings):
         print("\ntuned (training loss: mean total RMSE over the training trials, °):")
         print(tunings.to_string(index=False, float_format=lambda v: f"{v:.6g}"))
-    print(f"\ntotal RMSE (°) per group, mean over its trials (trials run), "
+    print(f"\ntotal RMSE (°){against} per group, mean over its trials (trials run), "
           f"{tuning.MODE_LABELS[mode]}:")
     print(benchmark.format_groups(result))
     _write(args, result, tunings, dataset, train)
