@@ -161,4 +161,5 @@ def warn_unmodelled(scenario, estimators, references=None) -> None:
                 f"{np.degrees(np.linalg.norm(hard) / strength):.2g}°")
     warnings.warn(f"the magnetometer's {what} is in the simulated readings but in no "
                   f"estimator's model ({', '.join(map(str, readers))}): its error is in their "
-                  f"estimates{size}", stacklevel=3)
+                  f"estimates{size} (sensors.magnetometer_calibration.twostep estimates a "
+                  "hard iron from the readings and the field's norm)", stacklevel=3)

@@ -23,6 +23,10 @@ the field's norm, :math:`S` is known up to a scale: it is taken with
 determinant one (the soft iron stretches the field without changing the
 volume of its ellipsoid).
 
+Where the field's norm is known at every reading — a spacecraft, whose
+orbit and field model give it — the hard iron alone is estimated from the
+readings and those norms by TWOSTEP (:func:`twostep`).
+
 The fit (:func:`fit_ellipsoid`): the algebraic least-squares quadric on
 centred, scaled readings (the right singular vector of the smallest
 singular value), which must be an ellipsoid, refined by scipy's
@@ -266,3 +270,42 @@ def _declared(key: str, value, shape: tuple) -> np.ndarray:
         raise InvalidParameterError(key, value, f"must be {' × '.join(map(str, shape))} "
                                     "finite numbers")
     return array
+
+
+def twostep(readings: np.ndarray, field_norms: np.ndarray,
+            sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(b, P)``: the magnetometer's hard iron and its covariance from
+    ``readings`` (N, 3) and the field's norm at each (N,), both in one unit,
+    with white noise of ``sigma`` per axis — no attitude: Alonso & Shuster,
+    "TWOSTEP: A fast robust algorithm for attitude-independent
+    magnetometer-bias determination", *J. Astronaut. Sci.* 50 (4), 2002.
+
+    Each reading gives :math:`z_k = |B_k|^2 - |H_k|^2 = 2 B_k \\cdot b -
+    |b|^2 + v_k`, its noise of mean :math:`\\mu = -3\\sigma^2` and variance
+    :math:`\\sigma_k^2 = 4\\sigma^2 |B_k - b|^2 + 6\\sigma^4` (their eqs. for
+    isotropic noise). Step one, the centred estimate: the weighted means of
+    :math:`z_k` and :math:`B_k` taken out, the :math:`|b|^2` term goes and
+    the rest is linear in :math:`b`. Step two: Gauss–Newton on the whole
+    likelihood from it (scipy's ``least_squares``), :math:`P` the inverse
+    of its Fisher information :math:`\\sum_k 4 (B_k - b)(B_k - b)^T /
+    \\sigma_k^2`."""
+    from scipy.optimize import least_squares
+    readings = np.asarray(readings, dtype=float)
+    z = np.sum(readings ** 2, axis=1) - np.asarray(field_norms, dtype=float) ** 2 \
+        + 3.0 * sigma ** 2
+    # Step one: weights 1/σ_k² (with b = 0 in σ_k), the weighted means out.
+    weights = 1.0 / (4.0 * sigma ** 2 * np.sum(readings ** 2, axis=1) + 6.0 * sigma ** 4)
+    share = weights / weights.sum()
+    centred, z_centred = readings - share @ readings, z - share @ z
+    start = np.linalg.solve(4.0 * (centred * weights[:, None]).T @ centred,
+                            2.0 * (centred * (weights * z_centred)[:, None]).sum(axis=0))
+
+    def residual(b):
+        return (z - 2.0 * readings @ b + b @ b) / np.sqrt(
+            4.0 * sigma ** 2 * np.sum((readings - b) ** 2, axis=1) + 6.0 * sigma ** 4)
+
+    bias = least_squares(residual, start, method="lm", xtol=1e-12, ftol=1e-12).x
+    offsets = readings - bias
+    variance = 4.0 * sigma ** 2 * np.sum(offsets ** 2, axis=1) + 6.0 * sigma ** 4
+    fisher = 4.0 * (offsets / variance[:, None]).T @ offsets
+    return bias, np.linalg.inv(fisher)
