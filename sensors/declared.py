@@ -53,6 +53,7 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
+from sensors.recording_keys import known_keys
 
 #: Each time unit in seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -72,9 +73,6 @@ REFERENCE_GAP_FACTOR = 1.5
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
-#: The keys of a sensor's section beside time, columns and unit.
-EXTRA_KEYS = {"reference": {"order", "sequence", "frame"},
-              "magnetometer": {"calibrate", "hard_iron", "soft_iron"}}
 #: Frames of the reference's world frame, as rotations to East-North-Up.
 FRAMES = ("ENU", "NED")
 
@@ -182,7 +180,7 @@ def read_declaration(path: Path) -> dict:
     if not isinstance(declared.get("recording"), dict):
         _refuse(path, "recording", None, "must be a [recording] section naming the file "
                 "and its sensors' columns")
-    known = {"file", "description", "time_unit", *SENSORS}
+    known = known_keys("recording")
     unknown = sorted(set(declared["recording"]) - known)
     if unknown:
         _refuse(path, f"recording.{unknown[0]}", declared["recording"][unknown[0]],
@@ -249,7 +247,7 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     key = f"recording.{name}"
     if not isinstance(section, dict):
         _refuse(path, key, section, "must be a section with time, columns and unit")
-    known = {"time", "columns", "unit"} | EXTRA_KEYS.get(name, set())
+    known = known_keys(key)
     unknown = sorted(set(section) - known)
     if unknown:
         _refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],

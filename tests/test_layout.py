@@ -184,3 +184,19 @@ def test_no_function_of_the_project_is_longer_than_a_screenful():
                         long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} "
                                     f"({lines} lines)")
     assert not long, f"longer than {MAX_FUNCTION_LINES} lines: {', '.join(long)}"
+
+
+def test_the_readmes_key_reference_is_the_generated_one():
+    # The README's tables of every scenario and recording key are
+    # show-config --keys's output, made from the one declaration of each.
+    from benchmarks.experiments.configuration import key_reference
+    text = (ROOT / "README.md").read_text()
+    copy = text.split("<!-- keys -->\n", 1)[1].split("<!-- /keys -->", 1)[0]
+    assert copy == key_reference()
+
+
+def test_show_config_keys_prints_the_reference(capsys):
+    from benchmarks.cli import main
+    from benchmarks.experiments.configuration import key_reference
+    assert main(["show-config", "--keys"]) == 0
+    assert capsys.readouterr().out == key_reference()

@@ -20,6 +20,9 @@ def arguments(commands, defaults) -> None:
                       "package.module:ClassName (default: every registry estimator)")
     show.add_argument("--out", type=folder, default=None, metavar="DIR",
                       help="also write the table as DIR/config.csv (default: print only)")
+    show.add_argument("--keys", action="store_true",
+                      help="instead: every key a scenario file and a [recording] file take "
+                      "(section, key, unit, meaning, default), as Markdown tables")
     show.add_argument("--quiet", action="store_true", help="accepted, as by every command "
                       "(show-config shows no progress)")
     add_divergence_option(show)
@@ -28,7 +31,10 @@ def arguments(commands, defaults) -> None:
 
 def run(args, scenario):
     from benchmarks.experiments.configuration import (effective_settings, format_settings,
-                                                      given_fields)
+                                                      given_fields, key_reference)
+    if args.keys:
+        print(key_reference(), end="")
+        return None
     given = given_fields(args.scenario, [name for name in SCENARIO_FLAGS
                                          if getattr(args, name, None) is not None])
     rows = [row for name in args.estimators for row in effective_settings(scenario, name, given)]

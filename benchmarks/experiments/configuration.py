@@ -91,7 +91,8 @@ def _same(a, b) -> bool:
 def _shown(value) -> str:
     """A value as one short line."""
     if isinstance(value, np.ndarray):
-        if value.ndim == 2 and np.allclose(value, np.diag(np.diag(value))):
+        if value.ndim == 2 and value.shape[0] == value.shape[1] and \
+                np.allclose(value, np.diag(np.diag(value))):
             diagonal = np.diag(value)
             if np.all(diagonal == diagonal[0]):
                 return f"{diagonal[0]:.6g} I{len(diagonal)}"
@@ -120,4 +121,30 @@ def format_settings(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["SOURCES", "effective_settings", "format_settings"]
+def key_reference() -> str:
+    """Every key of a scenario file (:data:`benchmarks.scenario.SETTINGS`,
+    its default from :class:`Scenario`) and of a ``[recording]`` file
+    (:data:`sensors.recording_keys.KEYS`), as two Markdown tables: the
+    README's key reference, generated from the one declaration of each."""
+    from benchmarks.scenario import SETTINGS
+    from sensors.recording_keys import KEYS
+    defaults = Scenario()
+    lines = ["| section | key | unit | meaning | default |", "|---|---|---|---|---|"]
+    for setting in SETTINGS:
+        default = getattr(defaults, setting.field)
+        lines.append(_row(f"[{setting.section}]" if setting.section else "(top level)",
+                          setting.key, setting.unit, setting.doc,
+                          "none" if default is None else _shown(default)))
+    lines += ["", "| section | key | unit or values | meaning | default |",
+              "|---|---|---|---|---|"]
+    lines += [_row(f"[{key.section}]", key.key, key.unit, key.meaning, key.default)
+              for key in KEYS]
+    return "\n".join(lines) + "\n"
+
+
+def _row(*cells) -> str:
+    return "| " + " | ".join(f"`{cells[1]}`" if i == 1 else str(cell).replace("|", "\\|")
+                             for i, cell in enumerate(cells)) + " |"
+
+
+__all__ = ["SOURCES", "effective_settings", "format_settings", "key_reference"]
