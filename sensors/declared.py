@@ -53,7 +53,7 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
-from sensors.recording_keys import known_keys
+from sensors.recording_keys import axes_matrix, known_keys
 
 #: Each time unit in seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -269,6 +269,8 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     if name != "reference":
         unit = _choice(path, f"{key}.unit", section.get("unit"), UNITS[name])
         values = values * UNITS[name][unit]
+        if "axes" in section:
+            values = values @ axes_matrix(section["axes"], f"{path.name}: {key}.axes").T
     if name == "gyro":
         _check_clock(path, times)
         _check_rates(path, values, section["unit"])

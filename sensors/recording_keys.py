@@ -6,6 +6,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
+
+from dynamics.validation import InvalidParameterError
+
 
 class RecordingKey(NamedTuple):
     section: str            # "recording", or a sensor's: "recording.gyro", …
@@ -34,6 +38,10 @@ KEYS = (
                      "the unit of its readings" if sensor != "reference" else
                      "the unit of Euler angles", "required" if sensor != "reference" else "deg"),
     )),
+    *(RecordingKey(f"recording.{sensor}", "axes", "3 of x, y, z, -x, -y, -z",
+                   "the device's x, y, z as this sensor's columns (a magnetometer mounted "
+                   "apart from the gyro: [\"y\", \"x\", \"-z\"])", '["x", "y", "z"]')
+      for sensor in ("gyro", "accelerometer", "magnetometer")),
     RecordingKey("recording.magnetometer", "calibrate", "true, false",
                  "fit its hard and soft iron to the recording (an ellipsoid fit)", "false"),
     RecordingKey("recording.magnetometer", "hard_iron", "its unit",
@@ -54,3 +62,22 @@ def known_keys(section: str) -> set:
     hold; a sensor's section in ``[recording]``."""
     keys = {key.key for key in KEYS if key.section == section}
     return keys | set(_SENSORS) if section == "recording" else keys
+
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def axes_matrix(value, where: str) -> np.ndarray:
+    """The matrix that turns a sensor's readings into the device's axes,
+    from an ``axes`` key (``["y", "x", "-z"]``: the device's x is the
+    sensor's y, …): a signed permutation, refused in one line otherwise."""
+    rule = 'must be three of "x", "y", "z", each once, each maybe with "-"'
+    if not isinstance(value, list) or len(value) != 3 or \
+            not all(isinstance(a, str) and a.lstrip("-") in _AXES for a in value):
+        raise InvalidParameterError(where, value, rule)
+    if sorted(a.lstrip("-") for a in value) != ["x", "y", "z"]:
+        raise InvalidParameterError(where, value, rule)
+    matrix = np.zeros((3, 3))
+    for row, axis in enumerate(value):
+        matrix[row, _AXES[axis.lstrip("-")]] = -1.0 if axis.startswith("-") else 1.0
+    return matrix

@@ -216,3 +216,19 @@ def test_twostep_estimates_a_hard_iron_consistently_and_fails_when_mistuned():
     # Told a noise four times too small, it claims a covariance sixteen
     # times too small: far above the band.
     assert anees(50.0) > 4 * band[1]
+
+
+def test_a_sensor_mounted_on_other_axes_is_read_in_the_devices(tmp_path):
+    # An MPU-9250's magnetometer reads (y, x, -z) of the gyro's axes: with
+    # axes = ["y", "x", "-z"] the declared recording is the device's field.
+    recording = load_recording(TRIAL)
+    field = recording.magnetometer_uT
+    sensor = np.column_stack([field[:, 1], field[:, 0], -field[:, 2]])
+    np.savez(tmp_path / "log.npz", t=recording.time_s, gyro=recording.gyro_radps, mag=sensor)
+    path = tmp_path / "log.toml"
+    path.write_text(npz_declaration(magnetometer=("mag", "uT", 'axes = ["y", "x", "-z"]')))
+    assert np.array_equal(load_declared(path).magnetometer_uT, field)
+    path.write_text(npz_declaration(magnetometer=("mag", "uT", 'axes = ["y", "y", "-z"]')))
+    with pytest.raises(InvalidParameterError, match=r"log.toml: recording.magnetometer.axes = "
+                       r"\['y', 'y', '-z'\]: must be three of"):
+        load_declared(path)
