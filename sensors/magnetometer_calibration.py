@@ -105,13 +105,15 @@ def fit_ellipsoid(readings: np.ndarray, field_norm: float | None = None,
     site's field, in the readings' unit) or to a soft iron of determinant
     one; :class:`InvalidParameterError` naming ``name`` where the readings
     cannot determine it."""
+    if field_norm is not None and (isinstance(field_norm, bool) or
+                                   not isinstance(field_norm, (int, float)) or
+                                   not (math.isfinite(field_norm) and field_norm > 0)):
+        raise InvalidParameterError(f"{name} field_norm", field_norm, "must be a positive number")
     readings = np.asarray(readings, dtype=float)
     readings = readings[np.any(readings != 0, axis=1) & np.all(np.isfinite(readings), axis=1)]
     if len(readings) < MIN_READINGS:
         raise InvalidParameterError(name, f"{len(readings)} readings",
                                     f"an ellipsoid fit needs at least {MIN_READINGS}")
-    if field_norm is not None and not (math.isfinite(field_norm) and field_norm > 0):
-        raise InvalidParameterError(f"{name} field_norm", field_norm, "must be positive")
     hard, inverse = _refined(readings, *_algebraic(readings, name))
     unit_residual = np.linalg.norm((readings - hard) @ inverse, axis=1) - 1.0
     covered = coverage((readings - hard) @ inverse)
@@ -159,6 +161,8 @@ def _algebraic(readings: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]
     singular vector of the design matrix of centred, scaled readings."""
     centre = readings.mean(axis=0)
     scale = float(np.sqrt(np.mean(np.sum((readings - centre) ** 2, axis=1))))
+    if not scale > 1e-9 * max(float(np.abs(centre).max()), 1e-300):
+        raise InvalidParameterError(name, "the readings", "are all the same: " + _TURN_MORE)
     x, y, z = ((readings - centre) / scale).T
     design = np.column_stack([x * x, y * y, z * z, 2 * y * z, 2 * x * z, 2 * x * y,
                               2 * x, 2 * y, 2 * z, np.ones_like(x)])
@@ -221,7 +225,9 @@ def _check_determined(readings, hard, inverse, residual, name: str) -> None:
     jac = _jacobian(readings, hard, inverse)
     variance = float(residual @ residual) / max(len(readings) - 9, 1)
     information = jac.T @ jac
-    if np.linalg.cond(information) > 1e12:
+    # Its condition on columns scaled to one: free of the readings' unit.
+    size = np.sqrt(np.diag(information))
+    if not np.all(size > 0) or np.linalg.cond(information / np.outer(size, size)) > 1e12:
         raise InvalidParameterError(name, "the readings", _TURN_MORE)
     errors = np.sqrt(np.maximum(np.diag(np.linalg.inv(information)) * variance, 0.0))
     radius = np.linalg.det(inverse) ** (-1.0 / 3.0)

@@ -32,8 +32,8 @@ KEYS = (
     *(key for sensor in _SENSORS for key in (
         RecordingKey(f"recording.{sensor}", "time", "column", "its time column (its own clock)"),
         RecordingKey(f"recording.{sensor}", "columns", "columns",
-                     "its 3 columns (the reference's 4, or 3 Euler angles), or one array's "
-                     "name"),
+                     ("its 4 columns, or 3 of Euler angles" if sensor == "reference" else
+                      "its 3 columns") + ", or one array's name"),
         RecordingKey(f"recording.{sensor}", "unit", _UNITS.get(sensor, "deg, rad"),
                      "the unit of its readings" if sensor != "reference" else
                      "the unit of Euler angles", "required" if sensor != "reference" else "deg"),
@@ -45,9 +45,11 @@ KEYS = (
     RecordingKey("recording.magnetometer", "calibrate", "true, false",
                  "fit its hard and soft iron to the recording (an ellipsoid fit)", "false"),
     RecordingKey("recording.magnetometer", "hard_iron", "its unit",
-                 "a known hard iron, taken off every reading", "none"),
+                 "a known hard iron, taken off every reading (in the device's axes, after "
+                 "axes)", "none"),
     RecordingKey("recording.magnetometer", "soft_iron", "3 × 3",
-                 "a known soft iron: field = inv(soft_iron) (reading − hard_iron)", "identity"),
+                 "a known soft iron: field = inv(soft_iron) (reading − hard_iron), in the "
+                 "device's axes", "identity"),
     RecordingKey("recording.reference", "order", "wxyz, xyzw", "a quaternion's order",
                  "wxyz"),
     RecordingKey("recording.reference", "sequence", "e.g. ZYX",

@@ -109,8 +109,8 @@ def test_a_recording_without_a_reference_is_ranked_by_agreement_and_says_so(
     assert np.array_equal(trials["total_rmse_deg"], trials["agreement_total_deg"])
     # Agreement tells the tiers apart as the reference does on these 70 s
     # (measured, against the others' median / against the reference, °):
-    # USQUE 1.58 / 0.96, the MEKF 1.57 / 0.97, Madgwick 1.31 / 1.31, Mahony
-    # 2.87 / 3.11, TRIAD 4.61 / 4.83, dead reckoning 10.2 / 10.8. Within
+    # USQUE 1.60 / 0.96, the MEKF 1.59 / 0.97, Madgwick 1.34 / 1.31, Mahony
+    # 2.89 / 3.11, TRIAD 4.60 / 4.83, dead reckoning 10.2 / 10.8. Within
     # the first tier it cannot order them (the MEKF and USQUE share their
     # models, and each is scored against a median that holds the other).
     agreement = trials["agreement_total_deg"]
@@ -127,7 +127,7 @@ def test_without_a_reference_tuning_and_a_lone_heading_are_refused(unreferenced,
     out = tmp_path / "out"
     assert main(["broad", "--broad", str(unreferenced), "--estimators", "mekf",
                  "--tune", "all-trials", "--out", str(out), "--quiet"]) == 2
-    assert "--tune scores settings against a reference" in capsys.readouterr().err
+    assert "--tune all-trials scores settings against a reference" in capsys.readouterr().err
     assert main(["broad", "--broad", str(unreferenced), "--estimators", "mekf,dead-reckoning",
                  "--out", str(out), "--quiet"]) == 0     # dead reckoning against the MEKF
     capsys.readouterr()
@@ -136,3 +136,17 @@ def test_without_a_reference_tuning_and_a_lone_heading_are_refused(unreferenced,
     err = capsys.readouterr().err
     assert "fewer than two estimators observe the heading" in err
     assert "Traceback" not in err and not (tmp_path / "none").exists()
+
+
+def test_an_estimator_without_a_heading_is_scored_on_its_inclination_only():
+    # As against the reference (VQF 6D): an estimator that observes no
+    # heading has its total and heading agreement NaN, its inclination kept.
+    n = 10
+    base = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    turned = np.tile(_wxyz(Rotation.from_euler("z", 3.0, degrees=True)), (n, 1))
+    scores, curves = agreement_scores({"a": base, "b": base, "six": turned}, ["a", "b"],
+                                      heading={"a", "b"})
+    assert np.isnan(scores["six"]["agreement_total_deg"])
+    assert np.isnan(scores["six"]["agreement_heading_deg"])
+    assert scores["six"]["agreement_inclination_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(curves["six"], 0.0)

@@ -232,3 +232,18 @@ def test_a_sensor_mounted_on_other_axes_is_read_in_the_devices(tmp_path):
     with pytest.raises(InvalidParameterError, match=r"log.toml: recording.magnetometer.axes = "
                        r"\['y', 'y', '-z'\]: must be three of"):
         load_declared(path)
+
+
+def test_the_fit_is_the_same_in_any_unit_and_refuses_constant_readings():
+    # The fit's checks are free of the readings' unit: the same readings in
+    # µT, nT and gauss give the same calibration, scaled.
+    readings = _readings(_directions(2000, seed=6), noise_uT=0.3, seed=6)
+    in_uT = fit_ellipsoid(readings)
+    for scale in (1e3, 1e-2):
+        found = fit_ellipsoid(readings * scale)
+        assert np.allclose(found.hard_iron, in_uT.hard_iron * scale, rtol=1e-6)
+        assert np.allclose(found.soft_iron, in_uT.soft_iron, atol=1e-8)
+    with pytest.raises(InvalidParameterError, match="are all the same"):
+        fit_ellipsoid(np.tile([20.0, 5.0, 40.0], (200, 1)))
+    with pytest.raises(InvalidParameterError, match="field_norm = 'x': must be a positive"):
+        fit_ellipsoid(readings, field_norm="x")

@@ -27,13 +27,15 @@ import numpy as np
 
 from benchmarks.broad.metric import errors_deg, rmse_of
 
-#: The per-trial columns of the scores against the others' mean attitude.
+#: The per-trial columns of the scores against the others' median attitude.
 AGREEMENT = ("agreement_total_deg", "agreement_heading_deg", "agreement_inclination_deg")
 #: What the agreement scores are taken against, in words (tables, notes).
 AGAINST = "the median attitude of the other estimators that observe the heading"
-#: Weiszfeld's iterations for the median, and the least distance a member
-#: is weighted by (a member at the estimate would weigh infinitely).
-MEDIAN_ITERATIONS = 10
+#: Weiszfeld's iterations for the median at most (it stops when no
+#: estimate moves by MEDIAN_TOLERANCE), and the least distance a member is
+#: weighted by (a member at the estimate would weigh infinitely).
+MEDIAN_ITERATIONS = 100
+MEDIAN_TOLERANCE = 1e-6
 MEDIAN_FLOOR = 1e-6
 
 
@@ -51,12 +53,11 @@ def median_attitudes(quaternions: np.ndarray) -> np.ndarray:
     in the sum of chordal distances (not of their squares), so that one
     estimator far off moves it little: Weiszfeld's iteration (Hartley,
     Aftab & Trumpf, "L1 rotation averaging using the Weiszfeld algorithm",
-    CVPR 2011), each member weighted by the inverse of its distance to the
-    last estimate. Each step's
-    weighted mean is one power iteration of the weighted scatter from the
-    last estimate, ``v ← Σ w q (q·v)`` normalised, instead of its
-    eigendecomposition: the fixed point is the same, and a step costs two
-    sums over the members."""
+    CVPR 2011): ``v ← Σ s q / d`` normalised, each member ``q`` turned to
+    the estimate's sign ``s`` and weighted by the inverse of its chordal
+    distance ``d`` to the last estimate ``v`` — the stationary point of the
+    sum of distances on the unit sphere. A step costs two sums over the
+    members."""
     finite = np.isfinite(quaternions).all(axis=2)
     members = np.where(finite[..., None], quaternions, 0.0)
     # The start: the members' sum, each turned to the sign of the first
@@ -65,12 +66,19 @@ def median_attitudes(quaternions: np.ndarray) -> np.ndarray:
     signs = np.sign(np.einsum("kni,ni->kn", members, first))
     estimate = np.einsum("kn,kni->ni", signs, members)
     estimate /= np.maximum(np.linalg.norm(estimate, axis=1, keepdims=True), 1e-300)
+    active = np.arange(len(estimate))           # the samples still moving
     for _ in range(MEDIAN_ITERATIONS):
-        cosine = np.einsum("kni,ni->kn", members, estimate)
+        part, last = members[:, active], estimate[active]
+        cosine = np.einsum("kni,ni->kn", part, last)
         distance = np.sqrt(np.maximum(2.0 - 2.0 * np.minimum(np.abs(cosine), 1.0), 0.0))
-        weights = np.where(finite, cosine / np.maximum(distance, MEDIAN_FLOOR), 0.0)
-        estimate = np.einsum("kn,kni->ni", weights, members)
-        estimate /= np.maximum(np.linalg.norm(estimate, axis=1, keepdims=True), 1e-300)
+        weights = np.where(finite[:, active], np.sign(cosine) /
+                           np.maximum(distance, MEDIAN_FLOOR), 0.0)
+        step = np.einsum("kn,kni->ni", weights, part)
+        step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-300)
+        estimate[active] = step
+        active = active[np.max(np.abs(step - last), axis=1) >= MEDIAN_TOLERANCE]
+        if not active.size:
+            break
     return _canonical(estimate, finite)
 
 
@@ -81,11 +89,14 @@ def _canonical(quaternions: np.ndarray, finite: np.ndarray) -> np.ndarray:
     return quaternions
 
 
-def agreement_scores(estimates: dict, members) -> tuple[dict, dict]:
+def agreement_scores(estimates: dict, members, heading=None) -> tuple[dict, dict]:
     """``(scores, curves)``: for each estimator of ``estimates`` (name →
     ``(N, 4)``), its total, heading and inclination RMS (°) against the
-    median of ``members`` other than itself (:data:`AGREEMENT`; NaN where no other
-    member is), and its total error against that median over time."""
+    median of ``members`` other than itself (:data:`AGREEMENT`; NaN where no
+    other member is), and its error against that median over time: the
+    total, or for an estimator not in ``heading`` (those that observe it;
+    default: every one) the inclination alone, its total and heading NaN,
+    as against the reference."""
     scores, curves = {}, {}
     for name, estimate in estimates.items():
         others = [estimates[other] for other in members if other != name]
@@ -98,5 +109,8 @@ def agreement_scores(estimates: dict, members) -> tuple[dict, dict]:
         rms = rmse_of(errors, estimate, consensus, np.ones(len(estimate), dtype=bool))
         scores[name] = {column: rms[f"{part}_rmse_deg"]
                         for column, part in zip(AGREEMENT, ("total", "heading", "inclination"))}
-        curves[name] = errors["total"]
+        observed = heading is None or name in heading
+        if not observed:
+            scores[name].update(dict.fromkeys(AGREEMENT[:2], float("nan")))
+        curves[name] = errors["total" if observed else "inclination"]
     return scores, curves

@@ -84,19 +84,21 @@ class BroadResult:
 
 
 def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float = 0.0,
-              sigmas=None, options=None) -> tuple[list, dict, dict]:
+              sigmas=None, options=None, agreement: bool = False) -> tuple[list, dict, dict]:
     """Each of ``estimators`` on ``trial`` (:func:`benchmarks.broad.inputs.imu_inputs`
     with ``gyro_delay_s`` and ``sigmas``; ``options``: estimator → settings
     over its defaults, a tuned set for this trial), through the engine where it can
     (:func:`benchmarks.engine.recorded.run_recorded`): its rows (a diverged
     estimator's scores NaN, its step in ``diverged_step``, else -1), total
-    errors over time, labels."""
+    errors over time, labels. The estimators' agreement
+    (:mod:`benchmarks.broad.agreement`) is scored where the trial has no
+    reference, and on every trial with ``agreement`` (NaN where not)."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
     sensors = inputs.sensors
     readings = {v.sensor: int(np.count_nonzero(v.available)) for v in sensors.vectors}
     scored = int(np.count_nonzero(scored_samples(recording.reference_quat, recording.movement)))
-    rows, curves, labels, estimates, members = [], {}, {}, {}, []
+    rows, curves, labels, estimates, members, observers = [], {}, {}, {}, [], set()
     for name in estimators:
         estimator = resolve_estimator(name).from_scenario(inputs.scenario,
                                                           **(options or {}).get(name, {}))
@@ -129,13 +131,17 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         labels[name] = estimator.label + ("" if heading else " [inclination only]") + (
             " [offline]" if estimator.mode == "offline" else "")
         estimates[name] = run.estimates
-        if heading and run.diverged_step is None:
-            members.append(name)
-    agreement, agreement_curves = agreement_scores(estimates, members)
-    for row in rows:
-        row.update(agreement[row["estimator"]])
-    if not np.isfinite(recording.reference_quat).all(axis=1).any():
-        curves = {name: (recording.time_s, curve) for name, curve in agreement_curves.items()}
+        if heading:
+            observers.add(name)
+            if run.diverged_step is None:
+                members.append(name)
+    unreferenced = not recording.has_reference.any()
+    if unreferenced or agreement:
+        scores, agreement_curves = agreement_scores(estimates, members, observers)
+        for row in rows:
+            row.update(scores[row["estimator"]])
+        if unreferenced:
+            curves = {name: (recording.time_s, curve) for name, curve in agreement_curves.items()}
     return rows, curves, labels
 
 
@@ -210,7 +216,7 @@ def group_means(dataset: BroadDataset, trials: pd.DataFrame) -> pd.DataFrame:
 
 def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0.0,
               sigmas=None, quiet: bool = False, workers: int = 0,
-              options=None, tuning: str = "none") -> BroadResult:
+              options=None, tuning: str = "none", agreement: bool = False) -> BroadResult:
     """:func:`run_trial` over ``trials`` (on a local Dask cluster of
     ``workers`` processes, one trial per task, if ``workers``), with
     ``options``: trial → its estimators' settings
@@ -224,7 +230,7 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
                                     f"{repeated[0]} a second time; each trial may be named once")
     rows, labels = [], {}
     arguments = [(dataset, trial, tuple(estimators), gyro_delay_s, sigmas,
-                  (options or {}).get(trial)) for trial in trials]
+                  (options or {}).get(trial), agreement) for trial in trials]
     with progress(total=len(trials), desc="broad", unit="trial", quiet=quiet) as bar:
         results = map_tasks(run_trial, arguments, workers, bar)
     for found, _, names in results:
@@ -250,9 +256,10 @@ def _against(result: BroadResult) -> str:
 def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> BroadResult:
     """Nothing to score against a reference: the estimators ranked by their
     agreement with the others (:mod:`benchmarks.broad.agreement`), every
-    sample of every trial scored against the others' mean, said as such;
-    an error if no two estimators observe the heading."""
-    if not np.isfinite(frame[list(AGREEMENT)].to_numpy(dtype=float)).any():
+    sample of every trial scored against the others' median, said as such;
+    an error if no total could be scored (fewer than two estimators that
+    observe the heading ran through)."""
+    if not np.isfinite(frame[AGREEMENT[0]].to_numpy(dtype=float)).any():
         raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
                                     "score: " + "; ".join(f"{t} {why}"
                                                           for t, why in unscored.items()) +
@@ -470,6 +477,7 @@ def trial_figure(result: BroadResult):
     axis.set_xlabel("time (s)")
     axis.set_ylabel("total error (°, RMS per window, log)")
     axis.set_title(f"BROAD {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
-                   "windows (the reference's gaps blank)" + _against(result))
+                   "windows" + (" (the reference's gaps blank)" if result.against ==
+                                "the reference" else "") + _against(result))
     legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))
     return figure

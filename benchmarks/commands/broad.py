@@ -62,6 +62,9 @@ def arguments(commands, defaults) -> None:
                        "β, the tuner otherwise): all-trials, on the other half of the trials "
                        "than those scored (2-fold); per-trial, on each trial itself "
                        "(optimistic); none, the defaults (default); writes broad_tuning.csv")
+    broad.add_argument("--agreement", action="store_true",
+                       help="also score every trial with a reference by the estimators' "
+                       "agreement (the agreement_* columns; a trial without one always is)")
     broad.add_argument("--workers", type=whole("workers", 1), default=0, metavar="N",
                        help="run the trials on a local Dask cluster of N processes (default: "
                        "in this process)")
@@ -87,16 +90,17 @@ def run(args, _scenario):
               if value is not None}
     checked_sigmas(sigmas)
     mode, train = _training(args, dataset, trials)
-    if mode != "none" and not any(dataset.load(trial).has_reference.any() for trial in trials):
-        raise UsageError(f"--{'train' if train is not None else 'tune'} scores settings "
-                         "against a reference, and no trial here has one: leave it out (the "
-                         "filters are then ranked by their agreement)")
+    if mode in ("all-trials", "per-trial") and \
+            not any(dataset.load(trial).has_reference.any() for trial in trials):
+        raise UsageError(f"--tune {mode} scores settings against a reference, and no trial "
+                         "here has one: leave it out (the filters are then ranked by their "
+                         "agreement), or tune them on a dataset that has one (--train DIR)")
     options, tunings = tuning.tuned_options(dataset, trials, args.estimators, mode,
                                             args.gyro_delay, sigmas, args.workers, args.quiet,
                                             train=train)
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
                                  quiet=args.quiet, workers=args.workers, options=options,
-                                 tuning=mode)
+                                 tuning=mode, agreement=args.agreement)
     print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
     against = "" if result.against == "the reference" else " against the others' median"
     if against:

@@ -287,21 +287,26 @@ def findings(parts, table: dict, declaration: dict) -> list[str]:
         count, extreme = clipped(values) if sensor != "reference" else (0, 0.0)
         if count:
             lines.append(f"{'':<14} {count:,} readings at ±{extreme:.6g} (its rail: clipped?)")
+    magnetometer = declaration.get("magnetometer", {})
+    calibrated = magnetometer.get("calibrate") is True or \
+        bool({"hard_iron", "soft_iron"} & set(magnetometer))
     if len(parts) == 1:
-        return lines + _physics(parts[0])
+        return lines + _physics(parts[0], calibrated)
     lines.append(f"the gyro's clock has {len(parts) - 1} gap{'s' if len(parts) > 2 else ''}: "
                  f"{len(parts)} parts, each a trial of its own")
     for part in parts:
         lines += [f"{part.name} ({part.n_samples:,} samples): {line}"
-                  for line in _physics(part)]
+                  for line in _physics(part, calibrated)]
     return lines
 
 
-def _physics(recording) -> list[str]:
-    """Rest, gravity, the field and the magnetometer's calibration."""
+def _physics(recording, calibrated: bool = False) -> list[str]:
+    """Rest, gravity, the field and the magnetometer's calibration
+    (``calibrated``: the declaration applies one already)."""
     lines = _motion(recording)
     if recording.magnetometer_uT is not None:
-        lines.append(_calibration(recording.magnetometer_uT))
+        lines.append("calibration: the declaration applies one (calibrate, hard_iron or "
+                     "soft_iron)" if calibrated else _calibration(recording.magnetometer_uT))
     return lines
 
 
