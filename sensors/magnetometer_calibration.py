@@ -67,6 +67,8 @@ MAX_RESIDUAL = 0.05
 MAX_RELATIVE_ERROR = 0.02
 #: The fewest readings of a fit (nine unknowns and room to judge them).
 MIN_READINGS = 50
+#: The keys of a [recording.magnetometer] section that declare a calibration.
+DECLARED = ("hard_iron", "soft_iron")
 
 
 @dataclass(frozen=True)
@@ -115,8 +117,9 @@ def fit_ellipsoid(readings: np.ndarray, field_norm: float | None = None,
         raise InvalidParameterError(name, f"{len(readings)} readings",
                                     f"an ellipsoid fit needs at least {MIN_READINGS}")
     hard, inverse = _refined(readings, *_algebraic(readings, name))
-    unit_residual = np.linalg.norm((readings - hard) @ inverse, axis=1) - 1.0
-    covered = coverage((readings - hard) @ inverse)
+    unit_field = (readings - hard) @ inverse
+    unit_residual = np.linalg.norm(unit_field, axis=1) - 1.0
+    covered = coverage(unit_field)
     if covered < MIN_COVERAGE:
         raise InvalidParameterError(name, f"{covered:.0%} of the directions", _TURN_MORE)
     _check_determined(readings, hard, inverse, unit_residual, name)
@@ -247,7 +250,7 @@ def calibrated(readings: np.ndarray, section: dict, unit: float, where: str) -> 
     fit = section.get("calibrate", False)
     if not isinstance(fit, bool):
         raise InvalidParameterError(f"{where}.calibrate", fit, "must be true or false")
-    declared = [key for key in ("hard_iron", "soft_iron") if key in section]
+    declared = [key for key in DECLARED if key in section]
     if fit and declared:
         raise InvalidParameterError(f"{where}.{declared[0]}", section[declared[0]],
                                     "is declared beside calibrate = true, which fits it: "
@@ -265,6 +268,13 @@ def calibrated(readings: np.ndarray, section: dict, unit: float, where: str) -> 
         raise InvalidParameterError(f"{where}.soft_iron", section["soft_iron"],
                                     "must be invertible")
     return MagnetometerCalibration(hard * unit, soft, 1.0).apply(readings)
+
+
+def declares_calibration(section: dict) -> bool:
+    """Whether a ``[recording.magnetometer]`` section applies a calibration
+    (:func:`calibrated`): ``calibrate = true``, or a declared hard or soft
+    iron."""
+    return section.get("calibrate") is True or any(key in section for key in DECLARED)
 
 
 def _declared(key: str, value, shape: tuple) -> np.ndarray:
@@ -299,19 +309,21 @@ def twostep(readings: np.ndarray, field_norms: np.ndarray,
     readings = np.asarray(readings, dtype=float)
     z = np.sum(readings ** 2, axis=1) - np.asarray(field_norms, dtype=float) ** 2 \
         + 3.0 * sigma ** 2
+
+    def variance(offsets):           # σ_k² of each z_k, b taken off the readings
+        return 4.0 * sigma ** 2 * np.sum(offsets ** 2, axis=1) + 6.0 * sigma ** 4
+
     # Step one: weights 1/σ_k² (with b = 0 in σ_k), the weighted means out.
-    weights = 1.0 / (4.0 * sigma ** 2 * np.sum(readings ** 2, axis=1) + 6.0 * sigma ** 4)
+    weights = 1.0 / variance(readings)
     share = weights / weights.sum()
     centred, z_centred = readings - share @ readings, z - share @ z
     start = np.linalg.solve(4.0 * (centred * weights[:, None]).T @ centred,
                             2.0 * (centred * (weights * z_centred)[:, None]).sum(axis=0))
 
     def residual(b):
-        return (z - 2.0 * readings @ b + b @ b) / np.sqrt(
-            4.0 * sigma ** 2 * np.sum((readings - b) ** 2, axis=1) + 6.0 * sigma ** 4)
+        return (z - 2.0 * readings @ b + b @ b) / np.sqrt(variance(readings - b))
 
     bias = least_squares(residual, start, method="lm", xtol=1e-12, ftol=1e-12).x
     offsets = readings - bias
-    variance = 4.0 * sigma ** 2 * np.sum(offsets ** 2, axis=1) + 6.0 * sigma ** 4
-    fisher = 4.0 * (offsets / variance[:, None]).T @ offsets
+    fisher = 4.0 * (offsets / variance(offsets)[:, None]).T @ offsets
     return bias, np.linalg.inv(fisher)

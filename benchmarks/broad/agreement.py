@@ -18,8 +18,8 @@ Crassidis & Oshman ("Averaging quaternions", *J. Guidance, Control, and
 Dynamics* 30 (4), 2007): the eigenvector of the largest eigenvalue of
 :math:`\\sum_i q_i q_i^T`, sign-free. scipy's ``Rotation.mean`` computes it
 for one set of rotations; here it is batched over the samples (one
-``eigh`` of an (N, 4, 4) stack instead of N calls). The median is
-Weiszfeld's reweighting of it (:func:`median_attitudes`).
+``eigh`` of an (N, 4, 4) stack instead of N calls). The median
+(:func:`median_attitudes`) starts from it and reweights it (Weiszfeld).
 """
 from __future__ import annotations
 
@@ -53,19 +53,15 @@ def median_attitudes(quaternions: np.ndarray) -> np.ndarray:
     in the sum of chordal distances (not of their squares), so that one
     estimator far off moves it little: Weiszfeld's iteration (Hartley,
     Aftab & Trumpf, "L1 rotation averaging using the Weiszfeld algorithm",
-    CVPR 2011): ``v ← Σ s q / d`` normalised, each member ``q`` turned to
+    CVPR 2011) from the mean (:func:`mean_attitudes`, whose sign needs no
+    member to be right): ``v ← Σ s q / d`` normalised, each member ``q`` turned to
     the estimate's sign ``s`` and weighted by the inverse of its chordal
     distance ``d`` to the last estimate ``v`` — the stationary point of the
     sum of distances on the unit sphere. A step costs two sums over the
     members."""
     finite = np.isfinite(quaternions).all(axis=2)
     members = np.where(finite[..., None], quaternions, 0.0)
-    # The start: the members' sum, each turned to the sign of the first
-    # finite one (the chordal mean to first order; the iteration does the rest).
-    first = members[np.argmax(finite, axis=0), np.arange(members.shape[1])]
-    signs = np.sign(np.einsum("kni,ni->kn", members, first))
-    estimate = np.einsum("kn,kni->ni", signs, members)
-    estimate /= np.maximum(np.linalg.norm(estimate, axis=1, keepdims=True), 1e-300)
+    estimate = np.nan_to_num(mean_attitudes(quaternions))
     active = np.arange(len(estimate))           # the samples still moving
     for _ in range(MEDIAN_ITERATIONS):
         part, last = members[:, active], estimate[active]

@@ -51,6 +51,8 @@ GROUP_COLUMNS = ("group", "level", "estimator", "trials", "scored_trials", *METR
                  "left_out", "nan_on")
 #: The trial figure's curves: the total error's RMS over windows this long, s.
 CURVE_WINDOW_S = 1.0
+#: What the scores are taken against where a trial has a reference.
+REFERENCE = "the reference"
 #: The width of a group's bars in the group figure (seaborn's default).
 BAR_WIDTH = 0.8
 
@@ -74,7 +76,12 @@ class BroadResult:
     curve_movement: np.ndarray | None = None     # that trial's movement flags (N,)
     #: What the scores are taken against: the reference, or (no trial has
     #: one) :data:`benchmarks.broad.agreement.AGAINST`.
-    against: str = "the reference"
+    against: str = REFERENCE
+
+    @property
+    def by_agreement(self) -> bool:
+        """Whether the scores are the estimators' agreement, not accuracy."""
+        return self.against != REFERENCE
 
     @property
     def dt(self) -> float:
@@ -249,8 +256,8 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
 def _against(result: BroadResult) -> str:
     """A figure title's second line where the scores are not against the
     reference."""
-    return "" if result.against == "the reference" else \
-        f"\nno reference: against {result.against} (agreement, not accuracy)"
+    return f"\nno reference: against {result.against} (agreement, not accuracy)" \
+        if result.by_agreement else ""
 
 
 def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> BroadResult:
@@ -477,7 +484,7 @@ def trial_figure(result: BroadResult):
     axis.set_xlabel("time (s)")
     axis.set_ylabel("total error (°, RMS per window, log)")
     axis.set_title(f"BROAD {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
-                   "windows" + (" (the reference's gaps blank)" if result.against ==
-                                "the reference" else "") + _against(result))
+                   "windows" + ("" if result.by_agreement else " (the reference's gaps "
+                                "blank)") + _against(result))
     legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))
     return figure

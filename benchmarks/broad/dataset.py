@@ -118,8 +118,8 @@ class BroadDataset:
                 given[name] = text
                 trials.append(name)
         reasons = {name: self.unscored(name) for name in trials}
-        unreferenced = not any(self.load(name).has_reference.any() for name in trials)
-        if all(reasons.values()) and not unreferenced:
+        if all(reasons.values()) and \
+                any(self.load(name).has_reference.any() for name in trials):
             raise InvalidParameterError(
                 "trials", ",".join(trial_label(name) for name in trials),
                 "nothing to score: " + "; ".join(f"{name} {why}" for name, why in

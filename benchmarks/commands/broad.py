@@ -102,7 +102,7 @@ def run(args, _scenario):
                                  quiet=args.quiet, workers=args.workers, options=options,
                                  tuning=mode, agreement=args.agreement)
     print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
-    against = "" if result.against == "the reference" else " against the others' median"
+    against = " against the others' median" if result.by_agreement else ""
     if against:
         print(f"No trial has a reference: every score below is the RMS angle to "
               f"{result.against}, sample by sample. That is agreement, not accuracy: filters "

@@ -287,9 +287,8 @@ def findings(parts, table: dict, declaration: dict) -> list[str]:
         count, extreme = clipped(values) if sensor != "reference" else (0, 0.0)
         if count:
             lines.append(f"{'':<14} {count:,} readings at ±{extreme:.6g} (its rail: clipped?)")
-    magnetometer = declaration.get("magnetometer", {})
-    calibrated = magnetometer.get("calibrate") is True or \
-        bool({"hard_iron", "soft_iron"} & set(magnetometer))
+    from sensors.magnetometer_calibration import declares_calibration
+    calibrated = declares_calibration(declaration.get("magnetometer", {}))
     if len(parts) == 1:
         return lines + _physics(parts[0], calibrated)
     lines.append(f"the gyro's clock has {len(parts) - 1} gap{'s' if len(parts) > 2 else ''}: "
