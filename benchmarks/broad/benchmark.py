@@ -277,7 +277,6 @@ def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> 
     scored["movement_samples"] = scored["scored_samples"] = scored["samples"]
     return BroadResult(trials=scored, groups=group_means(dataset, scored), labels=labels,
                        curves=results[0][1], curve_trial=trials[0], tuning=tuning,
-                       curve_movement=np.ones(int(frame["samples"].iloc[0]), dtype=bool),
                        against=AGAINST)
 
 
