@@ -49,14 +49,17 @@ def build_parser(defaults=None) -> Parser:
 def main(argv=None) -> int:
     """The command line: one command's run; a warning the library gives
     (an estimator taking the per-run path, a reading applied at its step) is
-    one line on stderr, ``attitude-bench: note: …``."""
+    one line on stderr, ``attitude-bench: note: …``, once per run of the
+    command (campaigns warn from each of their parts)."""
+    shown = set()
+
+    def note(message, category, filename, lineno, file=None, line=None) -> None:
+        if str(message) not in shown:
+            shown.add(str(message))
+            print(f"{PROG}: note: {message}", file=sys.stderr)
     with warnings.catch_warnings():
-        warnings.showwarning = _note
+        warnings.showwarning = note
         return _main(argv)
-
-
-def _note(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"{PROG}: note: {message}", file=sys.stderr)
 
 
 def _main(argv) -> int:

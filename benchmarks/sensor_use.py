@@ -136,9 +136,22 @@ def tagged_label(label: str, note: str) -> str:
     return f"{label} [{', '.join(tags)}]" if tags else label
 
 
+def _estimates_hard_iron(item, scenario) -> bool:
+    """Whether estimator ``item`` (a name or a per-run object), as
+    ``scenario`` configures it, estimates the magnetometer's hard iron (the
+    MEKF's ``magnetometer_bias_states``)."""
+    if isinstance(item, str):
+        cls = _class_of(item)
+        if "magnetometer_bias_states" not in getattr(cls, "option_names", tuple)():
+            return False
+        return bool(cls.configured_settings(scenario).get("magnetometer_bias_states", False))
+    return bool(getattr(item, "magnetometer_bias_states", False))
+
+
 def warn_unmodelled(scenario, estimators, references=None) -> None:
     """Say (a warning, once) what the scenario's truth has that no estimator
-    among ``estimators`` models: a magnetometer's hard or soft iron. Its
+    among ``estimators`` models: a magnetometer's hard or soft iron (a hard
+    iron alone is modelled by a filter that estimates it). Its
     error is then in every magnetometer reading, and in the estimates by
     about the hard iron over the field (a ``|b| / |B|`` rad tilt of the
     field's direction)."""
@@ -148,6 +161,8 @@ def warn_unmodelled(scenario, estimators, references=None) -> None:
                if sensing.MAGNETOMETER in (getattr(_class_of(item), "reads", None) or ())]
     hard = np.asarray(scenario.magnetometer_bias_nT, dtype=float)
     soft = np.asarray(scenario.magnetometer_soft_iron, dtype=float)
+    if np.any(hard) and np.array_equal(soft, np.eye(3)):
+        readers = [item for item in readers if not _estimates_hard_iron(item, scenario)]
     if not readers or (not np.any(hard) and np.array_equal(soft, np.eye(3))):
         return
     what = " and ".join(part for part, present in (

@@ -914,7 +914,7 @@ class AttitudeAndBiasEstimator(SampledRate, KalmanEstimator):
 
     @property
     def bias_covariance(self) -> np.ndarray:
-        return self._output[2][3:, 3:].copy()
+        return self._output[2][3:6, 3:6].copy()
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,25 @@ applied one vector at a time (sequential updates, each followed by its
 reset, so the next vector's :math:`\hat b` comes from the updated
 :math:`\hat q`), after the star tracker's reading of the same step.
 
+**Magnetometer bias states** (``magnetometer_bias_states``): a spacecraft's
+magnetometer reads its own hard iron :math:`b_m` (the field of its
+electronics, in its own axes) beside the field, :math:`b = A^\mathsf{T} r +
+b_m + v`. The error state grows by three, :math:`\Delta b_m` (the reading's
+unit), constant (:math:`\Phi` and :math:`Q` are the identity and zero in its
+block), and a magnetometer reading's model is
+
+.. math:: \hat b = A(\hat q)^\mathsf{T} r + \hat b_m, \qquad
+          H = \bigl[\,[A(\hat q)^\mathsf{T} r\times]\ \ 0_3\ \ I_3\,\bigr],
+
+the reset adding :math:`\Delta b_m^+` to :math:`\hat b_m` (the state
+augmentation of Lefferts, Markley & Shuster 1982 and M&C 2014, §6.2; the
+filter form of the attitude-independent calibration of Crassidis, Lai &
+Harman 2005). The field's turning along an orbit makes the hard iron
+observable apart from the attitude. Its prior is
+``initial_magnetometer_bias_sigma`` per axis; a scenario that declares a
+hard iron (``[magnetometer] bias_nT``) turns the states on with a prior of at
+least its size on each axis (:meth:`MultiplicativeEKF.settings_from_scenario`).
+
 **Gating** (``gate_probability``): each reading's NIS
 :math:`y^\mathsf{T} S^{-1} y`, :math:`S = H P H^\mathsf{T} + R`, is tested
 against its χ² quantile before the update
@@ -121,18 +140,26 @@ average rate over that step.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
                                  rotvec_from_quat, skew, to_body_frame)
-from estimators import imu
-from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
-                             gate_probability_setting, norm_tolerance_setting)
+from dynamics.validation import InvalidParameterError, boolean
+from estimators import imu, sensing
+from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, axis_sigmas,
+                             finite_state, gate_probability_setting, norm_tolerance_setting)
 from estimators.imu.updates import ErrorStateUpdates
 from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
 _I3 = np.eye(3)
+#: The error states of the attitude and the gyro bias; the magnetometer's
+#: hard iron, where estimated, follows them.
+CORE_STATES = 6
+#: The prior σ of the magnetometer's hard iron per axis, in the readings'
+#: unit (nT in a scenario): a CubeSat's residual hard iron is hundreds of nT.
+MAGNETOMETER_BIAS_SIGMA = 1000.0
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
 #: their Taylor series: the closed form of (x³/3 + 2 sin x − 2x)/w⁵ cancels
 #: to relative error ~60 ε/x⁴ (1e-10 at 0.1), the series' first omitted term is
@@ -190,6 +217,14 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     return phi, q
 
 
+def _with_constant_states(phi: np.ndarray, q: np.ndarray, size: int) -> tuple:
+    """``Φ`` and ``Q`` grown to ``size`` states by constant ones (identity, no noise)."""
+    grown_phi, grown_q = np.eye(size), np.zeros((size, size))
+    n = len(phi)
+    grown_phi[:n, :n], grown_q[:n, :n] = phi, q
+    return grown_phi, grown_q
+
+
 class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
@@ -239,15 +274,21 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
         direction (rad²·s), the heading (rad²·s), the low-passed rate at rest
         (rad²/s²·s); a reading's variance is the density over the time since
         the sensor's last reading.
+    magnetometer_bias_states : bool
+        Estimate the magnetometer's hard iron as three more error states
+        (module docstring; needs ``magnetometer_model="vector"``).
+    initial_magnetometer_bias_sigma : float or (3,)
+        Standard deviation of the initial hard-iron error per axis, in the
+        magnetometer readings' unit (nT in a scenario).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`). Readings are always
         aligned in sign with the prediction (the innovation is a rotation).
 
     The filterpy ``KalmanFilter`` on the error state is :attr:`filter`
-    (``x`` is the error δθ, δβ, zero after each reset; ``P``, ``y``, ``S``,
-    ``K`` as filterpy keeps them); :attr:`q_hat` and :attr:`beta_hat` are
-    the global estimates.
+    (``x`` is the error δθ, δβ and, if estimated, δb_m, zero after each
+    reset; ``P``, ``y``, ``S``, ``K`` as filterpy keeps them); :attr:`q_hat`,
+    :attr:`beta_hat` and :attr:`magnetometer_bias` are the global estimates.
     """
 
     name = "mekf"
@@ -264,7 +305,9 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
                  gravity_model: str = "reading", magnetometer_model: str = "vector",
                  rest_updates: bool = False, gravity_density: float = imu.GRAVITY_DENSITY,
                  heading_density: float = imu.HEADING_DENSITY,
-                 rest_density: float = imu.REST_DENSITY, on_invalid: str = "raise"):
+                 rest_density: float = imu.REST_DENSITY, magnetometer_bias_states: bool = False,
+                 initial_magnetometer_bias_sigma=MAGNETOMETER_BIAS_SIGMA,
+                 on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self._configure_imu(gravity_model=gravity_model, magnetometer_model=magnetometer_model,
@@ -272,22 +315,59 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
                             heading_density=heading_density, rest_density=rest_density)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
-        from filterpy.kalman import KalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
-        self.filter = KalmanFilter(dim_x=6, dim_z=3)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
                         initial_bias_sigma_radps=initial_bias_sigma_radps, output=output,
                         rate_interpolation=rate_interpolation)
+        self._configure_magnetometer_bias(magnetometer_bias_states,
+                                          initial_magnetometer_bias_sigma)
+        from filterpy.kalman import KalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
+        self.filter = KalmanFilter(dim_x=self.state_size, dim_z=3)
         self.filter.R = self.R
-        self.filter.H = np.hstack([_I3, np.zeros((3, 3))])
+        self.filter.H = np.hstack([_I3, np.zeros((3, self.state_size - 3))])
         self.reset()
+
+    def _configure_magnetometer_bias(self, states, sigma) -> None:
+        """Validate and keep the hard-iron states' settings; the initial
+        covariance grows by their prior where they are on."""
+        self.magnetometer_bias_states = boolean("magnetometer_bias_states", states)
+        self.initial_magnetometer_bias_sigma = axis_sigmas("initial_magnetometer_bias_sigma",
+                                                           sigma)
+        if self.magnetometer_bias_states and self.magnetometer_model != "vector":
+            raise InvalidParameterError(
+                "magnetometer_bias_states", True, "needs magnetometer_model = 'vector' (the "
+                f"'{self.magnetometer_model}' model reads the field's direction only)")
+        self.state_size = CORE_STATES + 3 * self.magnetometer_bias_states
+        if self.magnetometer_bias_states:
+            covariance = np.zeros((self.state_size, self.state_size))
+            covariance[:CORE_STATES, :CORE_STATES] = self.initial_covariance
+            covariance[CORE_STATES:, CORE_STATES:] = np.diag(
+                self.initial_magnetometer_bias_sigma ** 2)
+            self.initial_covariance = covariance
+
+    @classmethod
+    def settings_from_scenario(cls, scenario) -> dict:
+        """The six-state filters' settings; a declared hard iron
+        (``[magnetometer] bias_nT``) turns the magnetometer bias states on,
+        their prior at least its size on each axis (as the gyro bias's prior
+        covers its declared initial bias)."""
+        settings = super().settings_from_scenario(scenario)
+        hard_iron = np.abs(np.asarray(getattr(scenario, "magnetometer_bias_nT", np.zeros(3)),
+                                      dtype=float))
+        if getattr(scenario, "magnetometer_interval_s", None) is not None and np.any(hard_iron):
+            settings["magnetometer_bias_states"] = True
+            settings["initial_magnetometer_bias_sigma"] = np.maximum(hard_iron,
+                                                                     MAGNETOMETER_BIAS_SIGMA)
+        return settings
 
     def reset(self) -> None:
         self.q_hat = self.initial_attitude.copy()
         self.beta_hat = self.initial_bias_radps.copy()
-        self._reset_filter(np.zeros(6), self.initial_covariance.copy())
+        #: The hard-iron estimate (zero, and kept so, without its states).
+        self.magnetometer_bias = np.zeros(3)
+        self._reset_filter(np.zeros(self.state_size), self.initial_covariance.copy())
         self._restart_rates()
         if self.imu is not None:
             self.imu.reset(self.q_hat)
@@ -315,16 +395,29 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
 
     def vector_model(self, observation) -> tuple[np.ndarray, np.ndarray]:
         """``(y, H)``: the innovation ``b − A(q̂)ᵀ r`` of a vector reading and
-        its error-state Jacobian ``[[b̂×] 0]`` (module docstring)."""
+        its error-state Jacobian ``[[b̂×] 0]`` (module docstring); a
+        magnetometer's with its hard-iron states, ``b − A(q̂)ᵀ r − b̂_m`` and
+        ``[[b̂×] 0 I]``."""
         predicted = to_body_frame(self.q_hat, np.asarray(observation.reference, dtype=float))
-        H = np.zeros((3, 6))
+        H = np.zeros((3, self.state_size))
         H[:, :3] = skew(predicted)
+        if self._reads_hard_iron(observation):
+            H[:, CORE_STATES:] = _I3
+            predicted = predicted + self.magnetometer_bias
         return np.asarray(observation.body, dtype=float) - predicted, H
+
+    def _reads_hard_iron(self, observation) -> bool:
+        return self.magnetometer_bias_states and observation.sensor == sensing.MAGNETOMETER
 
     def correct_vector(self, observation) -> None:
         """Kalman update with one vector reading, then the reset (or the IMU
-        models' updates, where the settings ask: :mod:`estimators.imu.updates`)."""
-        if self._imu_reading(observation) or not self.passes_norm(observation):
+        models' updates, where the settings ask: :mod:`estimators.imu.updates`).
+        A magnetometer's norm test reads the field less the hard-iron estimate."""
+        tested = observation
+        if self._reads_hard_iron(observation):
+            tested = replace(observation, body=np.asarray(observation.body, dtype=float)
+                             - self.magnetometer_bias)
+        if self._imu_reading(observation) or not self.passes_norm(tested):
             return
         y, H = self.vector_model(observation)
         R = observation.variance * _I3
@@ -336,11 +429,13 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
 
     def _reset(self) -> None:
         """Move the error state into the global state (§6.2.3)."""
-        delta_theta, delta_beta = self.filter.x[:3], self.filter.x[3:]
+        delta_theta, delta_beta = self.filter.x[:3], self.filter.x[3:CORE_STATES]
         q = quat_multiply(self.q_hat, quat_from_rotvec(delta_theta))
         self.q_hat = q / np.sqrt(q @ q)
         self.beta_hat = self.beta_hat + delta_beta
-        self.filter.x = np.zeros(6)
+        if self.magnetometer_bias_states:
+            self.magnetometer_bias = self.magnetometer_bias + self.filter.x[CORE_STATES:]
+        self.filter.x = np.zeros(self.state_size)
 
     def propagate(self, omega_meas_radps: np.ndarray, dt: float | None = None) -> None:
         """Global state and covariance from ``k`` to ``k + 1`` with the gyro's
@@ -349,6 +444,8 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
         omega_hat = np.asarray(omega_meas_radps, dtype=float) - self.beta_hat
         phi, q = discrete_error_model(omega_hat, dt, self.gyro_noise,
                                       self.gyro_bias_random_walk)
+        if self.magnetometer_bias_states:             # a constant hard iron: Φ = I, Q = 0
+            phi, q = _with_constant_states(phi, q, self.state_size)
         self.filter.predict(F=phi, Q=q)
         propagated = quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt))
         self.q_hat = propagated / np.sqrt(propagated @ propagated)

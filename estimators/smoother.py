@@ -21,6 +21,10 @@ Crassidis 2014, §6.2):
     \hat q_s = \hat q_f \otimes \exp\bigl((G\delta)_{1:3}\bigr), \quad
     \hat\beta_s = \hat\beta_f + (G\delta)_{4:6}, \quad P_s = P_f - G P_f.
 
+With the MEKF's hard-iron states (``magnetometer_bias_states``), :math:`\delta`
+and :math:`G\delta` carry the hard iron's difference too, which time reversal
+leaves as it is; each pass starts its hard iron from zero with its prior.
+
 Fusing the attitudes' marginals alone would not be the smoother: the bias
 carries what the two passes know of each other's attitude (on a linear case,
 the attitude-only fusion is off the RTS smoother by a tenth of the error;
@@ -83,7 +87,8 @@ def fuse(forward, backward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     other's."""
     q_f, b_f, P_f = (np.asarray(x, dtype=float) for x in forward)
     q_b, b_b, P_b = (np.asarray(x, dtype=float) for x in backward)
-    b_b, P_b = -b_b, P_b * _FLIP                  # the reversed gyro's bias is −β
+    flip = _flip(P_f.shape[-1])
+    b_b, P_b = b_b * flip[3:], P_b * np.outer(flip, flip)   # the reversed gyro's bias is −β
     fused = [q_f.copy(), b_f.copy(), P_f.copy()]
     ok_f, ok_b = _finite(q_f, b_f, P_f), _finite(q_b, b_b, P_b)
     for mine, theirs in zip(fused, (q_b, b_b, P_b)):
@@ -105,8 +110,12 @@ def fuse(forward, backward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return tuple(fused)
 
 
-#: The sign of each covariance entry under the bias's negation.
-_FLIP = np.outer([1, 1, 1, -1, -1, -1], [1, 1, 1, -1, -1, -1]).astype(float)
+def _flip(size: int) -> np.ndarray:
+    """The sign of each error state under time reversal: the gyro bias's
+    turns, the attitude's and a hard iron's (states 7–9) do not."""
+    signs = np.ones(size)
+    signs[3:6] = -1.0
+    return signs
 
 
 def _finite(q, b, P) -> np.ndarray:
@@ -125,16 +134,19 @@ def diverged_step(forward: int | None, backward: int | None, n: int) -> int | No
 
 def filter_pass(mekf: MultiplicativeEKF, omega, star, available, vectors=None) -> tuple:
     """``mekf`` (reset) over a whole record: each step's output ``(q, β, P)``
-    as ``(N, 4)``, ``(N, 3)`` and ``(N, 6, 6)`` arrays."""
+    as ``(N, 4)``, ``(N, 3)`` and ``(N, 6, 6)`` arrays (with hard-iron
+    states, ``β`` is followed by the hard iron, ``(N, 6)``, and ``P`` is 9x9)."""
     omega, star, available, _ = mekf._start_record(omega, star, available)
     records = checked_vector_record(vectors, len(omega))
-    n = len(omega)
-    quat, bias, covariance = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 6, 6))
+    n, size = len(omega), mekf.state_size
+    quat, bias, covariance = np.empty((n, 4)), np.empty((n, size - 3)), np.empty((n, size, size))
     with quiet_overflow():
         for k in range(n):
             quat[k] = mekf.step(omega[k], star[k] if available[k] else None, 0.0,
                                 observations_at(records, k))
-            bias[k], covariance[k] = mekf._output[1], mekf._output[2]
+            bias[k, :3], covariance[k] = mekf._output[1], mekf._output[2]
+            if mekf.magnetometer_bias_states:
+                bias[k, 3:] = mekf.magnetometer_bias
     return quat, bias, covariance
 
 
@@ -205,7 +217,7 @@ class MekfSmoother(MultiplicativeEKF):
         for k, sensor in forward_filter.rejections:
             rejected.setdefault(sensor, []).append(k)
         return EstimateTrace(quat=quat, attitude_covariance=covariance[:, :3, :3],
-                             bias_radps=bias, bias_covariance=covariance[:, 3:, 3:],
+                             bias_radps=bias[:, :3], bias_covariance=covariance[:, 3:6, 3:6],
                              rejected={sensor: np.array(steps)
                                        for sensor, steps in rejected.items()})
 

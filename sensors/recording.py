@@ -115,8 +115,20 @@ class Recording:
                        magnetometer_uT=_rows_from(self.magnetometer_uT, start))
 
 
+    def until_sample(self, stop: int) -> "Recording":
+        """The recording before sample ``stop``."""
+        return replace(self, gyro_radps=self.gyro_radps[:stop],
+                       reference_quat=self.reference_quat[:stop], movement=self.movement[:stop],
+                       accelerometer_mps2=_rows_to(self.accelerometer_mps2, stop),
+                       magnetometer_uT=_rows_to(self.magnetometer_uT, stop))
+
+
 def _rows_from(channel, start: int):
     return None if channel is None else channel[start:]
+
+
+def _rows_to(channel, stop: int):
+    return None if channel is None else channel[:stop]
 
 
 def load_recording(path, name: str | None = None) -> Recording:

@@ -366,3 +366,38 @@ def test_the_authors_grid_gives_their_best_beta_on_trial_02():
                                  "madgwick-broad")
     assert grid.shape == (len(case_study.MADGWICK_BETAS), 3)
     np.testing.assert_allclose(grid.min(axis=0), [1.4835498, 1.1998357, 0.7698124], atol=1e-4)
+
+
+def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_path,
+                                                                          monkeypatch):
+    import pandas as pd
+    from dataclasses import replace
+    from benchmarks.broad import tuning
+    from benchmarks.broad.tuning import LikelihoodScore, TrialCase, first_half_of
+    monkeypatch.setattr(tuning, "MAX_EVALUATIONS", 8)
+    name = "02_undisturbed_slow_rotation_B"
+    recording = open_broad(SHIPPED).load(name)
+    # The loss reads no reference: the same number with the reference erased.
+    half = first_half_of(recording)
+    blind = replace(half, reference_quat=np.full_like(half.reference_quat, np.nan))
+    settings_of = (lambda _scenario: {"gyro_noise": 3e-6})
+    assert LikelihoodScore("mekf", [TrialCase(name, imu_inputs(half))])(settings_of) == \
+        LikelihoodScore("mekf", [TrialCase(name, imu_inputs(blind))])(settings_of)
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(SHIPPED), "--trials", "02", "--estimators",
+                 "mekf,madgwick", "--tune", "halves", "--out", str(out), "--quiet"]) == 0
+    tuned = pd.read_csv(out / "broad_tuning.csv", dtype={"training": str, "scored": str})
+    # Only the Kalman filter tunes without a reference (Madgwick has no innovations).
+    assert list(tuned["estimator"]) == ["mekf"]
+    row = tuned.iloc[0]
+    assert row["evaluations"] <= 8 + 1 and row["training_loss"] <= row["training_loss_default"]
+    assert row["held_out_verdict"] in ("better", "not better: keep the defaults")
+    assert (row["held_out_verdict"] == "better") == (row["held_out_loss"]
+                                                      < row["held_out_loss_default"])
+    # Every estimator is scored on the second half only, the tuned MEKF as the table says.
+    trials = pd.read_csv(out / "broad_trials.csv")
+    second = recording.movement.copy()
+    second[:recording.n_samples // 2] = False
+    assert (trials["movement_samples"] == np.count_nonzero(second)).all()
+    mekf = trials[trials["estimator"] == "mekf"].iloc[0]
+    assert mekf["total_rmse_deg"] == pytest.approx(row["held_out_rmse_deg"], rel=1e-9)

@@ -19,10 +19,15 @@ from dynamics.validation import InvalidParameterError
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 VECTOR_FILTERS = ("mekf", "usque")
 #: The CubeSat into the Earth's shadow (from 449 s on, where neither sun
-#: sensor reads), with a magnetometer bias the filters do not know: at the
-#: scenario's 99.99 % gate, the biased field readings are rejected now and then.
-CUBESAT = Scenario.from_toml(SCENARIOS / "cubesat.toml").replace(
-    tstop=900.0, orbit_argument_of_latitude_deg=82.0, magnetometer_bias_nT=[900.0, -700.0, 500.0])
+#: sensor reads), with a magnetometer bias the filters do not know (the MEKF
+#: told not to estimate it): at the scenario's 99.99 % gate, the biased field
+#: readings are rejected now and then.
+_SHIPPED = Scenario.from_toml(SCENARIOS / "cubesat.toml")
+CUBESAT = _SHIPPED.replace(
+    tstop=900.0, orbit_argument_of_latitude_deg=82.0, magnetometer_bias_nT=[900.0, -700.0, 500.0],
+    estimator_options={**_SHIPPED.estimator_options,
+                       "mekf": {**_SHIPPED.estimator_options["mekf"],
+                                "magnetometer_bias_states": False}})
 
 
 def per_run(scenario, name, seed):

@@ -212,3 +212,18 @@ def test_a_declination_turns_the_estimate_alike_on_every_path(trial, name):
         # Started where they were told, in the turned frame: the estimate goes
         # on from there (no jump at the first sample) and moves toward the turn.
         assert angles[0] < 0.2 and 1.0 < angles[-1] < 4.0
+
+
+@pytest.mark.parametrize("name", ["mekf", "usque"])
+def test_the_kernels_innovation_likelihood_is_the_per_run_filters(trial, name):
+    # The tuner without a reference (broad --tune halves) reads these sums:
+    # both paths give the same ln det S + NIS over the same updates.
+    scenario, omega, vectors = trial
+    kernel_run = run_recorded(build_estimator(name, scenario), omega, vectors, innovations=True)
+    per_run = build_estimator(name, scenario)
+    per_run.log_innovations = True
+    _per_run(per_run, omega, vectors)
+    sums = per_run.innovation_sums
+    assert kernel_run.path == "kernel" and kernel_run.likelihood[1] == sums["updates"] > 100
+    assert kernel_run.likelihood[0] == pytest.approx(sums["log_det"] + sums["nis"], rel=1e-9)
+    assert run_recorded(build_estimator(name, scenario), omega, vectors).likelihood is None

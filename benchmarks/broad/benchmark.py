@@ -27,6 +27,7 @@ import pandas as pd
 from benchmarks.broad.agreement import AGAINST, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs
+from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import METRICS, errors_deg, rmse_of, scored_samples, \
     unscored_reason
 from dynamics.validation import InvalidParameterError
@@ -91,7 +92,8 @@ class BroadResult:
 
 
 def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float = 0.0,
-              sigmas=None, options=None, agreement: bool = False) -> tuple[list, dict, dict]:
+              sigmas=None, options=None, agreement: bool = False,
+              second_half: bool = False) -> tuple[list, dict, dict]:
     """Each of ``estimators`` on ``trial`` (:func:`benchmarks.broad.inputs.imu_inputs`
     with ``gyro_delay_s`` and ``sigmas``; ``options``: estimator → settings
     over its defaults, a tuned set for this trial), through the engine where it can
@@ -99,12 +101,16 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
     estimator's scores NaN, its step in ``diverged_step``, else -1), total
     errors over time, labels. The estimators' agreement
     (:mod:`benchmarks.broad.agreement`) is scored where the trial has no
-    reference, and on every trial with ``agreement`` (NaN where not)."""
+    reference, and on every trial with ``agreement`` (NaN where not). With
+    ``second_half``, every estimator runs the whole trial and is scored on its
+    second half only (``--tune halves`` tuned on the first)."""
     recording = dataset.load(trial)
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
     sensors = inputs.sensors
     readings = {v.sensor: int(np.count_nonzero(v.available)) for v in sensors.vectors}
-    scored = int(np.count_nonzero(scored_samples(recording.reference_quat, recording.movement)))
+    judged = judged_samples(recording, second_half)
+    movement = recording.movement & judged
+    scored = int(np.count_nonzero(scored_samples(recording.reference_quat, movement)))
     rows, curves, labels, estimates, members, observers = [], {}, {}, {}, [], set()
     for name in estimators:
         estimator = resolve_estimator(name).from_scenario(inputs.scenario,
@@ -114,7 +120,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
         seconds = time.perf_counter() - start
         errors = errors_deg(run.estimates, recording.reference_quat)
-        scores = rmse_of(errors, run.estimates, recording.reference_quat, recording.movement)
+        scores = rmse_of(errors, run.estimates, recording.reference_quat, movement)
         if not sensing.heading_observed(type(estimator), readings):
             # No heading reference (VQF 6D): its heading is the gyro's, and its
             # total would rank a heading that happens to start near the
@@ -124,7 +130,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
-                     "movement_samples": int(np.count_nonzero(recording.movement)),
+                     "movement_samples": int(np.count_nonzero(movement)),
                      "scored_samples": scored,
                      **{f"rejected_{sensor}": run.rejected.get(sensor, 0) for sensor in SENSORS},
                      **{f"rejected_{sensor}_share":
@@ -137,7 +143,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         curves[name] = (recording.time_s, errors["total" if heading else "inclination"])
         labels[name] = estimator.label + ("" if heading else " [inclination only]") + (
             " [offline]" if estimator.mode == "offline" else "")
-        estimates[name] = run.estimates
+        estimates[name] = run.estimates[judged]
         if heading:
             observers.add(name)
             if run.diverged_step is None:
@@ -148,7 +154,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         for row in rows:
             row.update(scores[row["estimator"]])
         if unreferenced:
-            curves = {name: (recording.time_s, curve) for name, curve in agreement_curves.items()}
+            curves = {name: (recording.time_s[judged], curve)
+                      for name, curve in agreement_curves.items()}
     return rows, curves, labels
 
 
@@ -237,7 +244,7 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
                                     f"{repeated[0]} a second time; each trial may be named once")
     rows, labels = [], {}
     arguments = [(dataset, trial, tuple(estimators), gyro_delay_s, sigmas,
-                  (options or {}).get(trial), agreement) for trial in trials]
+                  (options or {}).get(trial), agreement, tuning == "halves") for trial in trials]
     with progress(total=len(trials), desc="broad", unit="trial", quiet=quiet) as bar:
         results = map_tasks(run_trial, arguments, workers, bar)
     for found, _, names in results:

@@ -57,11 +57,15 @@ def arguments(commands, defaults) -> None:
                        "Mahony's 4,100 Kp × Ki; about a minute per trial, use --workers): the "
                        "one setting for all trials and each trial's best beside theirs "
                        "(writes broad_case_study_grid.csv)")
-    broad.add_argument("--tune", choices=("none", "all-trials", "per-trial"), default="none",
+    broad.add_argument("--tune", choices=("none", "all-trials", "per-trial", "halves"),
+                       default="none",
                        help="tune each estimator's settings (the authors' grid for Madgwick's "
                        "β, the tuner otherwise): all-trials, on the other half of the trials "
                        "than those scored (2-fold); per-trial, on each trial itself "
-                       "(optimistic); none, the defaults (default); writes broad_tuning.csv")
+                       "(optimistic); halves, without a reference: the Kalman filters on each "
+                       "trial's first half by their innovations' likelihood, every estimator "
+                       "scored on the second half; none, the defaults (default); writes "
+                       "broad_tuning.csv")
     broad.add_argument("--agreement", action="store_true",
                        help="also score every trial with a reference by the estimators' "
                        "agreement (the agreement_* columns; a trial without one always is)")
@@ -109,7 +113,9 @@ def run(args, _scenario):
               "that share a model share its errors.")
     print(benchmark.format_trials(result))
     if len(tunings):
-        print("\ntuned (training loss: mean total RMSE over the training trials, °):")
+        print("\ntuned (training loss: " + ("the innovations' ln det S + NIS per update over "
+              "the trial's first half, no reference read" if mode == "halves" else
+              "mean total RMSE over the training trials, °") + "):")
         print(tunings.to_string(index=False, float_format=lambda v: f"{v:.6g}"))
     print(f"\ntotal RMSE (°){against} per group, mean over its trials (trials run), "
           f"{tuning.MODE_LABELS[mode]}:")

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchmarks.engine.kernels import KERNELS, kernel
+from benchmarks.engine.kernels import KERNELS, kernel, settings_limitation
 from benchmarks.engine.kernels.sensors import bias_model
 from benchmarks.engine.vectors import VectorStreams, max_block_steps, vector_block, vector_streams
 from benchmarks.metrics import STAT_COLUMNS, attitude_error_deg
@@ -128,7 +128,7 @@ def engine_limitation(scenario: Scenario, runs: RunTable | None = None,
     if not getattr(module, "GATING", False) and \
             getattr(ESTIMATORS[name].from_scenario(scenario), "gate_probability", None) is not None:
         return f"innovation gating (gate_probability) for {name}"
-    return None
+    return settings_limitation(module, name, ESTIMATORS[name].configured_settings(scenario))
 
 
 def checked_runs(scenario: Scenario, runs) -> RunTable:

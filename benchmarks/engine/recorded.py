@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from benchmarks.engine.kernels import KERNELS, kernel
+from benchmarks.engine.kernels import KERNELS, kernel, settings_limitation
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
 from estimators.smoother import (MekfSmoother, diverged_step, fuse, reversed_readings,
@@ -49,6 +49,9 @@ class RecordedRun:
     rejected: dict = field(default_factory=dict)
     #: "kernel", "compiled", "batch" or "per-run": the path it took.
     path: str = "per-run"
+    #: With ``innovations``: the sum of ln det S + NIS over the applied
+    #: updates and their count (None for an estimator without innovations).
+    likelihood: tuple | None = None
 
 
 def path_of(estimator, vectors=()) -> str:
@@ -57,8 +60,10 @@ def path_of(estimator, vectors=()) -> str:
     from benchmarks.engine.kernels import complementary
     name = getattr(estimator, "name", None)
     if isinstance(estimator, MekfSmoother):
-        return "kernel"
-    if name in KERNELS and type(estimator).__module__.startswith("estimators."):
+        return "per-run" if settings_limitation(kernel("mekf"), name, vars(estimator)) \
+            else "kernel"
+    if name in KERNELS and type(estimator).__module__.startswith("estimators.") and \
+            settings_limitation(kernel(name), name, vars(estimator)) is None:
         module = kernel(name)
         needs_vectors = bool(vectors) and estimator.uses_vector_readings
         gated = getattr(estimator, "gate_probability", None) is not None
@@ -72,10 +77,14 @@ def path_of(estimator, vectors=()) -> str:
     return "per-run"
 
 
-def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> RecordedRun:
+def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
+                 innovations: bool = False) -> RecordedRun:
     """``estimator`` (reset first, as ``run`` resets it) over the recorded
     rates ``(N, 3)`` and vector readings
-    (:class:`sensors.vector.VectorReadings`), by :func:`path_of`'s path."""
+    (:class:`sensors.vector.VectorReadings`), by :func:`path_of`'s path;
+    with ``innovations``, a filter's innovation likelihood sums too
+    (:attr:`RecordedRun.likelihood`, the kernel's or the per-run filter's
+    ``innovation_sums``: the same numbers)."""
     omega = np.ascontiguousarray(omega_meas_radps, dtype=float)
     vectors = tuple(vectors)
     path = path_of(estimator, vectors)
@@ -83,7 +92,9 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> Recorde
     if path == "kernel" and isinstance(estimator, MekfSmoother):
         return _smoothed(estimator, omega, vectors)
     if path == "kernel":
-        return _through_kernel(estimator, omega, vectors)
+        run, record, _ = _kernel_record(estimator, omega, vectors, innovations=innovations)
+        sums = record.likelihood[0, 0]
+        return replace(run, likelihood=(float(sums[0]), int(sums[1])) if innovations else None)
     if path == "compiled" and _frame_learnt(estimator, vectors):
         from benchmarks.engine.kernels import complementary
         acc, has_acc, mag, has_mag = _channels(vectors)
@@ -98,10 +109,16 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=()) -> Recorde
                            rejected=dict(getattr(estimator, "rejected", {})))
         path = "per-run"
     n = len(omega)
+    logged = innovations and hasattr(estimator, "log_innovations")
+    if logged:
+        estimator.log_innovations = True
     estimates = estimator.run(omega, np.tile(IDENTITY, (n, 1)), np.zeros(n, dtype=bool),
                               vectors=vectors)
+    sums = estimator.innovation_sums if logged else None
     return RecordedRun(estimates=estimates, diverged_step=estimator.diverged_step,
-                       rejected=dict(estimator.rejected), path=path)
+                       rejected=dict(estimator.rejected), path=path,
+                       likelihood=(sums["log_det"] + sums["nis"], sums["updates"])
+                       if logged else None)
 
 
 def _frame_learnt(estimator, vectors) -> bool:
@@ -143,11 +160,6 @@ def _channels(vectors) -> tuple:
     return tuple(out)
 
 
-def _through_kernel(estimator, omega: np.ndarray, vectors) -> RecordedRun:
-    """One run of the estimator's kernel over one block: the recording."""
-    return _kernel_record(estimator, omega, vectors)[0]
-
-
 def with_covariance(estimator, omega: np.ndarray, vectors) -> tuple:
     """``estimator`` (with a six-state kernel: the MEKF's) over a recording
     through its kernel: its :class:`RecordedRun`, and each output's bias
@@ -176,15 +188,18 @@ def _smoothed(smoother, omega: np.ndarray, vectors) -> RecordedRun:
                                                    backward.diverged_step, len(omega)))
 
 
-def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = False) -> tuple:
-    """:func:`_through_kernel`'s run, and the kernel's record and state."""
+def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = False,
+                   innovations: bool = False) -> tuple:
+    """One run of the estimator's kernel over one block, the recording (its
+    innovations' likelihood summed with ``innovations``): the run, and the
+    kernel's record and state."""
     from benchmarks.engine.batch import new_record
     from benchmarks.engine.kernels.common import Block
     from benchmarks.engine.kernels.sensors import SensorState
     module = kernel(estimator.name)
     used = vectors if estimator.uses_vector_readings else ()
     n = len(omega)
-    record = new_record((estimator.name,), 1, n, True, False, 1, 0, False, 0, len(used),
+    record = new_record((estimator.name,), 1, n, True, innovations, n, 0, False, 0, len(used),
                         full_state=full_state)
     block = Block(
         k0=0, steps=n, last_step=n - 1, dt=float(estimator.dt),

@@ -117,21 +117,21 @@ class ErrorStateUpdates(ImuUpdates):
 
     def _gravity_update(self, up, variance: float, dof: int) -> None:
         predicted = to_body_frame(self.q_hat, UP)
-        H = np.zeros((3, 6))
+        H = np.zeros((3, self.state_size))
         H[:, :3] = skew(predicted)
-        H[:, 3:] = self.imu.drift
+        H[:, 3:6] = self.imu.drift
         self._error_update(up - predicted, H, variance * np.eye(3), dof, "accelerometer")
 
     def _rest_update(self, rate, variance: float) -> None:
-        H = np.zeros((3, 6))
-        H[:, 3:] = np.eye(3)
+        H = np.zeros((3, self.state_size))
+        H[:, 3:6] = np.eye(3)
         self._error_update(rate - self.beta_hat, H, variance * np.eye(3), 3, "rest",
                            gated=False)
 
     def _heading_update(self, psi: float, variance: float, validated: bool, field,
                         reference) -> None:
         v = to_body_frame(self.q_hat, UP)
-        H = np.zeros((1, 6))
+        H = np.zeros((1, self.state_size))
         H[0, :3] = v
         self._error_update(np.array([psi]), H, np.array([[variance]]), 1, "magnetometer",
                            heading_axis=v, bias=validated)
@@ -151,7 +151,7 @@ class ErrorStateUpdates(ImuUpdates):
             K[:3] = np.outer(heading_axis, heading_axis @ K[:3])
             if not bias:
                 K[3:] = 0.0
-        I_KH = np.eye(6) - K @ H
+        I_KH = np.eye(self.state_size) - K @ H
         f.x = K @ y
         f.P = I_KH @ f.P @ I_KH.T + K @ R @ K.T
         f.y, f.S, f.K = y, S, K

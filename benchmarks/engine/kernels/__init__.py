@@ -29,7 +29,8 @@ What a kernel module declares (``dead_reckoning.py`` is the shortest):
   :mod:`benchmarks.engine.vectors`) and ``GATING = True`` (it gates readings
   as its per-run class does). Without them, a scenario with vector sensors
   or an estimator with a ``gate_probability`` runs on the per-run path
-  (:func:`benchmarks.engine.batch.engine_limitation`).
+  (:func:`benchmarks.engine.batch.engine_limitation`), as does an estimator
+  whose settings its kernel's ``limitation`` names.
 
 :data:`KERNELS` maps a name to its module, in the engine's order. Adding an
 estimator to the engine is its kernel module plus one line here. Each
@@ -62,3 +63,13 @@ def kernel(name: str):
     object, as a test's toy kernel is, is returned as it is)."""
     module = KERNELS[name]
     return importlib.import_module(module) if isinstance(module, str) else module
+
+
+def settings_limitation(module, name: str, settings: dict) -> str | None:
+    """What of estimator ``name``'s ``settings`` (its constructor's keywords,
+    or a per-run object's attributes) kernel ``module`` does not model (its
+    ``limitation(settings)``, if it declares one; the per-run path runs
+    those), or None."""
+    check = getattr(module, "limitation", None)
+    found = None if check is None else check(settings)
+    return None if found is None else f"{found} for {name}"

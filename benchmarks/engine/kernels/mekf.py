@@ -82,6 +82,15 @@ def initial_state(estimators) -> State:
                  **imu.imu_state(estimators))
 
 
+def limitation(settings: dict) -> str | None:
+    """What of the per-run object's settings (its constructor's keywords, or
+    its attributes) this kernel does not model: the hard-iron states (the
+    per-run path runs them), or None."""
+    if settings.get("magnetometer_bias_states", False):
+        return "the magnetometer's hard-iron states (magnetometer_bias_states)"
+    return None
+
+
 def nis_dof(estimators) -> int:
     return estimators[0].filter.dim_z
 
