@@ -150,3 +150,21 @@ def test_an_estimator_without_a_heading_is_scored_on_its_inclination_only():
     assert np.isnan(scores["six"]["agreement_heading_deg"])
     assert scores["six"]["agreement_inclination_deg"] == pytest.approx(0.0, abs=1e-9)
     assert np.allclose(curves["six"], 0.0)
+
+
+def test_without_a_reference_tuning_on_the_first_half_is_judged_on_the_second(
+        unreferenced, tmp_path, capsys, monkeypatch):
+    from benchmarks.broad import tuning
+    monkeypatch.setattr(tuning, "MAX_EVALUATIONS", 6)
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(unreferenced), "--estimators", "mekf,madgwick",
+                 "--tune", "halves", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "No trial has a reference" in printed and "no reference read" in printed
+    tuned = pd.read_csv(out / "broad_tuning.csv")
+    assert list(tuned["estimator"]) == ["mekf"]
+    # Judged by the likelihood alone: no RMSE column where there is no reference.
+    assert np.isfinite(tuned[["held_out_loss_default", "held_out_loss"]].to_numpy()).all()
+    assert not any(column.startswith("held_out_rmse") for column in tuned.columns)
+    trials = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
+    assert np.isfinite(trials.loc[["mekf", "madgwick"], "agreement_total_deg"]).all()
