@@ -18,9 +18,10 @@ trials, then scores them on others:
 * ``halves``: no reference needed. Each trial's first half tunes the
   Kalman filters by their innovations' likelihood
   (:class:`LikelihoodScore`: the classical criterion of adaptive filtering,
-  Mehra 1970, as :mod:`benchmarks.experiments.objectives` has it), and the
-  second half is scored (every estimator on it alone, by the reference where
-  there is one, else by agreement): tuned without truth on one part of a
+  Mehra 1970, as :mod:`benchmarks.experiments.objectives` has it); every
+  estimator runs the whole trial and is scored on its second half only (by
+  the reference where there is one, else by agreement), and each tuning is
+  judged there (:func:`held_out`): tuned without truth on one part of a
   recording, judged on another. The other estimators keep their defaults.
 * ``none``: the defaults.
 
@@ -178,7 +179,8 @@ def tune_on(name: str, cases, quiet: bool = True, mode: str = "all-trials") -> d
                 "method": f"the authors' grid ({len(points)} points)",
                 "evaluations": len(points) + 1}
     from benchmarks.experiments.tuning import tune_estimator
-    tuning = tune_estimator(name, cases, name_of_loss, parameters=(HALVES_PARAMETERS if mode == "halves" else PARAMETERS).get(name),
+    parameters = (HALVES_PARAMETERS if mode == "halves" else PARAMETERS).get(name)
+    tuning = tune_estimator(name, cases, name_of_loss, parameters=parameters,
                             max_evaluations=MAX_EVALUATIONS, quiet=quiet, score=score)
     return {"values": dict(tuning.tuned), "loss": tuning.loss,
             "loss_default": tuning.loss_default, "method": tuning.method,
