@@ -140,12 +140,13 @@ def _estimates_hard_iron(item, scenario) -> bool:
     """Whether estimator ``item`` (a name or a per-run object), as
     ``scenario`` configures it, estimates the magnetometer's hard iron (the
     MEKF's ``magnetometer_bias_states``)."""
+    from estimators.mekf import estimates_hard_iron
     if isinstance(item, str):
         cls = _class_of(item)
         if "magnetometer_bias_states" not in getattr(cls, "option_names", tuple)():
             return False
-        return bool(cls.configured_settings(scenario).get("magnetometer_bias_states", False))
-    return bool(getattr(item, "magnetometer_bias_states", False))
+        return estimates_hard_iron(cls.configured_settings(scenario))
+    return estimates_hard_iron(getattr(item, "__dict__", {}))
 
 
 def warn_unmodelled(scenario, estimators, references=None) -> None:

@@ -167,6 +167,12 @@ MAGNETOMETER_BIAS_SIGMA = 1000.0
 SERIES_BELOW = 0.1
 
 
+def estimates_hard_iron(settings) -> bool:
+    """Whether ``settings`` (the MEKF's constructor keywords, or a per-run
+    object's attributes) turn the magnetometer's hard-iron states on."""
+    return bool(settings.get("magnetometer_bias_states", False))
+
+
 def transition_coefficients(rate_norm_radps: float, dt: float) -> tuple[float, ...]:
     r"""The five scalar coefficients of :math:`\Phi` and :math:`Q`, for :math:`w = |\hat\omega|`:
 

@@ -476,6 +476,8 @@ def test_a_users_readme_that_cites_broad_does_not_make_it_broads(tmp_path):
                                    "(doi:10.3390/data6070072).\n")
     credit = open_broad(folder).attribution
     assert "Walks with my phone" in credit and "Laidig" not in credit
+    # Its figures are titled by its folder's name, not BROAD's.
+    assert open_broad(folder).title == folder.name
 
 
 def test_a_dataset_without_a_readme_is_credited_to_no_one_else(tmp_path, capsys):
@@ -489,6 +491,7 @@ def test_a_dataset_without_a_readme_is_credited_to_no_one_else(tmp_path, capsys)
 def test_broad_itself_is_credited_as_its_authors_ask():
     from benchmarks.broad.dataset import ATTRIBUTION, open_broad
     assert open_broad(SHIPPED).attribution == ATTRIBUTION      # its README names BROAD's DOI
+    assert open_broad(SHIPPED).title == "BROAD"
     assert "CC BY 4.0" in ATTRIBUTION and "Laidig" in ATTRIBUTION
 
 

@@ -78,6 +78,8 @@ class BroadResult:
     #: What the scores are taken against: the reference, or (no trial has
     #: one) :data:`benchmarks.broad.agreement.AGAINST`.
     against: str = REFERENCE
+    #: The data's name in titles (:attr:`BroadDataset.title`).
+    dataset_title: str = "BROAD"
 
     @property
     def by_agreement(self) -> bool:
@@ -257,7 +259,8 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
     shown = next(i for i, trial in enumerate(trials) if trial not in unscored)
     return BroadResult(trials=frame, groups=group_means(dataset, frame), labels=labels,
                        curves=results[shown][1], curve_trial=trials[shown], tuning=tuning,
-                       curve_movement=dataset.load(trials[shown]).movement)
+                       curve_movement=dataset.load(trials[shown]).movement,
+                       dataset_title=dataset.title)
 
 
 def _against(result: BroadResult) -> str:
@@ -284,7 +287,7 @@ def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> 
     scored["movement_samples"] = scored["scored_samples"] = scored["samples"]
     return BroadResult(trials=scored, groups=group_means(dataset, scored), labels=labels,
                        curves=results[0][1], curve_trial=trials[0], tuning=tuning,
-                       against=AGAINST)
+                       against=AGAINST, dataset_title=dataset.title)
 
 
 def group_header(group: str, trials: int, scored: int) -> str:
@@ -414,8 +417,8 @@ def groups_figure(result: BroadResult):
     for label in axes[-1].get_xticklabels():
         label.set_rotation(30)
         label.set_horizontalalignment("right")
-    figure.suptitle("BROAD: error during the movement per group, the mean over the trials "
-                    "counted under its name" + _against(result))
+    figure.suptitle(f"{result.dataset_title}: error during the movement per group, the mean "
+                    "over the trials counted under its name" + _against(result))
     legend_outside(figure, axes[:1], columns=min(len(names), 5),
                    note="; ".join(group_notes(result)))
     return figure
@@ -489,7 +492,7 @@ def trial_figure(result: BroadResult):
     axis.set_xlim(time_s[0], time_s[-1])
     axis.set_xlabel("time (s)")
     axis.set_ylabel("total error (°, RMS per window, log)")
-    axis.set_title(f"BROAD {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
+    axis.set_title(f"{result.dataset_title} {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
                    "windows" + ("" if result.by_agreement else " (the reference's gaps "
                                 "blank)") + _against(result))
     legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))

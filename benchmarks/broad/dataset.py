@@ -76,6 +76,12 @@ class BroadDataset:
         return dataset_attribution(self.folder)
 
     @property
+    def title(self) -> str:
+        """The name figures give the data: BROAD where the attribution is
+        BROAD's, else the folder's own name."""
+        return "BROAD" if self.attribution == ATTRIBUTION else self.folder.name
+
+    @property
     def available(self) -> list[str]:
         """The trials present, in ``trials.json``'s order."""
         return [name for name in self.trials if name in self.files]

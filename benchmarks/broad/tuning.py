@@ -263,16 +263,37 @@ def held_out(name: str, result: dict, first_halves, wholes) -> dict:
     says of a tuning that never read it."""
     found = {}
     for label, values in (("_default", {}), ("", result["values"])):
-        whole = LikelihoodScore(name, wholes).sums(lambda _scenario, v=values: v)
+        total, updates, rmse = _whole_runs(name, wholes, values)
         first = LikelihoodScore(name, first_halves).sums(lambda _scenario, v=values: v)
-        count = whole[1] - first[1]
-        found[f"held_out_loss{label}"] = (whole[0] - first[0]) / count if count else math.inf
-        if all(case.inputs.recording.has_reference.any() for case in wholes):
-            found[f"held_out_rmse{label}_deg"] = TrialsScore(name, wholes, second_half=True)(
-                lambda _scenario, v=values: v)
+        count = updates - first[1]
+        found[f"held_out_loss{label}"] = (total - first[0]) / count if count > 0 else math.inf
+        if rmse is not None:
+            found[f"held_out_rmse{label}_deg"] = rmse
     found["held_out_verdict"] = ("better" if found["held_out_loss"] < found["held_out_loss_default"]
                                  else "not better: keep the defaults")
     return {**result, "held_out": found}
+
+
+def _whole_runs(name: str, wholes, values: dict) -> tuple[float, int, float | None]:
+    """One run of estimator ``name`` with ``values`` over each whole trial:
+    its innovations' ln det S + NIS summed and their count, and the mean
+    total RMSE (°) of the second halves where every trial has a reference
+    (None otherwise); infinite sums and RMSE where a run diverges."""
+    cls, total, updates, totals = resolve_estimator(name), 0.0, 0, []
+    for case in wholes:
+        sensors, recording = case.inputs.sensors, case.inputs.recording
+        run = run_recorded(cls.from_scenario(case.scenario, **values),
+                           sensors.omega_meas_radps, sensors.vectors, innovations=True)
+        if run.diverged_step is not None or not run.likelihood or not run.likelihood[1]:
+            return math.inf, 0, math.inf
+        total, updates = total + run.likelihood[0], updates + run.likelihood[1]
+        if recording.has_reference.any():
+            movement = recording.movement & judged_samples(recording)
+            totals.append(rmse_deg(run.estimates, recording.reference_quat,
+                                   movement)["total_rmse_deg"])
+    if len(totals) < len(wholes):
+        return total, updates, None
+    return total, updates, float(np.mean(totals)) if np.all(np.isfinite(totals)) else math.inf
 
 
 def tuned_options(dataset, trials, estimators, mode: str, gyro_delay_s: float = 0.0,

@@ -34,6 +34,7 @@ import numpy as np
 from benchmarks.engine.kernels import KERNELS, kernel, settings_limitation
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
+from estimators.mekf import estimates_hard_iron
 from estimators.smoother import (MekfSmoother, diverged_step, fuse, reversed_readings,
                                  reversed_rates)
 
@@ -59,9 +60,8 @@ def path_of(estimator, vectors=()) -> str:
     ``vectors`` (module docstring)."""
     from benchmarks.engine.kernels import complementary
     name = getattr(estimator, "name", None)
-    if isinstance(estimator, MekfSmoother):
-        return "per-run" if settings_limitation(kernel("mekf"), name, vars(estimator)) \
-            else "kernel"
+    if isinstance(estimator, MekfSmoother):      # its kernel passes keep six states
+        return "per-run" if estimates_hard_iron(vars(estimator)) else "kernel"
     if name in KERNELS and type(estimator).__module__.startswith("estimators.") and \
             settings_limitation(kernel(name), name, vars(estimator)) is None:
         module = kernel(name)

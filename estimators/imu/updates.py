@@ -57,9 +57,7 @@ class ImuUpdates:
                             ("heading_density", heading_density),
                             ("rest_density", rest_density)):
             setattr(self, name, finite_number(name, value, strictly_positive=True))
-        on = (self.gravity_model != "reading" or self.magnetometer_model != "vector"
-              or self.rest_updates)
-        self.imu = ImuModels(self.dt) if on else None
+        self.imu = ImuModels(self.dt) if imu_models_on(vars(self)) else None
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()):
         if self.imu is not None:
@@ -106,6 +104,15 @@ class ImuUpdates:
             return
         self._heading_update(psi, trust * trust * self.heading_density / interval, validated,
                              field, reference)
+
+
+def imu_models_on(settings) -> bool:
+    """Whether ``settings`` (a filter's constructor keywords, or its
+    attributes) turn any IMU model on: a gravity model other than the plain
+    reading, the heading-only field, or the rest updates."""
+    return (settings.get("gravity_model", "reading") != "reading"
+            or settings.get("magnetometer_model", "vector") != "vector"
+            or bool(settings.get("rest_updates", False)))
 
 
 class ErrorStateUpdates(ImuUpdates):

@@ -274,20 +274,21 @@ def matmul4(a, b, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def joseph_covariance(P, IK, KRK, T):
-    """Joseph's form of a six-state covariance update, in place:
+def joseph_covariance(P, IK, KRK, T, n=6):
+    """Joseph's form of an ``n``-state covariance update, in place:
     P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, given ``IK`` = I − KH and ``KRK`` =
-    K R Kᵀ; ``T`` (6, 6) scratch."""
-    for i in range(6):
-        for j in range(6):
+    K R Kᵀ; ``T`` (n, n) scratch. Inlined, so that a constant ``n`` is
+    compiled into unrolled loops."""
+    for i in range(n):
+        for j in range(n):
             total = 0.0
-            for m in range(6):
+            for m in range(n):
                 total += IK[i, m] * P[m, j]
             T[i, j] = total
-    for i in range(6):
-        for j in range(6):
+    for i in range(n):
+        for j in range(n):
             first = 0.0
-            for m in range(6):
+            for m in range(n):
                 first += T[i, m] * IK[j, m]
             P[i, j] = first + KRK[i, j]
 
@@ -456,8 +457,9 @@ def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, va
                 keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch):
     """What a six-state kernel keeps of the estimate ``out`` it outputs at step
     ``k`` (before or after the step's reading, as the filter outputs): the
-    attitude variances with traces, the bias ``beta`` and 6x6 ``P`` at the
-    last step for the final report, and the NEES."""
+    attitude variances with traces, the bias ``beta`` and ``P`` (6x6, or
+    larger where the kernel keeps more states) at the last step for the
+    final report, and the NEES."""
     keep_variances(run, k, P, variances, keep_traces)
     if keep_traces and variances.shape[2] == FULL_STATE_WIDTH:
         for i in range(6):
@@ -468,8 +470,8 @@ def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, va
     if k == last_step:
         for i in range(3):
             beta_last[run, i] = beta[i]
-        for i in range(6):
-            for j in range(6):
+        for i in range(P_last.shape[1]):
+            for j in range(P_last.shape[1]):
                 P_last[run, i, j] = P[i, j]
     if streaming:
         fold_nees(run, k, nees(q_true_k, out, P, scratch), nees_every, settle, nees_samples,
