@@ -1,6 +1,7 @@
 r"""What every engine kernel shares: the error bookkeeping (streaming
-statistics, the median histogram, traces, divergence), the small linear
-algebra, the quaternion steps, the NEES and the health checks.
+statistics, the median histogram, traces, divergence), the NEES, the
+gates and the health checks (the small linear algebra and the quaternion
+steps are :mod:`benchmarks.engine.kernels.algebra`).
 
 Each formula is the same, in the same order, as its reference on the
 per-run path (named in each docstring), so the kernels reproduce it to
@@ -15,6 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+
+from benchmarks.engine.kernels.algebra import gauss_jordan, log_error, quadratic_form
 
 
 class Record(NamedTuple):
@@ -144,39 +147,6 @@ def acos(x, bits, bits_int):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def propagate(q, w, half_dt, out, jacobian, want_jacobian):
-    """out = f(q, ω); jacobian = ∂f/∂q if asked (see estimators.model)."""
-    p, qq, r = w[0], w[1], w[2]
-    # A = I + (dt/2) Ω(ω), Ω the right-product matrix of [0, ω].
-    a00, a01, a02, a03 = 1.0, -half_dt * p, -half_dt * qq, -half_dt * r
-    a10, a11, a12, a13 = half_dt * p, 1.0, half_dt * r, -half_dt * qq
-    a20, a21, a22, a23 = half_dt * qq, -half_dt * r, 1.0, half_dt * p
-    a30, a31, a32, a33 = half_dt * r, half_dt * qq, -half_dt * p, 1.0
-    g0 = a00 * q[0] + a01 * q[1] + a02 * q[2] + a03 * q[3]
-    g1 = a10 * q[0] + a11 * q[1] + a12 * q[2] + a13 * q[3]
-    g2 = a20 * q[0] + a21 * q[1] + a22 * q[2] + a23 * q[3]
-    g3 = a30 * q[0] + a31 * q[1] + a32 * q[2] + a33 * q[3]
-    norm = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3)
-    n0, n1, n2, n3 = g0 / norm, g1 / norm, g2 / norm, g3 / norm
-    out[0], out[1], out[2], out[3] = n0, n1, n2, n3
-    inv_norm = 1.0 / norm   # one division for the 16 entries of F (≤ 1 ulp apart)
-    if want_jacobian:
-        # F = (A - n (nᵀ A)) / |g|
-        c0 = n0 * a00 + n1 * a10 + n2 * a20 + n3 * a30
-        c1 = n0 * a01 + n1 * a11 + n2 * a21 + n3 * a31
-        c2 = n0 * a02 + n1 * a12 + n2 * a22 + n3 * a32
-        c3 = n0 * a03 + n1 * a13 + n2 * a23 + n3 * a33
-        a = ((a00, a01, a02, a03), (a10, a11, a12, a13),
-             (a20, a21, a22, a23), (a30, a31, a32, a33))
-        n = (n0, n1, n2, n3)
-        c = (c0, c1, c2, c3)
-        for i in range(4):
-            for j in range(4):
-                jacobian[i, j] = (a[i][j] - n[i] * c[j]) * inv_norm
-
-
-
-@njit(cache=True, inline="always", error_model="numpy")
 def error_arrays(record, row):
     """Estimator ``row``'s slices of the record that :func:`record_error` and
     the health checks write, taken out of the tuple (before a kernel's
@@ -262,70 +232,6 @@ def record_error(run, k, q_true_k, q, stats, hist, first_bits, traces, keep_trac
         samples[run, k // error_every] = error
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def matmul4(a, b, out):
-    """out = a b for 4x4 arrays (out distinct from a and b)."""
-    for i in range(4):
-        for j in range(4):
-            total = 0.0
-            for m in range(4):
-                total += a[i, m] * b[m, j]
-            out[i, j] = total
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def joseph_covariance(P, IK, KRK, T, n=6):
-    """Joseph's form of an ``n``-state covariance update, in place:
-    P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, given ``IK`` = I − KH and ``KRK`` =
-    K R Kᵀ; ``T`` (n, n) scratch. Inlined, so that a constant ``n`` is
-    compiled into unrolled loops."""
-    for i in range(n):
-        for j in range(n):
-            total = 0.0
-            for m in range(n):
-                total += IK[i, m] * P[m, j]
-            T[i, j] = total
-    for i in range(n):
-        for j in range(n):
-            first = 0.0
-            for m in range(n):
-                first += T[i, m] * IK[j, m]
-            P[i, j] = first + KRK[i, j]
-
-
-@njit(cache=True, error_model="numpy")
-def gauss_jordan(S, inverse, n):
-    """inverse = S⁻¹ for the leading n x n block (S is destroyed), with
-    partial pivoting; S is positive definite. Returns det S (the pivots'
-    product, signed by the row swaps)."""
-    determinant = 1.0
-    for i in range(n):
-        for j in range(n):
-            inverse[i, j] = 1.0 if i == j else 0.0
-    for col in range(n):
-        pivot = col
-        for row in range(col + 1, n):
-            if abs(S[row, col]) > abs(S[pivot, col]):
-                pivot = row
-        if pivot != col:
-            determinant = -determinant
-            for j in range(n):
-                S[col, j], S[pivot, j] = S[pivot, j], S[col, j]
-                inverse[col, j], inverse[pivot, j] = inverse[pivot, j], inverse[col, j]
-        diagonal = S[col, col]
-        determinant *= diagonal
-        for j in range(n):
-            S[col, j] /= diagonal
-            inverse[col, j] /= diagonal
-        for row in range(n):
-            if row != col:
-                factor = S[row, col]
-                for j in range(n):
-                    S[row, j] -= factor * S[col, j]
-                    inverse[row, j] -= factor * inverse[col, j]
-    return determinant
-
-
 # Inlined copies for the small kernels (the EKF's, dead reckoning's), where
 # inlining costs little compile time and spares a call a step. The MEKF's and
 # USQUE's kernels call them from several places: there inlining doubled their
@@ -334,72 +240,6 @@ record_error_inlined = njit(cache=True, inline="always",
                             error_model="numpy")(record_error.py_func)
 gauss_jordan_inlined = njit(cache=True, inline="always",
                             error_model="numpy")(gauss_jordan.py_func)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def quadratic_form(y, inverse, n):
-    """yᵀ S⁻¹ y for the first n entries of ``y`` (the NIS and the NEES)."""
-    total = 0.0
-    for i in range(n):
-        for j in range(n):
-            total += y[i] * inverse[i, j] * y[j]
-    return total
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def quat_exp(t0, t1, t2, out):
-    """out = δq(θ), the exponential map of dynamics.quaternion.quat_from_rotvec."""
-    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    if angle < 1e-4:
-        half_sinc = 0.5 - angle * angle / 48.0
-    else:
-        half_sinc = math.sin(0.5 * angle) / angle
-    out[0] = math.cos(0.5 * angle)
-    out[1] = half_sinc * t0
-    out[2] = half_sinc * t1
-    out[3] = half_sinc * t2
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def quat_times_normalized(q, d, out):
-    """out = (q ⊗ d) / |q ⊗ d| (Hamilton product); out may be q."""
-    w = q[0] * d[0] - q[1] * d[1] - q[2] * d[2] - q[3] * d[3]
-    x = q[0] * d[1] + q[1] * d[0] + q[2] * d[3] - q[3] * d[2]
-    y = q[0] * d[2] - q[1] * d[3] + q[2] * d[0] + q[3] * d[1]
-    z = q[0] * d[3] + q[1] * d[2] - q[2] * d[1] + q[3] * d[0]
-    norm = math.sqrt(w * w + x * x + y * y + z * z)
-    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def to_body_frame(q, v):
-    """A(q)ᵀ v for a unit quaternion ``q`` (dynamics.quaternion.to_body_frame,
-    the same operations in the same order)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    a, b, c = v[0], v[1], v[2]
-    tx, ty, tz = y * c - z * b, z * a - x * c, x * b - y * a
-    return (a - 2.0 * w * tx + 2.0 * (y * tz - z * ty),
-            b - 2.0 * w * ty + 2.0 * (z * tx - x * tz),
-            c - 2.0 * w * tz + 2.0 * (x * ty - y * tx))
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def log_error(q, p, norm):
-    """The rotation vector of ``(q⁻¹ ⊗ p) / norm``, aligned to ``w >= 0``
-    (dynamics.quaternion.rotvec_from_quat): the body-frame error from ``q`` to ``p``."""
-    w = q[0] * p[0] + q[1] * p[1] + q[2] * p[2] + q[3] * p[3]
-    v0 = q[0] * p[1] - q[1] * p[0] - q[2] * p[3] + q[3] * p[2]
-    v1 = q[0] * p[2] + q[1] * p[3] - q[2] * p[0] - q[3] * p[1]
-    v2 = q[0] * p[3] - q[1] * p[2] + q[2] * p[1] - q[3] * p[0]
-    if w < 0:
-        w, v0, v1, v2 = -w, -v0, -v1, -v2
-    w, v0, v1, v2 = w / norm, v0 / norm, v1 / norm, v2 / norm
-    vector_norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    if vector_norm < 1e-12:
-        scale = 2.0 / max(w, 1e-300)
-    else:
-        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
-    return scale * v0, scale * v1, scale * v2
 
 
 @njit(cache=True, error_model="numpy")
@@ -415,23 +255,6 @@ def nees(q_true_k, q, C, scratch):
             S[i, j] = C[i, j]
     gauss_jordan(S, inverse, 3)
     return quadratic_form(e, inverse, 3)
-
-
-@njit(cache=True, error_model="numpy")
-def projected_covariance(x, P, out):
-    """4 Ξ(q̂)ᵀ P Ξ(q̂) at the normalised q̂ (estimators.QuaternionEKF.attitude_covariance)."""
-    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
-    w, a, b, c = x[0] / norm, x[1] / norm, x[2] / norm, x[3] / norm
-    xi = ((-a, -b, -c), (w, -c, b), (c, w, -a), (-b, a, w))
-    for i in range(3):
-        for j in range(3):
-            total = 0.0
-            for m in range(4):
-                inner = 0.0
-                for n in range(4):
-                    inner += P[m, n] * xi[n][j]
-                total += xi[m][i] * inner
-            out[i, j] = 4.0 * total
 
 
 @njit(cache=True, inline="always", error_model="numpy")

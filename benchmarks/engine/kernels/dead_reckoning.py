@@ -8,7 +8,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from benchmarks.engine.kernels.common import check_health, error_arrays, propagate
+from benchmarks.engine.kernels.algebra import propagate
+from benchmarks.engine.kernels.common import check_health, error_arrays
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
 from benchmarks.engine.kernels.sensors import gyro_arrays, gyro_reading
 

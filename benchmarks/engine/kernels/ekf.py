@@ -9,10 +9,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from benchmarks.engine.kernels.algebra import (matmul4, projected_covariance, propagate,
+                                               quadratic_form)
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, fold_nees, keep_variances,
-                                              mark_diverged, matmul4, nees, nees_arrays,
-                                              projected_covariance, propagate, quadratic_form)
+                                              mark_diverged, nees, nees_arrays)
 from benchmarks.engine.kernels.common import gauss_jordan_inlined as gauss_jordan
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,

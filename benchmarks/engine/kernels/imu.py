@@ -15,8 +15,8 @@ import types
 import numpy as np
 from numba import njit
 
-from benchmarks.engine.kernels.common import (joseph_covariance, quat_exp, quat_times_normalized,
-                                              to_body_frame)
+from benchmarks.engine.kernels.algebra import (joseph_covariance, quat_exp, quat_times_normalized,
+                                               to_body_frame)
 from estimators.imu import gravity, heading, lowpass, rest
 
 

@@ -20,11 +20,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from benchmarks.engine.kernels.algebra import to_body_frame
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
                                               mark_diverged, nees_arrays, norm_tolerances,
-                                              rate_states, record_error, to_body_frame,
-                                              trapezoid_rate)
+                                              rate_states, record_error, trapezoid_rate)
 from benchmarks.engine.kernels import imu
 from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_passes,
                                                   gravity_update, propagate_covariance,

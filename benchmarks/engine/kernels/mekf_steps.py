@@ -14,9 +14,10 @@ import math
 import numpy as np
 from numba import njit
 
-from benchmarks.engine.kernels.common import (gauss_jordan, joseph_covariance, log_error,
-                                              passes_norm, quadratic_form, quat_exp,
-                                              quat_times_normalized, to_body_frame)
+from benchmarks.engine.kernels.algebra import (gauss_jordan, joseph_covariance, log_error,
+                                               quadratic_form, quat_exp, quat_times_normalized,
+                                               to_body_frame)
+from benchmarks.engine.kernels.common import passes_norm
 from estimators.mekf import transition_coefficients
 
 

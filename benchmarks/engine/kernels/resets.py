@@ -8,7 +8,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from benchmarks.engine.kernels.common import check_health, error_arrays, propagate, record_error
+from benchmarks.engine.kernels.algebra import propagate
+from benchmarks.engine.kernels.common import check_health, error_arrays, record_error
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 

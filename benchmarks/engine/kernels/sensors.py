@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from benchmarks.engine.kernels.common import quat_exp, quat_times_normalized
+from benchmarks.engine.kernels.algebra import quat_exp, quat_times_normalized
 
 
 class SensorState(NamedTuple):

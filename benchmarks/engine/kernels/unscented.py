@@ -10,7 +10,7 @@ import math
 
 from numba import njit
 
-from benchmarks.engine.kernels.common import gauss_jordan, quadratic_form
+from benchmarks.engine.kernels.algebra import gauss_jordan, quadratic_form
 from dynamics.quaternion import GRP_A, GRP_F
 from estimators.usque import STATE_SIZE
 

@@ -33,12 +33,11 @@ import numpy as np
 from numba import njit, prange
 
 from benchmarks.engine.kernels import imu, usque_imu
+from benchmarks.engine.kernels.algebra import quat_exp, to_body_frame
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_innovation,
-                                              gate_thresholds, keep_output,
+                                              fold_innovation, gate_thresholds, keep_output,
                                               norm_tolerances, passes_norm, mark_diverged,
-                                              nees_arrays, quat_exp,
-                                              rate_states, record_error, to_body_frame,
+                                              nees_arrays, rate_states, record_error,
                                               trapezoid_rate)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)

@@ -22,7 +22,8 @@ import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels import imu
-from benchmarks.engine.kernels.common import fold_innovation, to_body_frame
+from benchmarks.engine.kernels.algebra import to_body_frame
+from benchmarks.engine.kernels.common import fold_innovation
 from benchmarks.engine.kernels.unscented import (N_SIGMAS, fold_reference, output, product,
                                                  quat_from_grp, sigma_points, unit,
                                                  unscented_update)
