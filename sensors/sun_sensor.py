@@ -90,7 +90,13 @@ def _distinct_rows(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if flags.shape[1] > 62:
         return np.unique(flags, axis=0, return_inverse=True)
     codes = flags.astype(np.int64) @ (np.int64(1) << np.arange(flags.shape[1], dtype=np.int64))
-    distinct, which = np.unique(codes, return_inverse=True)
+    if flags.shape[1] <= 16:        # a table of every code: no sort (the same answer)
+        present = np.zeros(1 << flags.shape[1], dtype=bool)
+        present[codes] = True
+        distinct = np.flatnonzero(present)
+        which = (np.cumsum(present) - 1)[codes]
+    else:
+        distinct, which = np.unique(codes, return_inverse=True)
     return (distinct[:, None] >> np.arange(flags.shape[1]) & 1).astype(bool), which
 
 
@@ -191,32 +197,42 @@ class CoarseSunSensors(VectorSensor):
         :meth:`_first_faces` give a first solution, then the faces it lights
         (``n_i · b > 0``) the final one (a face in the dark reads its noise,
         so the set is refined from the solution rather than from the
-        currents alone). Solved once per distinct set of faces: there are
-        few, and one reading's arithmetic is that of a single solve."""
+        currents alone). Each distinct set of faces is solved once here
+        (there are few); each reading's sum over its faces is compiled
+        (:func:`sensors.sun_faces.solve_sets`)."""
+        from sensors import sun_faces        # compiled: loaded where readings are made
+        currents = np.ascontiguousarray(currents, dtype=float)
         lit = self._first_faces(currents)
         solution = np.full((len(currents), 3), np.nan)
         variance = np.full(len(currents), np.nan)
         solvable = np.ones(len(currents), dtype=bool)
         for _ in range(2):
             sets, which = _distinct_rows(lit)
-            for index, faces_lit in enumerate(sets):
-                rows = np.flatnonzero(solvable & (which == index))
-                if not len(rows):
-                    continue
-                faces = self.normals[faces_lit]
-                normal_matrix = faces.T @ faces
-                if len(faces) < 3 or np.linalg.cond(normal_matrix) > MAX_CONDITION:
-                    solvable[rows] = False
-                    continue
-                covariance = np.linalg.inv(normal_matrix)
-                gain = covariance @ faces.T
-                solution[rows] = 0.0
-                for column, face in enumerate(np.flatnonzero(faces_lit)):
-                    solution[rows] += currents[rows, face:face + 1] * gain[:, column]
-                variance[rows] = self.sigma ** 2 * np.trace(covariance) / 3.0
+            gains, variances, solvable_sets = self._set_solutions(sets)
+            sun_faces.solve_sets(currents, lit, which.astype(np.int64), gains, solvable_sets,
+                                 variances, solvable, solution, variance)
             lit = times_matrix(solution, self.normals) > 0.0
         solution[~solvable], variance[~solvable] = np.nan, np.nan
         return solution, variance
+
+    def _set_solutions(self, sets: np.ndarray) -> tuple:
+        """Per distinct set of lit faces ``(S, N)``: its least-squares gain
+        ``(N_Lᵀ N_L)⁻¹ N_Lᵀ`` (``(S, 3, N)``, a column per lit face in face
+        order), its mean variance per axis σ_c² tr((N_Lᵀ N_L)⁻¹)/3, and
+        whether it can be solved (three faces at least, well conditioned)."""
+        gains = np.zeros((len(sets), 3, len(self.normals)))
+        variances = np.full(len(sets), np.nan)
+        solvable = np.zeros(len(sets), dtype=bool)
+        for index, faces_lit in enumerate(sets):
+            faces = self.normals[faces_lit]
+            normal_matrix = faces.T @ faces
+            if len(faces) < 3 or np.linalg.cond(normal_matrix) > MAX_CONDITION:
+                continue
+            covariance = np.linalg.inv(normal_matrix)
+            gains[index, :, :len(faces)] = covariance @ faces.T
+            variances[index] = self.sigma ** 2 * np.trace(covariance) / 3.0
+            solvable[index] = True
+        return gains, variances, solvable
 
     def _first_faces(self, currents: np.ndarray) -> np.ndarray:
         """``(M, N)`` bool: per set of currents, the faces reading above
@@ -226,31 +242,12 @@ class CoarseSunSensors(VectorSensor):
         Sun on a face's normal or in its plane, a face in the dark stands
         in: it reads its noise about zero, the cosine law's reading of a
         normal at 90° (its choice, the brighter of two noisy zeros, biases
-        that axis by about 0.56 σ_c). Taken face by face in order of
-        brightness, every set at once."""
-        rows = np.arange(len(currents))
-        chosen = np.zeros(currents.shape, dtype=bool)
-        picked = np.zeros((len(currents), 2, 3))     # the first two faces' normals
-        threshold = LIT_THRESHOLD_SIGMA * self.sigma
+        that axis by about 0.56 σ_c). Compiled, set by set
+        (:func:`sensors.sun_faces.first_faces`)."""
+        from sensors import sun_faces
         opposite = self.normals @ self.normals.T < -OPPOSITE_COSINE
-        for face in np.argsort(-currents, axis=1, kind="stable").T:
-            count = chosen.sum(axis=1)
-            normal = self.normals[face]
-            take = ~((count >= 3) & (currents[rows, face] <= threshold)) & \
-                ~np.any(chosen & opposite[face], axis=1)
-            # Fewer than three so far: the face must add a dimension.
-            across = np.cross(picked[:, 0], normal)
-            spans = np.select([count == 0, count == 1, count == 2],
-                              [np.ones(len(rows), dtype=bool),
-                               np.linalg.norm(across, axis=1) > SPAN_TOLERANCE,
-                               np.abs(np.sum(across * picked[:, 1], axis=1)) > SPAN_TOLERANCE],
-                              default=True)
-            take &= spans
-            for few in (0, 1):
-                first = take & (count == few)
-                picked[first, few] = normal[first]
-            chosen[rows[take], face[take]] = True
-        return chosen
+        return sun_faces.first_faces(currents, self.normals, LIT_THRESHOLD_SIGMA * self.sigma,
+                                     opposite, SPAN_TOLERANCE)
 
     def measure_runs(self, q_true: np.ndarray, references, rngs,
                      first_step: int = 0) -> VectorReadings:

@@ -1,0 +1,105 @@
+"""The coarse sun sensors' per-reading arithmetic, compiled: the choice of
+the faces that give a first solution, and each reading's least-squares sum
+over its lit faces (:class:`sensors.sun_sensor.CoarseSunSensors`).
+
+Why compiled: a campaign measures every run's currents at every scheduled
+step (a thousand CubeSat runs of one orbit: six million sets of six
+currents), and the face choice is a short loop over the faces of each set in
+order of brightness, which numpy can only run as whole-array passes, one per
+face; those passes were two thirds of a CubeSat campaign's time. Each
+comparison, product and sum here is the one the numpy passes made, in the
+same order, so every reading keeps its bits (``tests/test_sun_faces.py``
+holds them to the numpy passes, which it keeps as the reference). Sets are
+independent: they are spread over the cores, with no effect on the numbers.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, parallel=True)
+def first_faces(currents, normals, threshold, opposite, span_tolerance):
+    """``(M, N)`` bool: per set of currents ``(M, N)``, the faces taken in
+    order of brightness (a stable sort: ties keep their face order) — a face
+    is taken unless three are and it reads at most ``threshold``, or a face
+    ``opposite`` it is taken, or (with fewer than three) it adds no dimension
+    to the taken faces' normals (their cross product, then triple product,
+    at most ``span_tolerance``)."""
+    sets, faces = currents.shape
+    chosen = np.zeros((sets, faces), dtype=np.bool_)
+    for row in prange(sets):
+        c = currents[row]
+        order = _brightest_first(c)
+        first = np.zeros(3)
+        second = np.zeros(3)
+        count = 0
+        for index in range(faces):
+            face = order[index]
+            take = not (count >= 3 and c[face] <= threshold)
+            for other in range(faces):
+                if chosen[row, other] and opposite[face, other]:
+                    take = False
+            n = normals[face]
+            # np.cross(first, n), and the norm and dot product numpy's reductions take.
+            a0 = first[1] * n[2] - first[2] * n[1]
+            a1 = first[2] * n[0] - first[0] * n[2]
+            a2 = first[0] * n[1] - first[1] * n[0]
+            if count == 1:
+                take = take and math.sqrt(a0 * a0 + (a1 * a1 + a2 * a2)) > span_tolerance
+            elif count == 2:
+                take = take and abs(a0 * second[0] + (a1 * second[1] + a2 * second[2])) \
+                    > span_tolerance
+            if take:
+                if count == 0:
+                    first[:] = n
+                elif count == 1:
+                    second[:] = n
+                chosen[row, face] = True
+                count += 1
+    return chosen
+
+
+@njit(cache=True, inline="always")
+def _brightest_first(c):
+    """The faces' indices by decreasing current, ties in face order
+    (``np.argsort(-c, kind="stable")``; an insertion sort: a handful of faces)."""
+    order = np.arange(len(c))
+    for i in range(1, len(c)):
+        face = order[i]
+        j = i - 1
+        while j >= 0 and -c[order[j]] > -c[face]:
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = face
+    return order
+
+
+@njit(cache=True, parallel=True)
+def solve_sets(currents, lit, which, gains, solvable_sets, variances, solvable, solution,
+               variance):
+    """Each set still ``solvable`` whose faces ``lit`` are set ``which`` of
+    the distinct ones: its solution ``Σ c_f g_f`` over its lit faces in face
+    order (``gains[which]``'s columns, one per lit face), from zero, and its
+    set's variance; a set whose faces cannot be solved is no longer
+    ``solvable``. In place."""
+    for row in prange(len(currents)):
+        if not solvable[row]:
+            continue
+        index = which[row]
+        if not solvable_sets[index]:
+            solvable[row] = False
+            continue
+        s0, s1, s2 = 0.0, 0.0, 0.0
+        column = 0
+        for face in range(currents.shape[1]):
+            if lit[row, face]:
+                c = currents[row, face]
+                s0 += c * gains[index, 0, column]
+                s1 += c * gains[index, 1, column]
+                s2 += c * gains[index, 2, column]
+                column += 1
+        solution[row, 0], solution[row, 1], solution[row, 2] = s0, s1, s2
+        variance[row] = variances[index]

@@ -1,0 +1,130 @@
+"""The coarse sun sensors' compiled face choice and least squares
+(sensors/sun_faces.py) give the bits the numpy passes they replaced gave:
+those passes are kept here, as they were, as the reference."""
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from sensors.sun_sensor import (CUBE_FACES, LIT_THRESHOLD_SIGMA, MAX_CONDITION,
+                                OPPOSITE_COSINE, SPAN_TOLERANCE, CoarseSunSensors,
+                                _distinct_rows)
+from sensors.vector import times_matrix
+
+
+def numpy_sun_vectors(self, currents: np.ndarray):
+    """The least-squares Sun vectors of ``(M, N)`` sets of currents and
+    their mean variances per axis, NaN where there is none: the faces of
+    :meth:`_first_faces` give a first solution, then the faces it lights
+    (``n_i · b > 0``) the final one (a face in the dark reads its noise,
+    so the set is refined from the solution rather than from the
+    currents alone). Solved once per distinct set of faces: there are
+    few, and one reading's arithmetic is that of a single solve."""
+    lit = numpy_first_faces(self, currents)
+    solution = np.full((len(currents), 3), np.nan)
+    variance = np.full(len(currents), np.nan)
+    solvable = np.ones(len(currents), dtype=bool)
+    for _ in range(2):
+        sets, which = _distinct_rows(lit)
+        for index, faces_lit in enumerate(sets):
+            rows = np.flatnonzero(solvable & (which == index))
+            if not len(rows):
+                continue
+            faces = self.normals[faces_lit]
+            normal_matrix = faces.T @ faces
+            if len(faces) < 3 or np.linalg.cond(normal_matrix) > MAX_CONDITION:
+                solvable[rows] = False
+                continue
+            covariance = np.linalg.inv(normal_matrix)
+            gain = covariance @ faces.T
+            solution[rows] = 0.0
+            for column, face in enumerate(np.flatnonzero(faces_lit)):
+                solution[rows] += currents[rows, face:face + 1] * gain[:, column]
+            variance[rows] = self.sigma ** 2 * np.trace(covariance) / 3.0
+        lit = times_matrix(solution, self.normals) > 0.0
+    solution[~solvable], variance[~solvable] = np.nan, np.nan
+    return solution, variance
+
+def numpy_first_faces(self, currents: np.ndarray) -> np.ndarray:
+    """The former numpy pass of ``SunSensorArray._first_faces`` (its rule is
+    in that docstring), taken face by face in order of brightness for
+    every set at once: the reference the compiled pass must equal."""
+    rows = np.arange(len(currents))
+    chosen = np.zeros(currents.shape, dtype=bool)
+    picked = np.zeros((len(currents), 2, 3))     # the first two faces' normals
+    threshold = LIT_THRESHOLD_SIGMA * self.sigma
+    opposite = self.normals @ self.normals.T < -OPPOSITE_COSINE
+    for face in np.argsort(-currents, axis=1, kind="stable").T:
+        count = chosen.sum(axis=1)
+        normal = self.normals[face]
+        take = ~((count >= 3) & (currents[rows, face] <= threshold)) & \
+            ~np.any(chosen & opposite[face], axis=1)
+        # Fewer than three so far: the face must add a dimension.
+        across = np.cross(picked[:, 0], normal)
+        spans = np.select([count == 0, count == 1, count == 2],
+                          [np.ones(len(rows), dtype=bool),
+                           np.linalg.norm(across, axis=1) > SPAN_TOLERANCE,
+                           np.abs(np.sum(across * picked[:, 1], axis=1)) > SPAN_TOLERANCE],
+                          default=True)
+        take &= spans
+        for few in (0, 1):
+            first = take & (count == few)
+            picked[first, few] = normal[first]
+        chosen[rows[take], face[take]] = True
+    return chosen
+
+
+def same_readings(sensor, currents):
+    solution, variance = sensor._sun_vectors(currents)
+    expected_solution, expected_variance = numpy_sun_vectors(sensor, currents)
+    assert np.array_equal(solution, expected_solution, equal_nan=True)
+    assert np.array_equal(variance, expected_variance, equal_nan=True)
+    assert np.array_equal(sensor._first_faces(currents), numpy_first_faces(sensor, currents))
+    return solution
+
+
+def cosine_currents(sensor, sun, rng):
+    """Currents of the cosine law with the sensor's noise, Sun directions ``(M, 3)``."""
+    lit = np.maximum(0.0, times_matrix(sun, sensor.normals))
+    return lit + sensor.sigma * rng.standard_normal(lit.shape)
+
+
+def test_the_cube_in_every_direction_reads_the_same_bits():
+    rng = np.random.default_rng(11)
+    sensor = CoarseSunSensors(0.01, 1.0, 0.1)
+    sun = rng.standard_normal((20000, 3))
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    solution = same_readings(sensor, cosine_currents(sensor, sun, rng))
+    # And they are Sun vectors: within a few σ_c of the truth (a sanity check
+    # that the comparison is not between two wrong answers).
+    found = np.isfinite(solution).all(axis=1)
+    assert found.mean() > 0.99
+    assert np.median(np.linalg.norm(solution[found] - sun[found], axis=1)) < 5 * sensor.sigma
+
+
+def test_the_sun_on_a_face_or_in_its_plane_reads_the_same_bits():
+    # The ties and the dark faces that stand in: the choice's hard cases.
+    rng = np.random.default_rng(2)
+    sensor = CoarseSunSensors(0.02, 1.0, 0.1)
+    axes = np.repeat(np.array(CUBE_FACES), 500, axis=0)
+    edges = np.repeat(np.array([[1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]) / np.sqrt(2.0), 500, axis=0)
+    sun = np.vstack([axes, edges])
+    same_readings(sensor, cosine_currents(sensor, sun, rng))
+    same_readings(sensor, np.zeros((10, 6)))                  # in the dark: no reading
+    same_readings(sensor, np.ones((10, 6)))                   # every face equal
+
+
+@settings(max_examples=40, deadline=None)
+@given(faces=st.integers(3, 9), seed=st.integers(0, 2**32 - 1),
+       sigma=st.floats(1e-4, 0.5), exact_zeros=st.booleans())
+def test_any_faces_and_currents_read_the_same_bits(faces, seed, sigma, exact_zeros):
+    rng = np.random.default_rng(seed)
+    normals = rng.standard_normal((faces, 3))
+    if faces >= 6 and seed % 2:
+        normals[:6] = CUBE_FACES                      # opposite faces among them
+    try:
+        sensor = CoarseSunSensors(sigma, 1.0, 0.1, normals=normals)
+    except ValueError:                                # a set that does not span space
+        return
+    currents = rng.standard_normal((300, faces)) * rng.choice([sigma, 1.0], (300, faces))
+    if exact_zeros:
+        currents[rng.random(currents.shape) < 0.3] = 0.0
+    same_readings(sensor, currents)
