@@ -272,6 +272,19 @@ def vectors_for(estimator, key: str, vectors: tuple):
     return None
 
 
+def _estimates(estimator, record, vectors, traces: bool, progress_bar) -> tuple:
+    """``(q_est, trace)``: one estimator's estimates over ``record`` and, with
+    ``traces``, its whole trace (:meth:`~estimators.AttitudeEstimator.track`;
+    else None), advancing ``progress_bar`` where its run takes one."""
+    method = estimator.track if traces else estimator.run
+    shown = ({"progress": progress_bar} if progress_bar is not None
+             and "progress" in inspect.signature(method).parameters else {})
+    if traces:
+        trace = estimator.track(*record, vectors=vectors, **shown)
+        return trace.quat, trace
+    return estimator.run(*record, vectors=vectors, **shown), None
+
+
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
              seed: int = 0, *, traces: bool = False, progress_bar=None) -> RunResult:
     """Simulate ``scenario`` for ``seed`` and run each estimator on the same data.
@@ -316,15 +329,9 @@ def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,
         if len(record) == 4 and not estimator.applies_reading_times:
             warnings.warn(f"{key} applies each star tracker reading at its gyro step, not at "
                           "its own time (it does not override _step_at)", stacklevel=2)
-        vectors = vectors_for(estimator, key, sensors.vectors)
-        method = estimator.track if traces else estimator.run
-        shown = ({"progress": progress_bar} if progress_bar is not None
-                 and "progress" in inspect.signature(method).parameters else {})
-        if traces:
-            kept[key] = estimator.track(*record, vectors=vectors, **shown)
-            q_est = kept[key].quat
-        else:
-            q_est = estimator.run(*record, vectors=vectors, **shown)
+        q_est, kept[key] = _estimates(estimator, record, vectors_for(estimator, key,
+                                                                     sensors.vectors),
+                                      traces, progress_bar)
         estimates[key] = q_est
         usage[key] = Usage.of(estimator, present)
         errors[key] = (attitude_error_deg if usage[key].heading

@@ -164,6 +164,29 @@ def _truth(time_s: np.ndarray, states: np.ndarray) -> RigidBodyTruth:
     return RigidBodyTruth(time_s=time_s, q_true=q_true, omega_true_radps=states[4:].T.copy())
 
 
+def _elliptic_amplitudes(moments: np.ndarray, omega0: np.ndarray) -> tuple:
+    """``(d, s, c, amp)``: the tumble axis ``d``, the middle axis ``s``, the
+    other extreme ``c``, and each axis's amplitude (``amp[d]`` signed as the
+    initial rate about it), from energy and angular momentum
+    (:func:`closed_form_body_rates`)."""
+    two_e = float(np.sum(moments * omega0**2))
+    m_sq = float(np.sum((moments * omega0) ** 2))
+    order = np.argsort(moments)
+    mid = order[1]
+    # Tumble ("d") axis and the other extreme ("c") axis.
+    d, c = (order[0], order[2]) if m_sq < two_e * moments[mid] else (order[2], order[0])
+    s = mid
+    amp = {}
+    amp[d] = np.sqrt((two_e * moments[c] - m_sq) / (moments[d] * (moments[c] - moments[d])))
+    amp[s] = np.sqrt((two_e * moments[d] - m_sq) / (moments[s] * (moments[d] - moments[s])))
+    amp[c] = np.sqrt((two_e * moments[d] - m_sq) / (moments[c] * (moments[d] - moments[c])))
+    if omega0[d] == 0:
+        raise InvalidParameterError("omega0_radps", omega0,
+                                    "needs a non-zero rate about the tumble axis")
+    amp[d] = np.copysign(amp[d], omega0[d])
+    return d, s, c, amp
+
+
 def closed_form_body_rates(principal_moments_kg_m2, omega0_radps, time_s) -> np.ndarray:
     r"""Exact ``ω(t)`` of a torque-free body with a diagonal inertia tensor.
 
@@ -193,21 +216,7 @@ def closed_form_body_rates(principal_moments_kg_m2, omega0_radps, time_s) -> np.
     if len(set(moments.tolist())) != 3:
         raise InvalidParameterError("principal_moments_kg_m2", moments,
                                     "must be three distinct values for the elliptic solution")
-    two_e = float(np.sum(moments * omega0**2))
-    m_sq = float(np.sum((moments * omega0) ** 2))
-    order = np.argsort(moments)
-    mid = order[1]
-    # Tumble ("d") axis and the other extreme ("c") axis.
-    d, c = (order[0], order[2]) if m_sq < two_e * moments[mid] else (order[2], order[0])
-    s = mid
-    amp = {}
-    amp[d] = np.sqrt((two_e * moments[c] - m_sq) / (moments[d] * (moments[c] - moments[d])))
-    amp[s] = np.sqrt((two_e * moments[d] - m_sq) / (moments[s] * (moments[d] - moments[s])))
-    amp[c] = np.sqrt((two_e * moments[d] - m_sq) / (moments[c] * (moments[d] - moments[c])))
-    if omega0[d] == 0:
-        raise InvalidParameterError("omega0_radps", omega0,
-                                    "needs a non-zero rate about the tumble axis")
-    amp[d] = np.copysign(amp[d], omega0[d])
+    d, s, c, amp = _elliptic_amplitudes(moments, omega0)
 
     # ω̇_a = κ_a ω_b ω_c with (a, b, c) cyclic: Euler's equations, torque-free.
     def kappa(a):

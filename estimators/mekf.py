@@ -128,7 +128,7 @@ least its size on each axis (:meth:`MultiplicativeEKF.settings_from_scenario`).
 **Gating** (``gate_probability``): each reading's NIS
 :math:`y^\mathsf{T} S^{-1} y`, :math:`S = H P H^\mathsf{T} + R`, is tested
 against its χ² quantile before the update
-(:meth:`~estimators.base.KalmanEstimator.accepts`); a reading that fails is
+(:meth:`~estimators.gating.InnovationGate.accepts`); a reading that fails is
 counted and not applied.
 
 Order within step ``k``: correct with the reading :math:`z_k` if there is
@@ -260,7 +260,7 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
     magnetic_norm_tolerance : float or None
         Magnetic disturbance detection: a magnetometer reading whose
         magnitude is off its reference's by more than this fraction is
-        rejected (None: no test; :meth:`~estimators.base.KalmanEstimator.passes_norm`).
+        rejected (None: no test; :meth:`~estimators.gating.InnovationGate.passes_norm`).
     rate_interpolation : {"hold", "trapezoid", "end"}
         The rate over a step (:mod:`estimators.sampled_rate`): its reading
         held (an averaging gyro's), the mean of the readings at its two ends

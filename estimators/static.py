@@ -38,7 +38,7 @@ import numpy as np
 
 from dynamics.quaternion import IDENTITY, quat_from_rotvec, quat_multiply, rotation_matrix
 from dynamics.validation import finite_number, one_of
-from estimators import sensing, wahba
+from estimators import sensing, triad, wahba
 from estimators.base import AttitudeEstimator, axis_sigmas, finite_state
 from estimators.tunable import MAGNETOMETER_WEIGHT
 
@@ -164,24 +164,24 @@ def _separated(body: np.ndarray, reference: np.ndarray, min_sine: float) -> bool
     frames (two readings of one direction, the Sun's, do not fix an attitude)."""
     for i in range(len(body)):
         for j in range(i + 1, len(body)):
-            if wahba.separated(body[i], body[j], min_sine) and \
-                    wahba.separated(reference[i], reference[j], min_sine):
+            if triad.separated(body[i], body[j], min_sine) and \
+                    triad.separated(reference[i], reference[j], min_sine):
                 return True
     return False
 
 
 class TRIAD(StaticAttitude):
-    """TRIAD on the two most accurate separated directions (:func:`estimators.wahba.triad`)."""
+    """TRIAD on the two most accurate separated directions (:func:`estimators.triad.triad`)."""
 
     name = "triad"
     label = "TRIAD"
 
     def solution(self, body, reference, weights) -> np.ndarray:
-        return wahba.triad(body, reference, weights, self.min_sine)
+        return triad.triad(body, reference, weights, self.min_sine)
 
     def covariance(self, body, reference, sigmas) -> np.ndarray:
-        first, second = wahba.triad_pair(body, reference, 1.0 / sigmas ** 2, self.min_sine)
-        return wahba.triad_covariance(body, sigmas, first, second)
+        first, second = triad.triad_pair(body, reference, 1.0 / sigmas ** 2, self.min_sine)
+        return triad.triad_covariance(body, sigmas, first, second)
 
     def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
         """``run``'s estimates at once for two vector sensors read at every
@@ -207,7 +207,7 @@ class TRIAD(StaticAttitude):
             solved &= np.linalg.norm(np.cross(u, w), axis=1) > max(self.min_sine, 1e-12)
         second = (weights[1] > weights[0])[:, None]     # the heavier anchors; ties, the first
         estimates = np.empty((len(b1), 4))
-        estimates[solved] = wahba.triad_attitudes(
+        estimates[solved] = triad.triad_attitudes(
             *(np.where(second, y, x)[solved] for x, y in ((b1, b2), (b2, b1), (r1, r2), (r2, r1))))
         self.reset()
         for k in np.flatnonzero(~solved):

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks.broad import benchmark, inputs
+from benchmarks.broad import benchmark, figures, inputs
 from benchmarks.broad.dataset import open_broad
 from benchmarks.broad.metric import METRICS
 from benchmarks.cli import main
@@ -400,14 +400,14 @@ def test_the_figures_are_readable(tmp_path):
                                  quiet=True)
     # The first trial has nothing to score: the trial figure shows the next.
     assert result.curve_trial == TRIAL_07
-    figure = benchmark.trial_figure(result)
+    figure = figures.trial_figure(result)
     (axis,) = figure.axes
     assert axis.get_yscale() == "log" and axis.get_legend() is None and figure.legends
     shaded = [p for p in axis.patches if p.get_label().startswith("movement")]
     assert len(shaded) == 1                           # one movement phase
     start = np.argmax(result.curve_movement) / dataset.load(TRIAL_07).rate_hz
     assert shaded[0].get_x() == pytest.approx(start)
-    figure = benchmark.groups_figure(result)
+    figure = figures.groups_figure(result)
     assert all(ax.get_yscale() == "log" for ax in figure.axes) and figure.legends
     assert all(ax.get_legend() is None for ax in figure.axes)
     names = [t.get_text() for t in figure.axes[-1].get_xticklabels()]

@@ -139,7 +139,7 @@ def synthetic_flight(names, steps: int = 600):
 
 
 def test_many_estimators_each_in_its_row_with_eclipses_and_rejections():
-    from benchmarks.figures.plots import flight_figure
+    from benchmarks.figures.flight import flight_figure
     names = ["triad", "quest", "ekf", "mekf", "usque"]
     args, kwargs = synthetic_flight(names)
     figure = drawn(flight_figure(*args, **kwargs))
@@ -234,7 +234,7 @@ def test_the_consistency_figure_shows_every_anees_whole_and_the_settle_time(tmp_
 
 
 def test_anees_far_off_the_band_is_drawn_and_its_value_legible():
-    from benchmarks.figures.plots import consistency_figure
+    from benchmarks.figures.consistency import consistency_figure
     rng = np.random.default_rng(2)
     time_s = np.linspace(0.0, 100.0, 200)
     levels = {"a": 3.0, "b": 120.0, "c": 150.0, "d": 0.01}     # three off one band's scale
@@ -258,7 +258,7 @@ def test_anees_far_off_the_band_is_drawn_and_its_value_legible():
 
 
 def test_the_tuning_figure_holds_every_evaluation_and_marks_the_default():
-    from benchmarks.experiments.tuning import EstimatorTuning, tuning_figure
+    from benchmarks.experiments.estimator_tuning import EstimatorTuning, tuning_figure
     losses = [9.0, 7.5, 0.31, math.inf, 0.4, 0.25, 0.22, 0.21] + [0.2] * 40
     tuning = EstimatorTuning(
         estimator="mekf", objective="std", parameters=["gyro_noise"], scales=["log"],

@@ -202,7 +202,7 @@ def test_an_unmodelled_hard_iron_is_said(tmp_path):
 
 
 def test_seeds_and_recordings_are_one_kind_each_in_the_python_api():
-    from benchmarks.experiments.tuning import cases_of
+    from benchmarks.experiments.estimator_tuning import cases_of
     with pytest.raises(InvalidParameterError, match="are simulated"):
         cases_of(Scenario(), seeds=(0,), datasets=["broad-02"])
 

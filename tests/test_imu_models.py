@@ -434,7 +434,7 @@ def test_the_ablation_shows_the_low_passed_gravity_at_work():
 
 
 def test_an_imu_models_density_is_tuned_only_where_its_model_is_on():
-    from benchmarks.experiments.tuning import tuning_plan
+    from benchmarks.experiments.estimator_tuning import tuning_plan
     from dynamics.validation import InvalidParameterError
     settings = {"magnetometer_model": "vector", "heading_density": 2.25e-4}
     with pytest.raises(InvalidParameterError, match="acts only with magnetometer_model = "

@@ -18,7 +18,7 @@ from benchmarks.broad.inputs import imu_inputs
 from benchmarks.engine.recorded import _finished, path_of, run_recorded
 from benchmarks.shipped import shipped_file
 from benchmarks.simulation import build_estimator
-from estimators import AttitudeEstimator, wahba
+from estimators import AttitudeEstimator, triad, wahba
 
 #: The slice: from the start of trial 07's movement (sample 7573), long
 #: enough for the gate to act, short enough for the per-run USQUE.
@@ -138,7 +138,7 @@ def test_triad_on_stacked_pairs_is_triad_on_each(pairs):
     if not pairs:
         return
     b1, b2, r1, r2 = (np.array(column) for column in zip(*pairs))
-    stacked = wahba.triad_attitudes(b1, b2, r1, r2)
+    stacked = triad.triad_attitudes(b1, b2, r1, r2)
     for k, (u, v, x, y) in enumerate(pairs):
         one = wahba.triad(np.array([u, v]), np.array([x, y]), np.array([2.0, 1.0]))
         np.testing.assert_allclose(stacked[k], one, rtol=0, atol=1e-12)

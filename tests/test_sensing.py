@@ -195,7 +195,7 @@ def test_present_sensors_are_read_from_the_data():
 
 def test_a_tunable_setting_of_a_sensor_the_data_lacks_is_not_tuned():
     from benchmarks.experiments.objectives import seed_cases
-    from benchmarks.experiments.tuning import tune_estimator, tuning_plan
+    from benchmarks.experiments.estimator_tuning import tune_estimator, tuning_plan
     from estimators import MultiplicativeEKF
     scenario = Scenario.from_toml(MAGNETOMETER_ONLY).replace(tstop=600.0)
     settings = MultiplicativeEKF.configured_settings(scenario)

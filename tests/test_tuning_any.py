@@ -10,8 +10,8 @@ from hypothesis import given, strategies as st
 from benchmarks import Scenario
 from benchmarks.cli import main
 from benchmarks.experiments.objectives import Case, Objective, seed_cases
-from benchmarks.experiments.tuning import (disjoint, tune_estimator, tune_pc_exponent,
-                                           tuning_plan)
+from benchmarks.experiments.estimator_tuning import disjoint, tune_estimator, tuning_plan
+from benchmarks.experiments.tuning import tune_pc_exponent
 from dynamics.validation import InvalidParameterError
 from estimators import ESTIMATORS, MultiplicativeEKF
 from estimators.tunable import GYRO_NOISE, MEASUREMENT_SCALE, tunables

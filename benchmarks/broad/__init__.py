@@ -10,7 +10,8 @@ against an optical reference, scored as the dataset's authors score them.
   the accelerometer as a gravity direction, the magnetometer as a field
   direction, their references and noise from the initial rest;
 * :mod:`benchmarks.broad.benchmark` — every estimator on every trial, the
-  per-trial and per-group tables and figures;
+  per-trial and per-group tables; :mod:`benchmarks.broad.figures` — their
+  figures;
 * :mod:`benchmarks.broad.case_study` — the authors' published case study
   (Madgwick's and Mahony's filters), reproduced.
 

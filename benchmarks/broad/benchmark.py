@@ -1,7 +1,7 @@
 """Every estimator on every BROAD trial, scored by the authors' metric
 (:mod:`benchmarks.broad.metric`): a tidy table of one row per trial and
-estimator, the group means as ``trials.json`` defines the groups, the bar
-figure of the groups and one trial's errors over time.
+estimator, and the group means as ``trials.json`` defines the groups (their
+figures: :mod:`benchmarks.broad.figures`).
 
 Every number says what it was taken on. A trial's row counts its samples,
 those of its movement and those scored (with a reference), and, for the
@@ -50,12 +50,8 @@ TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, "us_per_sample", "sampl
                  "diverged_step", "path", *AGREEMENT)
 GROUP_COLUMNS = ("group", "level", "estimator", "trials", "scored_trials", *METRICS,
                  "left_out", "nan_on")
-#: The trial figure's curves: the total error's RMS over windows this long, s.
-CURVE_WINDOW_S = 1.0
 #: What the scores are taken against where a trial has a reference.
 REFERENCE = "the reference"
-#: The width of a group's bars in the group figure (seaborn's default).
-BAR_WIDTH = 0.8
 
 
 def default_estimators() -> tuple:
@@ -128,17 +124,11 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             # total would rank a heading that happens to start near the
             # reference's; only its inclination is a score.
             scores.update(total_rmse_deg=math.nan, heading_rmse_deg=math.nan)
-        tested = tests_readings(estimator)
         rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
                      "movement_samples": int(np.count_nonzero(movement)),
-                     "scored_samples": scored,
-                     **{f"rejected_{sensor}": run.rejected.get(sensor, 0) for sensor in SENSORS},
-                     **{f"rejected_{sensor}_share":
-                        run.rejected.get(sensor, 0) / readings[sensor]
-                        if tested[sensor] and readings[sensor] else math.nan
-                        for sensor in SENSORS},
+                     "scored_samples": scored, **_rejections(estimator, run, readings),
                      "diverged_step": -1 if run.diverged_step is None else run.diverged_step,
                      "path": run.path})
         heading = sensing.heading_observed(type(estimator), readings)
@@ -159,6 +149,17 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             curves = {name: (recording.time_s[judged], curve)
                       for name, curve in agreement_curves.items()}
     return rows, curves, labels
+
+
+def _rejections(estimator, run, readings: dict) -> dict:
+    """Per sensor, the readings ``run`` rejected and their share of the
+    ``readings`` (NaN for a sensor the estimator does not test)."""
+    tested = tests_readings(estimator)
+    return {**{f"rejected_{sensor}": run.rejected.get(sensor, 0) for sensor in SENSORS},
+            **{f"rejected_{sensor}_share":
+               run.rejected.get(sensor, 0) / readings[sensor]
+               if tested[sensor] and readings[sensor] else math.nan
+               for sensor in SENSORS}}
 
 
 def tests_readings(estimator) -> dict:
@@ -263,13 +264,6 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
                        dataset_title=dataset.title)
 
 
-def _against(result: BroadResult) -> str:
-    """A figure title's second line where the scores are not against the
-    reference."""
-    return f"\nno reference: against {result.against} (agreement, not accuracy)" \
-        if result.by_agreement else ""
-
-
 def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> BroadResult:
     """Nothing to score against a reference: the estimators ranked by their
     agreement with the others (:mod:`benchmarks.broad.agreement`), every
@@ -360,140 +354,3 @@ def format_trials(result: BroadResult) -> str:
               "total and heading RMSE are NaN, never ranked" for name, label in
               result.labels.items() if label.endswith("[inclination only]")]
     return "\n".join([text, *notes])
-
-
-def groups_figure(result: BroadResult):
-    """The groups' total, heading and inclination RMSE per estimator (bars),
-    on a log axis: the errors span two decades (VQF's 0.4° to TRIAD's 87°
-    on the 30 trials), and on a linear axis the two baselines set the scale
-    and squash the filters near zero; on a log axis every bar is readable
-    and equal ratios look equal, with no clipping rule chosen by hand. Each
-    group is labelled with how many trials its mean holds."""
-    import seaborn as sns
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
-    from benchmarks.figures.style import estimator_styles, legend_outside, round_values
-    groups = result.groups.copy()
-    groups["label"] = [group_header(g, int(n), int(k)).replace(" (", "\n(") for g, n, k in
-                       zip(groups["group"], groups["trials"], groups["scored_trials"])]
-    names = list(dict.fromkeys(groups["estimator"]))
-    styles = estimator_styles(names)
-    palette = {result.labels[name]: styles[name]["color"] for name in names}
-    tidy = groups.melt(id_vars=["label", "estimator"], value_vars=list(METRICS),
-                       var_name="metric", value_name="rmse_deg")
-    tidy["estimator"] = tidy["estimator"].map(result.labels)
-    values = tidy["rmse_deg"].to_numpy(dtype=float)
-    positive = values[np.isfinite(values) & (values > 0)]
-    # The axis from the round value (1, 2 or 5 × 10ⁿ) just below the smallest bar.
-    low = max(round_values(0.08 * positive.min(), 0.8 * positive.min())) if positive.size \
-        else 0.1
-    high = 1.3 * positive.max() if positive.size else 10.0
-    n_groups = groups["label"].nunique()
-    with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(max(11.0, 0.9 * n_groups + 3.0), 10.0), layout="constrained")
-        axes = figure.subplots(len(METRICS), 1, sharex=True, squeeze=False)[:, 0]
-    labels = list(dict.fromkeys(tidy["label"]))
-    hues = [result.labels[name] for name in names]
-    for ax, metric in zip(axes, METRICS):
-        part = tidy[tidy["metric"] == metric]
-        sns.barplot(data=part, x="label", y="rmse_deg", hue="estimator", order=labels,
-                    hue_order=hues, palette=palette, ax=ax, errorbar=None, width=BAR_WIDTH,
-                    legend=ax is axes[0])
-        # A missing bar is a NaN mean (module docstring): say so where it would stand.
-        for row in part[part["rmse_deg"].isna()].itertuples():
-            x = labels.index(row.label) - BAR_WIDTH / 2 + \
-                (hues.index(row.estimator) + 0.5) * BAR_WIDTH / len(hues)
-            ax.text(x, low * 1.15, "NaN", rotation=90, ha="center", va="bottom",
-                    fontsize="x-small", color="0.35")
-        ax.set_yscale("log")
-        ax.set_ylim(low, high)
-        ax.yaxis.set_major_locator(FixedLocator(round_values(low, high)))
-        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-        ax.yaxis.set_minor_locator(NullLocator())
-        ax.set_xlabel("")
-        ax.set_ylabel(f"{metric.split('_')[0]} RMSE (°, log)")
-        if ax.get_legend() is not None:
-            ax.get_legend().remove()
-    for label in axes[-1].get_xticklabels():
-        label.set_rotation(30)
-        label.set_horizontalalignment("right")
-    figure.suptitle(f"{result.dataset_title}: error during the movement per group, the mean "
-                    "over the trials counted under its name" + _against(result))
-    legend_outside(figure, axes[:1], columns=min(len(names), 5),
-                   note="; ".join(group_notes(result)))
-    return figure
-
-
-def curve_windows(time_s: np.ndarray, error_deg: np.ndarray, window_s: float):
-    """``(centres, rms)``: the RMS of ``error_deg`` over consecutive windows
-    of ``window_s`` (its samples without a value left out; a window with
-    none, NaN)."""
-    dt = float(time_s[1] - time_s[0])
-    size = max(int(round(window_s / dt)), 1)
-    count = len(error_deg) // size
-    if count == 0:
-        return time_s[:1], np.array([math.sqrt(np.nanmean(error_deg ** 2))])
-    squares = np.asarray(error_deg[:count * size], dtype=float).reshape(count, size) ** 2
-    present = np.isfinite(squares).sum(axis=1)
-    total = np.where(np.isfinite(squares), squares, 0.0).sum(axis=1)
-    rms = np.sqrt(np.divide(total, present, out=np.full(count, np.nan), where=present > 0))
-    return time_s[:count * size].reshape(count, size).mean(axis=1), rms
-
-
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """Runs of true ``flags`` as ``[start, stop)`` index pairs."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
-
-
-def trial_figure(result: BroadResult):
-    """The first scored trial's total error over time, every estimator: its
-    RMS over each :data:`CURVE_WINDOW_S` (the metric's statistic, over the
-    samples with a reference), log scale, the movement phases (where the
-    metric scores) shaded, the legend below the axes; curves that coincide
-    on the log axis (within a thousandth of its decades) drawn dashed over
-    each other and named with their largest difference."""
-    import seaborn as sns
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
-    from benchmarks.figures.style import (COINCIDE_FRACTION, coincidence_note, coinciding,
-                                          estimator_styles, finite_max, legend_outside,
-                                          round_values, with_coincidences)
-    windows = {name: curve_windows(times, error, CURVE_WINDOW_S)
-               for name, (times, error) in result.curves.items()}
-    curves = {name: rms for name, (_, rms) in windows.items()}
-    bottoms = [np.percentile(rms[np.isfinite(rms) & (rms > 0)], 1) for rms in curves.values()
-               if np.any(np.isfinite(rms) & (rms > 0))]
-    low = 0.5 * min(bottoms) if bottoms else 1e-2
-    high = 2.0 * (finite_max(curves.values()) or 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        logs = {name: np.log10(rms) for name, rms in curves.items()}
-    under = {later: (earlier, float(np.nanmax(np.abs(curves[later] - curves[earlier]))))
-             for later, (earlier, _) in coinciding(
-                 logs, COINCIDE_FRACTION * math.log10(high / low)).items()}
-    styles = with_coincidences(estimator_styles(curves), under)
-    with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(12.0, 6.0), layout="constrained")
-        axis = figure.subplots()
-    time_s = next(iter(result.curves.values()))[0]
-    if result.curve_movement is not None:
-        for i, (start, stop) in enumerate(_runs(np.asarray(result.curve_movement, dtype=bool))):
-            axis.axvspan(time_s[start], time_s[stop - 1], color="0.85", alpha=0.6, linewidth=0,
-                         label=None if i else "movement (scored where the reference is)")
-    for name, (centres, rms) in windows.items():
-        axis.plot(centres, rms, label=result.labels[name], **{"linewidth": 1.3, **styles[name]})
-    axis.set_yscale("log")
-    axis.set_ylim(low, high)
-    ticks = round_values(low, high)
-    axis.yaxis.set_major_locator(FixedLocator(ticks if len(ticks) <= 12 else
-                                              round_values(low, high, (1,))))
-    axis.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    axis.yaxis.set_minor_locator(NullLocator())
-    axis.set_xlim(time_s[0], time_s[-1])
-    axis.set_xlabel("time (s)")
-    axis.set_ylabel("total error (°, RMS per window, log)")
-    axis.set_title(f"{result.dataset_title} {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
-                   "windows" + ("" if result.by_agreement else " (the reference's gaps "
-                                "blank)") + _against(result))
-    legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))
-    return figure

@@ -17,7 +17,7 @@ says, and ``broad`` prints:
   the accelerometer also reads the linear acceleration, and the magnetometer
   the room's disturbances), the gyro's σ_v :data:`GYRO_NOISE_DENSITY`;
 * the start attitude: TRIAD on the first sample whose two readings are
-  usable (:func:`start_sample`), gravity first (:func:`estimators.wahba.triad`):
+  usable (:func:`start_sample`), gravity first (:func:`estimators.triad.triad`):
   its linear acceleration, if the body moves there, is the start's error,
   which the filters' prior holds.
 

@@ -27,7 +27,7 @@ trials, then scores them on others:
 
 How: on the authors' grid where they used one (Madgwick's β,
 :data:`GRIDS`); otherwise the tuning issue's tuner
-(:func:`benchmarks.experiments.tuning.tune_estimator`, bounded Brent or
+(:func:`benchmarks.experiments.estimator_tuning.tune_estimator`, bounded Brent or
 Nelder–Mead from the defaults, at most :data:`MAX_EVALUATIONS` runs of the
 training trials) over the estimator's declared tunable settings
 (:data:`PARAMETERS` where the default choice would include ones that do
@@ -50,7 +50,7 @@ from benchmarks.broad.dataset import trial_label
 from benchmarks.broad.inputs import ImuInputs, imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
-from benchmarks.experiments.tuning import keyword_values
+from benchmarks.experiments.estimator_tuning import keyword_values
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator
 
@@ -178,7 +178,7 @@ def tune_on(name: str, cases, quiet: bool = True, mode: str = "all-trials") -> d
                 "loss": losses[best], "loss_default": score(lambda _scenario: {}),
                 "method": f"the authors' grid ({len(points)} points)",
                 "evaluations": len(points) + 1}
-    from benchmarks.experiments.tuning import tune_estimator
+    from benchmarks.experiments.estimator_tuning import tune_estimator
     parameters = (HALVES_PARAMETERS if mode == "halves" else PARAMETERS).get(name)
     tuning = tune_estimator(name, cases, name_of_loss, parameters=parameters,
                             max_evaluations=MAX_EVALUATIONS, quiet=quiet, score=score)

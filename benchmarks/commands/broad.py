@@ -146,9 +146,9 @@ def _training(args, dataset, trials):
 def _write(args, result, tunings, dataset, train) -> None:
     """The tables, the figures (drawn before the first write) and the
     attribution of the data and of the settings' training data."""
-    from benchmarks.broad import benchmark
+    from benchmarks.broad import figures
     drawn = {name: figure_bytes(args.out / name, figure(result)) for name, figure in
-             (("broad.png", benchmark.groups_figure), ("broad_trial.png", benchmark.trial_figure))}
+             (("broad.png", figures.groups_figure), ("broad_trial.png", figures.trial_figure))}
     write_text(args.out / "broad_trials.csv", result.trials.to_csv(index=False))
     write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
     for name, data in drawn.items():

@@ -107,7 +107,7 @@ def _tuned_replay(args, data, delay: float):
     (their pseudo star trackers and gyro delay as the replay's) and scored on
     the replayed one; ``data`` with the tuned settings."""
     import dataclasses
-    from benchmarks.experiments import tuning
+    from benchmarks.experiments import estimator_tuning as tuning
     from benchmarks.experiments.objectives import recording_case
     from benchmarks.experiments.replay import dataset_source
     if not args.train_datasets:

@@ -104,7 +104,7 @@ def run(args, scenario):
 
 def run_estimator(args, scenario):
     """``tune --estimator NAME``: its declared settings, on seeds or recordings."""
-    from benchmarks.experiments import tuning
+    from benchmarks.experiments import estimator_tuning as tuning
     from benchmarks.experiments.objectives import checked_objective
     objective = checked_objective(args.objective)
     settings = None

@@ -54,7 +54,7 @@ def fair_comparison(args, training, test, trained_on: str, tested_on: str,
     """Tune every estimator of ``args`` on ``training``, score on ``test``,
     print the table and write tuned.toml and tuned.json (after
     ``before_writing(fair)``, a last check, if given)."""
-    from benchmarks.experiments import tuning
+    from benchmarks.experiments import fair_comparison as tuning
     from benchmarks.experiments.objectives import checked_objective
     objective = checked_objective(args.tuned)
     fair = tuning.tune_all(args.estimators, objective, training, test, quiet=args.quiet)

@@ -193,7 +193,7 @@ def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = Fal
     """One run of the estimator's kernel over one block, the recording (its
     innovations' likelihood summed with ``innovations``): the run, and the
     kernel's record and state."""
-    from benchmarks.engine.batch import new_record
+    from benchmarks.engine.results import new_record
     from benchmarks.engine.kernels.common import Block
     from benchmarks.engine.kernels.sensors import SensorState
     module = kernel(estimator.name)

@@ -22,9 +22,9 @@ import warnings
 
 import numpy as np
 
-from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, PER_RUN_SETTINGS,
-                                     BatchResult, RunTable, checked_runs, engine_limitation,
-                                     run_batch, whole_number)
+from benchmarks.engine.batch import (CHUNK_RUNS, ENGINE_ESTIMATORS, PER_RUN_SETTINGS, RunTable,
+                                     checked_runs, engine_limitation, run_batch, whole_number)
+from benchmarks.engine.results import BatchResult
 from benchmarks.metrics import STAT_COLUMNS, error_statistics, nees
 from benchmarks.scenario import Scenario
 from benchmarks.sensor_use import Usage, refuse_unreadable, scenario_sensors, warn_unmodelled

@@ -281,8 +281,8 @@ def consistency_frame(result: ConsistencyResult) -> pd.DataFrame:
 def figure(result: ConsistencyResult):
     """The consistency figure of a campaign: each estimator's ANEES from its
     summary's runs, the settle time where its averages start, and one run's
-    errors (see :func:`benchmarks.figures.plots.consistency_figure`)."""
-    from benchmarks.figures.plots import consistency_figure
+    errors (see :func:`benchmarks.figures.consistency.consistency_figure`)."""
+    from benchmarks.figures.consistency import consistency_figure
     errors, sigmas, labels, time_s = {}, {}, {}, None
     for name, sample in result.samples.items():
         labels[name] = sample.label

@@ -334,7 +334,7 @@ def run_replay(data: ReplayData, estimators=DEFAULT_ESTIMATORS, seed: int = 0,
 def write_replay(result: Replay, out: Path) -> pd.DataFrame:
     """Write ``replay.png``, ``summary.csv`` and, for a shipped dataset,
     ``ATTRIBUTION.txt`` (CC BY 4.0 asks it of derived material)."""
-    from benchmarks.figures.plots import replay_figure
+    from benchmarks.figures.replay import replay_figure
     out = Path(out)
     summary = result.summary()
     write_figure(out / "replay.png", replay_figure(result))

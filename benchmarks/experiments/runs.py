@@ -12,7 +12,8 @@ import numpy as np
 
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from benchmarks.output import figure_bytes, write_bytes, write_csv
-from benchmarks.figures.plots import comparison_figure, flight_figure
+from benchmarks.figures.flight import flight_figure
+from benchmarks.figures.plots import comparison_figure
 from benchmarks.output import progress
 from benchmarks.scenario import Scenario
 from benchmarks.experiments.sweep_parameters import SWEEP_PARAMETERS
@@ -62,7 +63,7 @@ def compare(scenario: Scenario, seed: int, out: Path, estimators=WORKSHOP_ESTIMA
 
     With the workshop's sensors the figure is the workshop's (total error of
     each estimator); with flight sensors (a gyro bias model or the rotation
-    star tracker) it is :func:`~benchmarks.figures.plots.flight_figure`: per-axis error
+    star tracker) it is :func:`~benchmarks.figures.flight.flight_figure`: per-axis error
     with each filter's ±3σ envelope, and the bias estimates against the truth.
     """
     workshop = scenario.is_workshop_sensors

@@ -1,3 +1,3 @@
-"""Figures: the workshop's plots, the flight and consistency figures, and the
-3-D attitude animation. Built on matplotlib's ``Figure`` (no pyplot) and
-seaborn's styles."""
+"""Figures: the workshop's plots, the flight, consistency and replay figures
+(a module each), and the 3-D attitude animation. Built on matplotlib's
+``Figure`` (no pyplot) and seaborn's styles."""

@@ -323,7 +323,7 @@ def gate_thresholds(estimators) -> dict:
     """Each run's innovation gate, read off its per-run filter: ``gating``
     ``(B,)`` bool, and ``gate`` ``(B, 4)``, the χ² threshold of a reading of
     1, 2 or 3 degrees of freedom at its ``gate_probability``
-    (:func:`estimators.base.gate_threshold`; infinite where it does not gate)."""
+    (:func:`estimators.gating.gate_threshold`; infinite where it does not gate)."""
     from estimators.base import gate_threshold
     gate = np.full((len(estimators), 4), math.inf)
     for run, estimator in enumerate(estimators):
@@ -373,7 +373,7 @@ def trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def passes_norm(body, reference, tolerance):
-    """:meth:`estimators.base.KalmanEstimator.passes_norm` of a magnetometer
+    """:meth:`estimators.gating.InnovationGate.passes_norm` of a magnetometer
     reading: |‖b‖ / ‖r‖ − 1| ≤ ``tolerance``, the same arithmetic."""
     ratio = math.sqrt(body[0] * body[0] + body[1] * body[1] + body[2] * body[2]) / math.sqrt(
         reference[0] * reference[0] + reference[1] * reference[1] + reference[2] * reference[2])
