@@ -123,7 +123,9 @@ Harman 2005). The field's turning along an orbit makes the hard iron
 observable apart from the attitude. Its prior is
 ``initial_magnetometer_bias_sigma`` per axis; a scenario that declares a
 hard iron (``[magnetometer] bias_nT``) turns the states on with a prior of at
-least its size on each axis (:meth:`MultiplicativeEKF.settings_from_scenario`).
+least its size on each axis. Their settings and bookkeeping are
+:class:`~estimators.magnetometer_bias.MagnetometerBiasStates`'s, mixed into the
+class; the update, the reset and the propagation here carry the states.
 
 **Gating** (``gate_probability``): each reading's NIS
 :math:`y^\mathsf{T} S^{-1} y`, :math:`S = H P H^\mathsf{T} + R`, is tested
@@ -140,37 +142,30 @@ average rate over that step.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
 from dynamics.quaternion import (IDENTITY, quat_from_rotvec, quat_multiply, relative_rotation,
                                  rotvec_from_quat, skew, to_body_frame)
-from dynamics.validation import InvalidParameterError, boolean
-from estimators import imu, sensing
-from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, axis_sigmas,
-                             finite_state, gate_probability_setting, norm_tolerance_setting)
+from estimators import imu
+from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
+                             gate_probability_setting, norm_tolerance_setting)
 from estimators.imu.updates import ErrorStateUpdates
+from estimators.magnetometer_bias import (CORE_STATES, MAGNETOMETER_BIAS_SIGMA,
+                                          MagnetometerBiasStates, estimates_hard_iron)
 from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
+#: The names other modules import from here, wherever each is defined (the
+#: hard-iron states' settings and bookkeeping are :mod:`estimators.magnetometer_bias`'s).
+__all__ = ["MultiplicativeEKF", "discrete_error_model", "transition_coefficients",
+           "SERIES_BELOW", "CORE_STATES", "MAGNETOMETER_BIAS_SIGMA", "estimates_hard_iron"]
+
 _I3 = np.eye(3)
-#: The error states of the attitude and the gyro bias; the magnetometer's
-#: hard iron, where estimated, follows them.
-CORE_STATES = 6
-#: The prior σ of the magnetometer's hard iron per axis, in the readings'
-#: unit (nT in a scenario): a CubeSat's residual hard iron is hundreds of nT.
-MAGNETOMETER_BIAS_SIGMA = 1000.0
 #: Below this rotation per step, x = |ω̂|Δt, the transition's coefficients use
 #: their Taylor series: the closed form of (x³/3 + 2 sin x − 2x)/w⁵ cancels
 #: to relative error ~60 ε/x⁴ (1e-10 at 0.1), the series' first omitted term is
 #: below 1e-14 relative there.
 SERIES_BELOW = 0.1
-
-
-def estimates_hard_iron(settings) -> bool:
-    """Whether ``settings`` (the MEKF's constructor keywords, or a per-run
-    object's attributes) turn the magnetometer's hard-iron states on."""
-    return bool(settings.get("magnetometer_bias_states", False))
 
 
 def transition_coefficients(rate_norm_radps: float, dt: float) -> tuple[float, ...]:
@@ -231,7 +226,7 @@ def _with_constant_states(phi: np.ndarray, q: np.ndarray, size: int) -> tuple:
     return grown_phi, grown_q
 
 
-class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
+class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBiasEstimator):
     """The MEKF: attitude and gyro bias, six error states, on filterpy's ``KalmanFilter``.
 
     Parameters
@@ -329,44 +324,12 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
                         rate_interpolation=rate_interpolation)
         self._configure_magnetometer_bias(magnetometer_bias_states,
                                           initial_magnetometer_bias_sigma)
-        from filterpy.kalman import KalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
+        # Here, not at the top: building a scenario (and --help) needs no filterpy.
+        from filterpy.kalman import KalmanFilter
         self.filter = KalmanFilter(dim_x=self.state_size, dim_z=3)
         self.filter.R = self.R
         self.filter.H = np.hstack([_I3, np.zeros((3, self.state_size - 3))])
         self.reset()
-
-    def _configure_magnetometer_bias(self, states, sigma) -> None:
-        """Validate and keep the hard-iron states' settings; the initial
-        covariance grows by their prior where they are on."""
-        self.magnetometer_bias_states = boolean("magnetometer_bias_states", states)
-        self.initial_magnetometer_bias_sigma = axis_sigmas("initial_magnetometer_bias_sigma",
-                                                           sigma)
-        if self.magnetometer_bias_states and self.magnetometer_model != "vector":
-            raise InvalidParameterError(
-                "magnetometer_bias_states", True, "needs magnetometer_model = 'vector' (the "
-                f"'{self.magnetometer_model}' model reads the field's direction only)")
-        self.state_size = CORE_STATES + 3 * self.magnetometer_bias_states
-        if self.magnetometer_bias_states:
-            covariance = np.zeros((self.state_size, self.state_size))
-            covariance[:CORE_STATES, :CORE_STATES] = self.initial_covariance
-            covariance[CORE_STATES:, CORE_STATES:] = np.diag(
-                self.initial_magnetometer_bias_sigma ** 2)
-            self.initial_covariance = covariance
-
-    @classmethod
-    def settings_from_scenario(cls, scenario) -> dict:
-        """The six-state filters' settings; a declared hard iron
-        (``[magnetometer] bias_nT``) turns the magnetometer bias states on,
-        their prior at least its size on each axis (as the gyro bias's prior
-        covers its declared initial bias)."""
-        settings = super().settings_from_scenario(scenario)
-        hard_iron = np.abs(np.asarray(getattr(scenario, "magnetometer_bias_nT", np.zeros(3)),
-                                      dtype=float))
-        if getattr(scenario, "magnetometer_interval_s", None) is not None and np.any(hard_iron):
-            settings["magnetometer_bias_states"] = True
-            settings["initial_magnetometer_bias_sigma"] = np.maximum(hard_iron,
-                                                                     MAGNETOMETER_BIAS_SIGMA)
-        return settings
 
     def reset(self) -> None:
         self.q_hat = self.initial_attitude.copy()
@@ -412,17 +375,11 @@ class MultiplicativeEKF(ErrorStateUpdates, AttitudeAndBiasEstimator):
             predicted = predicted + self.magnetometer_bias
         return np.asarray(observation.body, dtype=float) - predicted, H
 
-    def _reads_hard_iron(self, observation) -> bool:
-        return self.magnetometer_bias_states and observation.sensor == sensing.MAGNETOMETER
-
     def correct_vector(self, observation) -> None:
         """Kalman update with one vector reading, then the reset (or the IMU
         models' updates, where the settings ask: :mod:`estimators.imu.updates`).
         A magnetometer's norm test reads the field less the hard-iron estimate."""
-        tested = observation
-        if self._reads_hard_iron(observation):
-            tested = replace(observation, body=np.asarray(observation.body, dtype=float)
-                             - self.magnetometer_bias)
+        tested = self._less_hard_iron(observation)
         if self._imu_reading(observation) or not self.passes_norm(tested):
             return
         y, H = self.vector_model(observation)

@@ -86,9 +86,11 @@ The models read the mean attitude :math:`\hat q \otimes \delta q(\delta p)`,
 and the strapdown turns by the mean's bias-corrected rate.
 
 Where filterpy could not express a step: none of the filter's arithmetic is
-replaced but the heading's projected gain. The class only supplies ``fx``, ``hx`` and ``residual_x``/``residual_z``
-(plain differences: all sigma points share one reference), keeps the
-reference quaternion beside filterpy's ``x``, and does the reset.
+replaced but the heading's projected gain. The class only supplies ``fx``,
+``hx`` and ``residual_x``/``residual_z`` (plain differences: all sigma points
+share one reference), keeps the reference quaternion beside filterpy's ``x``,
+and does the reset; the IMU models' updates on the sigma points are
+:class:`SigmaPointImuUpdates`'s, mixed into it.
 filterpy 2.0 redraws the sigma points from :math:`(x^-, P^-)` after ``predict``
 for the update (1.4.5 reused the propagated ones); both are valid unscented
 updates, and the tests run on the version this project resolves.
@@ -173,7 +175,83 @@ def _check_sigma_spread(name: str, value, spread: float) -> None:
                 "(n + lambda) P")
 
 
-class USQUE(ImuUpdates, AttitudeAndBiasEstimator):
+class SigmaPointImuUpdates(ImuUpdates):
+    """The IMU models' updates (:mod:`estimators.imu.updates`) made on USQUE's
+    sigma points (module docstring, :ref:`IMU models <usque-imu>`): each
+    model's reading a measurement function of the points, the reset after
+    each. Mixed into :class:`USQUE`, whose ``filter``, ``q_hat``,
+    :meth:`~USQUE._hx_vector`, :meth:`~USQUE._fresh_sigma_points`,
+    :meth:`~USQUE._gate` and :meth:`~USQUE._reset` these use."""
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """The attitude the IMU models read: ``q̂ ⊗ δq(δp)`` of the mean."""
+        x = self.filter.x
+        if not np.any(x[:3]):
+            return self.q_hat
+        return _unit(quat_multiply(self.q_hat, quat_from_grp(x[:3])))
+
+    def _gravity_update(self, up, variance: float, dof: int) -> None:
+        """Gravity's low-passed direction: ``h(χ) = A(q̂ ⊗ δq(δp))ᵀ e_z + D (β − β̄)``."""
+        self._imu_update(up, variance * np.eye(3), self._hx_gravity, dof, "accelerometer",
+                         drift=self.imu.drift, mean_bias=self.filter.x[3:].copy())
+
+    def _hx_gravity(self, x, drift, mean_bias):
+        return self._hx_vector(x, UP) + drift @ (x[3:] - mean_bias)
+
+    def _rest_update(self, rate, variance: float) -> None:
+        """The zero-rate update: ``h(χ) = β``, never gated."""
+        self._imu_update(np.asarray(rate, dtype=float), variance * np.eye(3), self._hx_bias, 3,
+                         "rest", gated=False)
+
+    @staticmethod
+    def _hx_bias(x):
+        return x[3:]
+
+    def _imu_update(self, z, R, hx, dof: int, sensor: str, gated: bool = True,
+                    **hx_args) -> None:
+        """filterpy's unscented update with ``hx``, gated as the vector
+        readings are, then the reset."""
+        self._fresh_sigma_points()
+        if not gated or self.gate_probability is None or self._gate(z, hx, R, dof, sensor,
+                                                                     **hx_args):
+            self.filter.update(z, R=R, hx=hx, **hx_args)
+        self._reset()
+        self._updated = True
+
+    def _heading_update(self, psi: float, variance: float, validated: bool, field,
+                        reference) -> None:
+        """The heading-only update: each sigma point's heading error
+        ``h(χ) = ψ + [ψ(χ) − ψ(x̄)]`` (wrapped), measured 0; the attitude gain
+        projected on the vertical ``v`` and the bias gain zeroed unless the
+        field is validated, so the covariance takes the general gain's form
+        ``P − K P_xzᵀ − P_xz Kᵀ + K S Kᵀ``."""
+        self._fresh_sigma_points()
+        f = self.filter
+        mean_heading = _heading(self.estimate, field)
+        h = np.array([[psi + _wrapped(_heading(self._sigma_attitude(s), field) - mean_heading)]
+                      for s in f.sigmas_f])
+        zp = f.Wm @ h
+        S = f.Wc @ ((h - zp) ** 2) + variance
+        y = -zp
+        if self.gate_probability is None or self.accepts(y, S[None], 1, "magnetometer"):
+            Pxz = (f.Wc[:, None] * (f.sigmas_f - f.x)).T @ (h - zp)
+            K = Pxz / S
+            v = to_body_frame(self.estimate, UP)
+            K[:3] = np.outer(v, v @ K[:3])
+            if not validated:
+                K[3:] = 0.0
+            f.x = f.x + (K @ y)
+            f.P = f.P - K @ Pxz.T - Pxz @ K.T + K @ (S[None] * K.T)
+            f.y, f.S, f.K = y, S[None], K
+        self._reset()
+        self._updated = True
+
+    def _sigma_attitude(self, sigma) -> np.ndarray:
+        return _unit(quat_multiply(self.q_hat, quat_from_grp(sigma[:3])))
+
+
+class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
     """Unscented quaternion estimator (Crassidis & Markley 2003) on filterpy's UKF.
 
     Parameters
@@ -225,7 +303,8 @@ class USQUE(ImuUpdates, AttitudeAndBiasEstimator):
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)
         _check_sigma_spread("initial_attitude_sigma_rad", initial_attitude_sigma_rad, spread)
         _check_sigma_spread("initial_bias_sigma_radps", initial_bias_sigma_radps, spread)
-        from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter  # here, not at the top: building a scenario (and --help) needs no filterpy
+        # Here, not at the top: building a scenario (and --help) needs no filterpy.
+        from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
         points = MerweScaledSigmaPoints(STATE_SIZE, alpha=alpha, beta=beta, kappa=kappa)
         self.filter = UnscentedKalmanFilter(dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
                                             fx=self._fx, points=points)
@@ -299,7 +378,8 @@ class USQUE(ImuUpdates, AttitudeAndBiasEstimator):
         """filterpy's unscented update with one vector reading, then the reset
         (or the IMU models' updates, where the settings ask)."""
         if self.imu is not None and self._imu_reading(observation):
-            if np.any(self.filter.x[:3]):     # an untrusted field: no update, the reset all the same
+            # An untrusted field: no update, the reset all the same.
+            if np.any(self.filter.x[:3]):
                 self._reset()
             self._updated = True
             return
@@ -319,74 +399,6 @@ class USQUE(ImuUpdates, AttitudeAndBiasEstimator):
     def _hx_vector(self, x, reference):
         """A sigma point's predicted body vector ``A(q̂ ⊗ δq(δp))ᵀ r``."""
         return to_body_frame(_unit(quat_multiply(self.q_hat, quat_from_grp(x[:3]))), reference)
-
-    # The IMU models' updates (estimators.imu.updates), on the sigma points.
-    @property
-    def estimate(self) -> np.ndarray:
-        """The attitude the IMU models read: ``q̂ ⊗ δq(δp)`` of the mean."""
-        x = self.filter.x
-        if not np.any(x[:3]):
-            return self.q_hat
-        return _unit(quat_multiply(self.q_hat, quat_from_grp(x[:3])))
-
-    def _gravity_update(self, up, variance: float, dof: int) -> None:
-        """Gravity's low-passed direction: ``h(χ) = A(q̂ ⊗ δq(δp))ᵀ e_z + D (β − β̄)``."""
-        self._imu_update(up, variance * np.eye(3), self._hx_gravity, dof, "accelerometer",
-                         drift=self.imu.drift, mean_bias=self.filter.x[3:].copy())
-
-    def _hx_gravity(self, x, drift, mean_bias):
-        return self._hx_vector(x, UP) + drift @ (x[3:] - mean_bias)
-
-    def _rest_update(self, rate, variance: float) -> None:
-        """The zero-rate update: ``h(χ) = β``, never gated."""
-        self._imu_update(np.asarray(rate, dtype=float), variance * np.eye(3), self._hx_bias, 3,
-                         "rest", gated=False)
-
-    @staticmethod
-    def _hx_bias(x):
-        return x[3:]
-
-    def _imu_update(self, z, R, hx, dof: int, sensor: str, gated: bool = True,
-                    **hx_args) -> None:
-        """filterpy's unscented update with ``hx``, gated as the vector
-        readings are, then the reset."""
-        self._fresh_sigma_points()
-        if not gated or self.gate_probability is None or self._gate(z, hx, R, dof, sensor,
-                                                                     **hx_args):
-            self.filter.update(z, R=R, hx=hx, **hx_args)
-        self._reset()
-        self._updated = True
-
-    def _heading_update(self, psi: float, variance: float, validated: bool, field,
-                        reference) -> None:
-        """The heading-only update: each sigma point's heading error
-        ``h(χ) = ψ + [ψ(χ) − ψ(x̄)]`` (wrapped), measured 0; the attitude gain
-        projected on the vertical ``v`` and the bias gain zeroed unless the
-        field is validated, so the covariance takes the general gain's form
-        ``P − K P_xzᵀ − P_xz Kᵀ + K S Kᵀ``."""
-        self._fresh_sigma_points()
-        f = self.filter
-        mean_heading = _heading(self.estimate, field)
-        h = np.array([[psi + _wrapped(_heading(self._sigma_attitude(s), field) - mean_heading)]
-                      for s in f.sigmas_f])
-        zp = f.Wm @ h
-        S = f.Wc @ ((h - zp) ** 2) + variance
-        y = -zp
-        if self.gate_probability is None or self.accepts(y, S[None], 1, "magnetometer"):
-            Pxz = (f.Wc[:, None] * (f.sigmas_f - f.x)).T @ (h - zp)
-            K = Pxz / S
-            v = to_body_frame(self.estimate, UP)
-            K[:3] = np.outer(v, v @ K[:3])
-            if not validated:
-                K[3:] = 0.0
-            f.x = f.x + (K @ y)
-            f.P = f.P - K @ Pxz.T - Pxz @ K.T + K @ (S[None] * K.T)
-            f.y, f.S, f.K = y, S[None], K
-        self._reset()
-        self._updated = True
-
-    def _sigma_attitude(self, sigma) -> np.ndarray:
-        return _unit(quat_multiply(self.q_hat, quat_from_grp(sigma[:3])))
 
     def _fresh_sigma_points(self) -> None:
         """Sigma points about the current ``(x, P)`` for a second update within

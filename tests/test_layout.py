@@ -168,22 +168,81 @@ def test_no_module_imports_another_modules_private_name():
                                         f"from {node.module}"
 
 
-#: No function grows past what one can read at a glance.
-MAX_FUNCTION_LINES = 100
+#: No function grows past what one can read at a glance (issue 31).
+MAX_FUNCTION_LINES = 60
+#: ... but the kernels' parallel loops, at most as long as they are now: numba's
+#: parallel loop must read plain arrays, each unpacked before it from the
+#: block, the record and the state in one place (the kernels package's
+#: docstring), and that unpacking is most of their length; each reading's
+#: work is a helper of its own.
+KERNEL_LOOPS = {"benchmarks/engine/kernels/mekf.py:advance": 82,
+                "benchmarks/engine/kernels/usque.py:advance": 98,
+                "benchmarks/engine/kernels/ekf.py:advance": 71}
+#: No module or class of the project grows past what one can hold in mind.
+MAX_MODULE_LINES = 500
+MAX_CLASS_LINES = 200
+
+
+def _definitions(root, packages, kinds):
+    """``(where, lines)`` of every definition of ``kinds`` in ``packages`` under ``root``."""
+    for package in packages:
+        for path in (root / package).rglob("*.py"):
+            tree = ast.parse(path.read_text(), filename=str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, kinds):
+                    yield (f"{path.relative_to(root).as_posix()}:{node.name}",
+                           node.end_lineno - node.lineno + 1)
+
+
+def long_functions(root, packages) -> list:
+    kinds = (ast.FunctionDef, ast.AsyncFunctionDef)
+    return [f"{name} ({lines} lines)" for name, lines in _definitions(root, packages, kinds)
+            if lines > KERNEL_LOOPS.get(name, MAX_FUNCTION_LINES)]
+
+
+def long_classes(root, packages) -> list:
+    return [f"{name} ({lines} lines)" for name, lines in
+            _definitions(root, packages, ast.ClassDef) if lines > MAX_CLASS_LINES]
+
+
+def long_modules(root, packages) -> list:
+    return [f"{path.relative_to(root).as_posix()} ({count} lines)" for package in packages
+            for path in (root / package).rglob("*.py")
+            if (count := len(path.read_text().splitlines())) > MAX_MODULE_LINES]
 
 
 def test_no_function_of_the_project_is_longer_than_a_screenful():
-    long = []
-    for package in PACKAGES + ("tests",):
-        for path in (ROOT / package).rglob("*.py"):
-            tree = ast.parse(path.read_text(), filename=str(path))
-            for node in ast.walk(tree):
-                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                    lines = node.end_lineno - node.lineno + 1
-                    if lines > MAX_FUNCTION_LINES:
-                        long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} "
-                                    f"({lines} lines)")
+    long = long_functions(ROOT, PACKAGES + ("tests",))
     assert not long, f"longer than {MAX_FUNCTION_LINES} lines: {', '.join(long)}"
+
+
+def test_the_kernel_loops_let_off_are_still_there():
+    # A kernel loop shortened or renamed leaves the list, and the house's limit
+    # is then its own (an entry naming nothing would let a newcomer through).
+    found = {name for name, _ in _definitions(ROOT, ("benchmarks",), ast.FunctionDef)}
+    assert set(KERNEL_LOOPS) <= found
+
+
+def test_no_class_of_the_project_is_longer_than_a_few_screens():
+    long = long_classes(ROOT, PACKAGES)
+    assert not long, f"longer than {MAX_CLASS_LINES} lines: {', '.join(long)}"
+
+
+def test_no_module_of_the_project_is_longer_than_it_can_be_read():
+    long = long_modules(ROOT, PACKAGES)
+    assert not long, f"longer than {MAX_MODULE_LINES} lines: {', '.join(long)}"
+
+
+def test_the_size_checks_find_what_is_too_long(tmp_path):
+    statements = "".join(f"        x{i} = {i}\n" for i in range(MAX_CLASS_LINES))
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "big.py").write_text(
+        "class Big:\n    def f(self):\n" + statements + "\n" * MAX_MODULE_LINES +
+        "def g():\n" + "    pass\n" * (MAX_FUNCTION_LINES - 1))
+    assert long_functions(tmp_path, ("pkg",)) == [f"pkg/big.py:f ({MAX_CLASS_LINES + 1} lines)"]
+    assert long_classes(tmp_path, ("pkg",)) == [f"pkg/big.py:Big ({MAX_CLASS_LINES + 2} lines)"]
+    assert long_modules(tmp_path, ("pkg",)) == [
+        f"pkg/big.py ({2 + MAX_CLASS_LINES + MAX_MODULE_LINES + MAX_FUNCTION_LINES} lines)"]
 
 
 def test_the_readmes_key_reference_is_the_generated_one():

@@ -1,10 +1,16 @@
-"""The checks a scenario makes of itself beyond one value at a time.
+"""The checks a scenario makes of itself, in the order it makes them.
 
-Limits that keep a run meaningful and finite (its length, the body rate, the
-sensors' noise), the σ the sensors square, a ground site's coordinates, and
-where each sensor is: the orbit, the site and the vector sensors must agree,
-each sensor where it can read, and some attitude sensor present; and each
-estimator's ``[estimators.NAME]`` options, tried on the scenario. Each check raises
+A :class:`~benchmarks.scenario.Scenario` checks itself on construction
+(its ``__post_init__``): one value at a time, each stored as checked (a list
+becomes an array, an interval a float), the sensors built once so that their
+classes check their own settings (:mod:`benchmarks.scenario.builders`); then
+the checks beyond one value: limits that keep a run meaningful and finite (its
+length, the body rate, the sensors' noise), the σ the sensors square, a
+ground site's coordinates, and where each sensor is: the orbit, the site and
+the vector sensors must agree, each sensor where it can read, and some
+attitude sensor present. Last, the estimators' own fields left None are
+derived from the sensors, and each estimator's ``[estimators.NAME]`` options
+tried on the scenario. Each check raises
 :class:`~dynamics.validation.InvalidParameterError` naming the setting (as
 the file's ``section.key`` where that is clearer), the value and the rule;
 a sensor idle for the whole run is a warning, not a refusal.
@@ -16,12 +22,21 @@ import warnings
 
 import numpy as np
 
+from benchmarks.scenario import builders
 from benchmarks.scenario.settings import estimator_class, plain_value, toml_key
-from dynamics.environment import igrf_date
-from dynamics.orbit import TLEOrbit
-from dynamics.validation import (InvalidParameterError, axis_standard_deviations, finite_number,
+from dynamics.environment import FIELD_MODELS, SHADOW_MODELS, igrf_date
+from dynamics.orbit import TLEOrbit, epoch_datetime, tle_lines
+from dynamics.validation import (InvalidParameterError, axis_standard_deviations,
+                                 covariance_matrix, finite_number, finite_vector, inertia_tensor,
+                                 nonzero_quaternion, one_of, process_exponent,
                                  standard_deviation)
+from estimators import ESTIMATORS
+from sensors.star_tracker import outage_windows, reading_interval
 
+#: The star tracker models: additive quaternion noise of power
+#: ``star_tracker_noise`` (the workshop's), a small error rotation of
+#: ``star_tracker_sigma_arcsec`` (:mod:`sensors.star_tracker`), or no star
+#: tracker (vector sensors only).
 STAR_TRACKER_MODELS = ("workshop", "rotation", "none")
 #: Body rates above this (rad/s, about 1600 revolutions a minute) are refused:
 #: no attitude sensor suite is built for them, and the truth's integrator
@@ -42,6 +57,97 @@ MAX_STEPS = 10**10
 #: a decay, persist once they start).
 ORBIT_CHECK_STEPS = 10_001
 
+
+def _store(scenario, name: str, value) -> None:
+    """Keep ``value`` as checked: a scenario is frozen, and checks itself as it is made."""
+    object.__setattr__(scenario, name, value)
+
+
+def check_run_and_truth(scenario) -> None:
+    """The time grid, and the truth's initial state."""
+    _store(scenario, "dt", finite_number("dt", scenario.dt, strictly_positive=True))
+    _store(scenario, "tstop", finite_number("tstop", scenario.tstop, strictly_positive=True))
+    check_run_length(scenario.tstop, scenario.dt)
+    _store(scenario, "inertia_tensor_kg_m2", inertia_tensor("inertia_tensor_kg_m2",
+                                                            scenario.inertia_tensor_kg_m2))
+    _store(scenario, "initial_attitude_quat", nonzero_quaternion(
+        "initial_attitude_quat", scenario.initial_attitude_quat))
+    _store(scenario, "initial_rate_radps", finite_vector("initial_rate_radps",
+                                                         scenario.initial_rate_radps, 3))
+    check_body_rate(scenario.initial_rate_radps)
+
+
+def check_sensors(scenario) -> None:
+    """The gyro and the star tracker: their noise, interval and model here,
+    the rest normalised by their own classes."""
+    def store(name, value):
+        _store(scenario, name, value)
+    store("gyro_noise", finite_number("gyro_noise", scenario.gyro_noise, minimum=0.0))
+    check_gyro_noise(scenario.gyro_noise, scenario.dt)
+    store("star_tracker_noise", finite_number("star_tracker_noise", scenario.star_tracker_noise,
+                                              minimum=0.0))
+    check_star_tracker_noise(scenario.star_tracker_noise, scenario.dt)
+    store("time_between_measurements", reading_interval(scenario.time_between_measurements,
+                                                        scenario.dt))
+    store("initial_state", nonzero_quaternion("initial_state", scenario.initial_state))
+    one_of("star_tracker_model", scenario.star_tracker_model, STAR_TRACKER_MODELS)
+    store("star_tracker_outages_s", outage_windows("star_tracker_outages_s",
+                                                   scenario.star_tracker_outages_s))
+    check_standard_deviations(scenario)
+    # The sensor classes validate (and normalise) their own settings.
+    gyro, star_tracker = builders.gyro(scenario), builders.star_tracker(scenario)
+    store("gyro_bias_random_walk", gyro.bias_random_walk)
+    store("gyro_initial_bias_radps", gyro.initial_bias_radps)
+    store("gyro_scale_misalignment", np.zeros((3, 3)) if gyro.scale_misalignment is None
+          else gyro.scale_misalignment)
+    # The rotation tracker's settings are checked whichever model is chosen:
+    # a file that switches models later should not hide a bad value.
+    rotation = star_tracker if star_tracker.model == "rotation" else \
+        builders.rotation_star_tracker(scenario)
+    store("star_tracker_sigma_arcsec", rotation.sigma_arcsec)
+    store("star_tracker_dropout_probability", rotation.dropout_probability)
+    store("star_tracker_to_body_quat", rotation.sensor_to_body_quat)
+
+
+def check_environment(scenario) -> None:
+    """The epoch and the environment's models; then the orbit, the site and
+    the vector sensors (:func:`check_places`)."""
+    if scenario.epoch is not None:
+        _store(scenario, "epoch", epoch_datetime("environment.epoch",
+                                                 scenario.epoch).isoformat())
+    one_of("environment.magnetic_field_model", scenario.magnetic_field_model, FIELD_MODELS)
+    one_of("environment.shadow_model", scenario.shadow_model, SHADOW_MODELS)
+    _store(scenario, "orbit_tle", tle_lines("orbit.tle", scenario.orbit_tle))
+    check_places(scenario)
+
+
+def derive_estimator_fields(scenario) -> None:
+    """Fill the estimators' own fields left None with what each estimator
+    derives from the scenario's sensors (its ``derived_fields``), and note
+    which they were (``scenario.derived_fields``, kept by ``replace`` so that
+    a changed sensor derives them anew)."""
+    derived = set()
+    for cls in dict.fromkeys(ESTIMATORS.values()):
+        missing = [cls.scenario_defaults[keyword] for keyword in cls.owned_fields
+                   if getattr(scenario, cls.scenario_defaults[keyword]) is None]
+        if not missing:
+            continue
+        values = cls.derived_fields(scenario)
+        for name in missing:
+            _store(scenario, name, values[name])
+            derived.add(name)
+    _store(scenario, "derived_fields", frozenset(derived))
+
+
+def check_estimator_fields(scenario) -> None:
+    """The estimators' own fields, derived or given, and their options
+    (:func:`checked_options`)."""
+    _store(scenario, "pc_exponent", process_exponent("pc_exponent", scenario.pc_exponent))
+    _store(scenario, "measurement_covariance", covariance_matrix(
+        "measurement_covariance", scenario.measurement_covariance))
+    _store(scenario, "initial_covariance", finite_number(
+        "initial_covariance", scenario.initial_covariance, strictly_positive=True))
+    _store(scenario, "estimator_options", checked_options(scenario, scenario.estimator_options))
 
 def check_run_length(tstop: float, dt: float) -> None:
     """At least one step (``tstop >= dt``) and at most :data:`MAX_STEPS`."""

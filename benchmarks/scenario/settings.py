@@ -372,9 +372,21 @@ def flatten_sections(data: dict) -> dict:
 
 
 def layered_settings(path, allow_imports=()) -> dict:
-    """The field values of the scenario file ``path``, or of a list of files
-    laid over each other in order (see :meth:`Scenario.from_toml`), with
-    ``estimator_options`` if any file gives ``[estimators.NAME]`` options."""
+    """The field values of the scenario file ``path`` (:meth:`Scenario.from_toml`),
+    with ``estimator_options`` if it gives ``[estimators.NAME]`` options;
+    missing keys are left out (the scenario's defaults).
+
+    ``path`` may be a list of files, laid over each other in order: a later
+    file's setting overrides an earlier one's key by key (in any of its
+    units), and its ``[estimators.NAME]`` keys override those of the same
+    section. So a change to try is a small file over the full one.
+
+    A section ``[estimators."package.module:ClassName"]`` imports that module,
+    which runs its code: it is refused, before anything is imported, unless
+    ``allow_imports`` (module names, or ``package.module:ClassName`` specs,
+    which allow their module) names the module (:func:`check_import_consent`).
+    Registry names (``[estimators.mekf]``) need no consent.
+    """
     paths = [path] if isinstance(path, (str, Path)) else list(path)
     if not paths:
         raise InvalidParameterError("scenario", paths, "must name at least one file")
@@ -400,9 +412,11 @@ def layered_settings(path, allow_imports=()) -> dict:
     return {**flat, **({"estimator_options": options} if options else {})}
 
 
-def estimator_sections(path, allow_imports=()) -> dict:
+def estimator_sections(path, allow_imports=(), options=None) -> dict:
     """The field values of a file that gives ``[estimators.NAME]`` sections
-    only (:meth:`Scenario.with_estimator_settings`); any other key is refused."""
+    only (:meth:`Scenario.with_estimator_settings`); any other key is refused.
+    Its ``estimator_options`` are the file's laid over ``options`` (a scenario's),
+    section by section."""
     data = read_toml(path)
     check_import_consent(data, allow_imports)
     for key, value in data.items():
@@ -410,7 +424,11 @@ def estimator_sections(path, allow_imports=()) -> dict:
             raise InvalidParameterError(key, plain_value(value), "only [estimators.NAME] "
                                         "sections may be given here; the rest is set "
                                         "for you")
-    return flatten_sections(data)
+    flat = flatten_sections(data)
+    laid = {name: dict(settings) for name, settings in (options or {}).items()}
+    for name, settings in flat.pop("estimator_options", {}).items():
+        laid.setdefault(name, {}).update(settings)
+    return {**flat, "estimator_options": laid}
 
 
 def _section_keys(data: dict, section: str) -> list[str] | None:

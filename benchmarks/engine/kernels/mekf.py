@@ -190,6 +190,34 @@ def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, k
     return True
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _vector_reading(q, beta, P, run, j, s, dt, body, reference, variance, gravity, magnetic,
+                    known, dof, gating, gate, rejected, streaming, likelihood, state, scratch,
+                    dq, imu_on, hard_iron, magnetic_tolerance, mag_bias):
+    """Vector reading ``s`` of step ``j``: through the IMU models where they
+    take it (:func:`_imu_vector`), else the magnetic norm test and the gated
+    update with its reset (MultiplicativeEKF.correct_vector). True if the
+    filter's state was touched (its health is then checked), False for a
+    field refused by the norm test."""
+    if imu_on and _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic,
+                              known, dof, gating, gate, rejected, streaming, likelihood, state,
+                              scratch, dq):
+        return True
+    reads_hard_iron = hard_iron and magnetic[s]
+    if magnetic[s] and not field_passes(body[run, j, s], reference[j, s],
+                                        magnetic_tolerance[run], mag_bias, reads_hard_iron):
+        rejected[run, s] += 1      # a disturbed field: no update
+        return False
+    nis, applied, determinant = vector_update(
+        q, beta, P, body[run, j, s], reference[j, s], variance[run, j, s], gating[run],
+        gate[run, dof[s]], scratch, dq, mag_bias, reads_hard_iron)
+    if streaming and applied:
+        fold_innovation(run, nis, determinant, likelihood)
+    if not applied:
+        rejected[run, s] += 1
+    return True
+
+
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
@@ -251,30 +279,13 @@ def advance(block, sensors, state, record, row):
                     nis_count[run] += 1
                     fold_innovation(run, nis, determinant, likelihood)
             for s in range(vector_dof.shape[0]):
-                if vector_available[run, j, s]:
-                    if imu_on and _imu_vector(
-                            q, beta, P, run, j, s, dt, vector_body, vector_reference,
-                            vector_gravity, vector_magnetic, vector_known, vector_dof, gating,
-                            gate, rejected, streaming, likelihood, state, scratch6, dq):
-                        if check:
-                            check_health(q, True, P, n, health[run], factor)
-                        continue
-                    reads_hard_iron = hard_iron and vector_magnetic[s]
-                    if vector_magnetic[s] and not field_passes(
-                            vector_body[run, j, s], vector_reference[j, s],
-                            magnetic_tolerance[run], mag_bias, reads_hard_iron):
-                        rejected[run, s] += 1      # a disturbed field: no update
-                        continue
-                    nis, applied, determinant = vector_update(
-                        q, beta, P, vector_body[run, j, s], vector_reference[j, s],
-                        vector_variance[run, j, s], gating[run], gate[run, vector_dof[s]],
-                        scratch6, dq, mag_bias, reads_hard_iron)
-                    if streaming and applied:
-                        fold_innovation(run, nis, determinant, likelihood)
-                    if not applied:
-                        rejected[run, s] += 1
-                    if check:
-                        check_health(q, True, P, n, health[run], factor)
+                if vector_available[run, j, s] and _vector_reading(
+                        q, beta, P, run, j, s, dt, vector_body, vector_reference,
+                        vector_variance, vector_gravity, vector_magnetic, vector_known,
+                        vector_dof, gating, gate, rejected, streaming, likelihood, state,
+                        scratch6, dq, imu_on, hard_iron, magnetic_tolerance, mag_bias) \
+                        and check:
+                    check_health(q, True, P, n, health[run], factor)
             if posterior:
                 for i in range(4):
                     out[i] = q[i]
