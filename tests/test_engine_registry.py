@@ -82,3 +82,11 @@ def test_a_toy_kernel_registered_from_a_test_file_runs_in_batches(registered):
     alone = run_batch(scenario, make_runs(scenario, [0, 1, 2]), ["ekf"])
     np.testing.assert_array_equal(alone.statistics["ekf"]["mean_deg"],
                                   batch.statistics["ekf"]["mean_deg"])
+
+
+def test_the_warm_up_compiles_every_kernel_once():
+    # The suite's workers and a cluster's compile nothing the warm-up left cold
+    # (benchmarks.engine.warm_up): every registered kernel is in one group.
+    from benchmarks.engine.warm_up import GROUPS
+    grouped = [name for group in GROUPS for name in group if name != "coarse-sun-sensors"]
+    assert sorted(grouped) == sorted(KERNELS)
