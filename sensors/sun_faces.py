@@ -9,18 +9,22 @@ order of brightness, which numpy can only run as whole-array passes, one per
 face; those passes were two thirds of a CubeSat campaign's time. Each
 comparison, product and sum here is the one the numpy passes made, in the
 same order, so every reading keeps its bits (``tests/test_sun_faces.py``
-holds them to the numpy passes, which it keeps as the reference). Sets are
-independent: they are spread over the cores, with no effect on the numbers.
+holds them to the numpy passes, which it keeps as the reference). The loops
+are serial and release the GIL: the engine draws the next block's readings
+in a thread of its own while its kernels run the current block on every
+core (:func:`benchmarks.engine.batch.run_batch`), and a parallel loop there
+would start a second team of threads beside the kernels' (where numba's
+threading layer is its own work queue, that is not allowed).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def first_faces(currents, normals, threshold, opposite, span_tolerance):
     """``(M, N)`` bool: per set of currents ``(M, N)``, the faces taken in
     order of brightness (a stable sort: ties keep their face order) — a face
@@ -30,7 +34,7 @@ def first_faces(currents, normals, threshold, opposite, span_tolerance):
     at most ``span_tolerance``)."""
     sets, faces = currents.shape
     chosen = np.zeros((sets, faces), dtype=np.bool_)
-    for row in prange(sets):
+    for row in range(sets):
         c = currents[row]
         order = _brightest_first(c)
         first = np.zeros(3)
@@ -77,7 +81,7 @@ def _brightest_first(c):
     return order
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def solve_sets(currents, lit, which, gains, solvable_sets, variances, solvable, solution,
                variance):
     """Each set still ``solvable`` whose faces ``lit`` are set ``which`` of
@@ -85,7 +89,7 @@ def solve_sets(currents, lit, which, gains, solvable_sets, variances, solvable, 
     order (``gains[which]``'s columns, one per lit face), from zero, and its
     set's variance; a set whose faces cannot be solved is no longer
     ``solvable``. In place."""
-    for row in prange(len(currents)):
+    for row in range(len(currents)):
         if not solvable[row]:
             continue
         index = which[row]

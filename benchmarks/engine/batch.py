@@ -274,10 +274,10 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int,
                     block_steps=block_steps, threads=threads, vectors=streams)
 
 
-def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
+def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates, vectors: dict):
     """The block of steps from ``k0`` with ``truth`` and the rates the gyro
-    reads over it: its normals drawn, in the per-run path's order, and the
-    tracker's outages over it."""
+    reads over it: its normals drawn, in the per-run path's order, the
+    tracker's outages over it, and its ``vectors`` (:func:`vector_block`'s)."""
     from benchmarks.engine.kernels.common import Block
     settings = dict(sensors.settings)
     stop = k0 + len(truth.time_s)
@@ -298,9 +298,7 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates):
     outage = sensors.tracker.in_outage(truth.time_s)
     return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
                  q_true=np.ascontiguousarray(truth.q_true),
-                 omega_true=np.ascontiguousarray(rates), outage=outage,
-                 **settings, **vector_block(sensors.vectors, len(sensors.generators), k0,
-                                            np.ascontiguousarray(truth.q_true)))
+                 omega_true=np.ascontiguousarray(rates), outage=outage, **settings, **vectors)
 
 
 def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict, record,
@@ -309,17 +307,36 @@ def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict,
     integrated as it goes for long runs): the block's noise drawn on every
     core, then each kernel advances every run through it (each makes the
     sensors' readings from the noise itself: measured, that costs no more
-    than sharing them). Returns each kernel's sensor state."""
+    than sharing them). The vector sensors' readings of the next block are
+    made in a thread of their own while the kernels run this one: their
+    streams are their own, and each still draws block after block, so the
+    numbers are those made in turn (a CubeSat campaign's host work, most of
+    its time, then runs beside its kernels). Returns each kernel's sensor
+    state."""
     readings = {name: sensors.state() for name in kernels}
-    for k0, (truth, rates) in zip(range(0, scenario.n_steps, sensors.block_steps),
-                                  truth_and_rate_blocks(scenario, sensors.block_steps,
-                                                        cache_steps)):
-        block = _block(sensors, scenario, k0, truth, rates)
-        for row, name in enumerate(kernels):
-            kernels[name].advance(block, readings[name], states[name], record, row)
-        if progress_bar is not None:
-            progress_bar.update(block.steps)
+    blocks = zip(range(0, scenario.n_steps, sensors.block_steps),
+                 truth_and_rate_blocks(scenario, sensors.block_steps, cache_steps))
+    with ThreadPoolExecutor(max_workers=1) as ahead:
+        upcoming = _vectors_ahead(ahead, sensors, next(blocks, None))
+        while upcoming is not None:
+            (k0, (truth, rates)), vectors = upcoming[0], upcoming[1].result()
+            upcoming = _vectors_ahead(ahead, sensors, next(blocks, None))
+            block = _block(sensors, scenario, k0, truth, rates, vectors)
+            for row, name in enumerate(kernels):
+                kernels[name].advance(block, readings[name], states[name], record, row)
+            if progress_bar is not None:
+                progress_bar.update(block.steps)
     return readings
+
+
+def _vectors_ahead(pool, sensors: _Sensors, item):
+    """``(item, the future of its vector readings)`` for the block ``item``
+    (``(k0, (truth, rates))``), made in ``pool``; None past the last block."""
+    if item is None:
+        return None
+    k0, (truth, _) = item
+    return item, pool.submit(vector_block, sensors.vectors, len(sensors.generators), k0,
+                             np.ascontiguousarray(truth.q_true))
 
 
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
