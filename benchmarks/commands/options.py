@@ -139,6 +139,10 @@ def add_scenario_options(parser: argparse.ArgumentParser, defaults: Scenario) ->
     group.add_argument("--scenario", metavar="FILE", type=Path, action="append",
                        help="TOML file of scenario settings (see scenarios/default.toml); "
                        "repeat to lay files over each other, later keys overriding earlier")
+    group.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append",
+                       help="one setting over the --scenario files, named as in them "
+                       "(e.g. gyro.arw_deg_per_rthr=0.15, star_tracker.model=rotation, "
+                       "tstop=10); repeatable")
     add_import_option(group)
     for setting in SETTINGS:
         if setting.flag:

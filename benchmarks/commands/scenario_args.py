@@ -1,4 +1,4 @@
-"""The scenario a command runs: from its ``--scenario`` files and flags,
+"""The scenario a command runs: from its ``--scenario`` files, ``--set`` and flags,
 its default estimators, and the checks that refuse, before any work, an
 estimator that can read none of its sensors or a flag that changes nothing.
 """
@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tomllib
 from pathlib import Path
 
 from benchmarks.commands.options import (SCENARIO_FLAGS, STAR_TRACKER_DEFAULTS, VECTOR_DEFAULTS,
@@ -60,8 +61,9 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
     if args.command in ("tune", "landscape") and args.pc_exponent is not None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
                          "pc_exponent itself; leave --pc-exponent out (from --pc-exponent)")
-    scenario = (Scenario.from_toml(args.scenario, allow_imports=allowed_imports(args))
-                if args.scenario else Scenario())
+    layers = [*(args.scenario or ()), *([set_layer(args.set)] if args.set else ())]
+    scenario = (Scenario.from_toml(layers, allow_imports=allowed_imports(args))
+                if layers else Scenario())
     # All overrides at once: --tstop 0.001 --dt 1e-4 is checked against the new dt.
     given = {name: getattr(args, name) for name in SCENARIO_FLAGS
              if getattr(args, name) is not None}
@@ -176,3 +178,31 @@ def check_sensors(args, scenario) -> None:
         (args.estimator,) if getattr(args, "estimator", None) else ())
     from benchmarks.sensor_use import refuse_unreadable, scenario_sensors
     refuse_unreadable(names, scenario_sensors(scenario), "the scenario")
+
+
+def set_layer(assignments) -> dict:
+    """The document of ``SECTION.KEY=VALUE`` assignments (``--set``), as the
+    file saying ``[SECTION] KEY = VALUE`` reads: ``gyro.arw_deg_per_rthr=0.15``,
+    ``star_tracker.model=rotation``, ``estimators.mekf.gyro_noise=1e-9``,
+    ``tstop=10`` (a top-level key). The value is read as TOML (a number, a
+    list, true), else as the string it is."""
+    document = {}
+    for assignment in assignments:
+        name, equals, text = assignment.partition("=")
+        keys = name.strip().split(".")
+        if not equals or not all(key.strip() for key in keys) or not text.strip():
+            raise InvalidParameterError("set", assignment, "must be SECTION.KEY=VALUE, e.g. "
+                                        "gyro.arw_deg_per_rthr=0.15 (or KEY=VALUE for a "
+                                        "top-level key)")
+        try:
+            value = tomllib.loads(f"value = {text.strip()}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()
+        place = document
+        for key in keys[:-1]:
+            place = place.setdefault(key.strip(), {})
+            if not isinstance(place, dict):
+                raise InvalidParameterError("set", assignment, f"sets a key inside {key}, "
+                                            "which is given a value")
+        place[keys[-1].strip()] = value
+    return document

@@ -379,7 +379,8 @@ def layered_settings(path, allow_imports=()) -> dict:
     ``path`` may be a list of files, laid over each other in order: a later
     file's setting overrides an earlier one's key by key (in any of its
     units), and its ``[estimators.NAME]`` keys override those of the same
-    section. So a change to try is a small file over the full one.
+    section. So a change to try is a small file over the full one. A layer
+    may also be a file's document already read (the command line's ``--set``).
 
     A section ``[estimators."package.module:ClassName"]`` imports that module,
     which runs its code: it is refused, before anything is imported, unless
@@ -392,7 +393,7 @@ def layered_settings(path, allow_imports=()) -> dict:
         raise InvalidParameterError("scenario", paths, "must name at least one file")
     flat, options, present = {}, {}, {}
     for each in paths:
-        data = read_toml(each)
+        data = each if isinstance(each, dict) else read_toml(each)   # a dict: a file's document
         check_import_consent(data, allow_imports)
         layer = flatten_sections(data)
         for name, settings in layer.pop("estimator_options", {}).items():
