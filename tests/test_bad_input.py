@@ -26,7 +26,8 @@ def test_pc_exponent_too_large_from_the_command_line_and_a_file(tmp_path, capsys
     scenario = tmp_path / "s.toml"
     scenario.write_text("pc_exponent = 1000.0\n")
     assert main(["compare", "--scenario", str(scenario), "--out", str(tmp_path / "b")]) == 2
-    assert "pc_exponent = 1000.0" in capsys.readouterr().err
+    # named as the files name it, the field after it (one name from file to flag)
+    assert "estimators.ekf.pc_exponent (pc_exponent) = 1000.0" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
@@ -200,4 +201,5 @@ def test_rotation_tracker_settings_are_checked_whatever_the_model(tmp_path, caps
     path = tmp_path / "s.toml"
     path.write_text(content)           # the model stays the workshop's
     assert main(["compare", "--scenario", str(path), "--out", str(tmp_path / "x")]) == 2
-    assert capsys.readouterr().err.startswith(f"attitude-bench: error: {name} = ")
+    key = name.replace("star_tracker_", "star_tracker.", 1)
+    assert capsys.readouterr().err.startswith(f"attitude-bench: error: {key} ({name}) = ")

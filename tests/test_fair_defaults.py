@@ -273,7 +273,8 @@ def test_a_gauss_markov_bias_that_overflows_is_refused_by_name(tmp_path, capsys)
         out = tmp_path / "out"
         assert main(["compare", "--scenario", str(path), "--out", str(out)]) == 2
         error = capsys.readouterr().err.strip()
-        assert error.startswith(f"attitude-bench: error: {name} = ") and "\n" not in error
+        key = name.replace("gyro_", "gyro.", 1)         # as the file names it
+        assert error.startswith(f"attitude-bench: error: {key} ({name}) = ") and "\n" not in error
         assert not out.exists()
     # And a filter's bias prior covers the Gauss–Markov part's spread.
     scenario = Scenario(gyro_bias_instability_radps=2e-4)

@@ -222,12 +222,15 @@ def test_every_command_takes_the_flags_every_command_takes(command, capsys):
 
 @pytest.mark.parametrize("section, key, first_line", [
     ("gyro", "initial_bias_radps = [1e100, 0, 0]",
-     "gyro_initial_bias_radps = [1e+100, 0, 0]: must be at most 10 rad/s"),
-    ("gyro", "bias_random_walk = 1e100", "gyro_bias_random_walk = 1e+100: must be at most 1"),
+     "gyro.initial_bias_radps (gyro_initial_bias_radps) = [1e+100, 0, 0]: "
+     "must be at most 10 rad/s"),
+    ("gyro", "bias_random_walk = 1e100",
+     "gyro.bias_random_walk (gyro_bias_random_walk) = 1e+100: must be at most 1"),
     ("gyro", "bias_instability_radps = 1e100",
-     "gyro_bias_instability_radps = 1e+100: must be at most 10"),
+     "gyro.bias_instability_radps (gyro_bias_instability_radps) = 1e+100: must be at most 10"),
     ("star_tracker", 'model = "rotation"\nsigma_arcsec = 1e100',
-     "star_tracker_sigma_arcsec = [1e+100, 1e+100, 1e+100]: must be at most 648000 arcsec"),
+     "star_tracker.sigma_arcsec (star_tracker_sigma_arcsec) = [1e+100, 1e+100, 1e+100]: "
+     "must be at most 648000 arcsec"),
 ])
 def test_huge_sensor_settings_are_refused_by_their_own_keys(section, key, first_line, tmp_path,
                                                            capsys):

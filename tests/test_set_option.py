@@ -59,7 +59,8 @@ def test_a_malformed_assignment_names_the_rule(assignment):
 @pytest.mark.parametrize("argv, expected", [
     (["--set", "gyro.nope=1"], ("gyro.nope", "known: noise_power")),
     (["--set", "garbage"], ("'garbage'", "SECTION.KEY=VALUE")),
-    (["--set", "gyro.noise_power=-1"], ("= -1", "must be >= 0")),
+    (["--set", "gyro.noise_power=-1"], ("gyro.noise_power (gyro_noise) = -1",
+                                         "must be >= 0")),
 ])
 def test_a_bad_set_is_one_line_and_writes_nothing(tmp_path, capsys, argv, expected):
     out = tmp_path / "out"

@@ -62,8 +62,11 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
         raise UsageError(f"pc_exponent = {args.pc_exponent!r}: {args.command} chooses "
                          "pc_exponent itself; leave --pc-exponent out (from --pc-exponent)")
     layers = [*(args.scenario or ()), *([set_layer(args.set)] if args.set else ())]
-    scenario = (Scenario.from_toml(layers, allow_imports=allowed_imports(args))
-                if layers else Scenario())
+    try:
+        scenario = (Scenario.from_toml(layers, allow_imports=allowed_imports(args))
+                    if layers else Scenario())
+    except InvalidParameterError as err:
+        raise UsageError(file_named(err)) from None
     # All overrides at once: --tstop 0.001 --dt 1e-4 is checked against the new dt.
     given = {name: getattr(args, name) for name in SCENARIO_FLAGS
              if getattr(args, name) is not None}
@@ -75,6 +78,17 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario | None:
             [SCENARIO_FLAGS[name] for name in given]
         raise UsageError(f"{err} (from {', '.join(flags)})") from None
     return scenario
+
+
+def file_named(err: InvalidParameterError) -> str:
+    """``err`` naming its setting as the files and ``--set`` do, the field
+    after it (``gyro.noise_power (gyro_noise) = -1: ...``), where it names a
+    scenario field that lives in a section."""
+    setting = next((s for s in SETTINGS if s.field == err.name and s.section), None)
+    if setting is None:
+        return str(err)
+    return str(InvalidParameterError(f"{setting.section}.{setting.key} ({err.name})",
+                                     err.value, err.rule))
 
 
 #: Scenario field → its section (None: a top-level key).
