@@ -4,8 +4,8 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
-from benchmarks import Scenario, simulate
-from benchmarks.experiments.consistency import anees_band, nees, verdict
+from benchmarks.experiments.consistency import anees_band, verdict
+from benchmarks.metrics import nees
 
 N_RUNS = 50
 STEPS = 200

@@ -14,7 +14,7 @@ from benchmarks import Scenario, simulate
 from benchmarks.cli import main
 from benchmarks.divergence import EXIT_DIVERGED
 from benchmarks.engine import RunTable, make_runs, run_batch, run_many
-from benchmarks.engine.campaign import CHUNKS, MANIFEST, Campaign, chunk_path, run_campaign
+from benchmarks.engine.campaign import MANIFEST, Campaign, chunk_path, run_campaign
 from benchmarks.experiments.tuning import EkfLoss, tune_pc_exponent
 from benchmarks.metrics import STAT_COLUMNS, error_statistics
 from dynamics.validation import MAX_SEED, InvalidParameterError

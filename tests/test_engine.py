@@ -163,7 +163,7 @@ def test_six_state_filters_on_workshop_sensors_equal_the_per_run_path(name):
 
 
 def test_engine_streams_the_per_run_nees_and_nis(flight_batch):
-    from benchmarks.experiments.consistency import nees
+    from benchmarks.metrics import nees
     runs, _ = flight_batch
     batch = run_batch(FLIGHT, runs, ["dead-reckoning", "ekf", "mekf", "usque"],
                       consistency=True, nees_every=7, settle_steps=50)

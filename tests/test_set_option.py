@@ -5,7 +5,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from benchmarks.cli import main
 from benchmarks.commands.scenario_args import set_layer
 from benchmarks.scenario import Scenario
 from dynamics.validation import InvalidParameterError

@@ -11,12 +11,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dynamics.quaternion import quat_multiply
 from dynamics.validation import InvalidParameterError
 from estimators.complementary import NWU_TO_ENU
+
+if TYPE_CHECKING:              # pandas is imported where the tables are made
+    import pandas as pd
 
 #: The authors' grids (``process_data.py``).
 MADGWICK_BETAS = np.round(np.arange(0.01, 0.300001, 0.01), 8)

@@ -6,8 +6,8 @@ For an estimate with error :math:`e_k` (here the body-frame small angle
 
 .. math:: \epsilon_k = e_k^\mathsf{T} P_k^{-1} e_k
 
-is :math:`\chi^2(n)` distributed with :math:`n` the error's dimension if the
-filter is consistent (its errors zero-mean with covariance :math:`P_k`).
+(:func:`benchmarks.metrics.nees`) is :math:`\chi^2(n)` distributed with
+:math:`n` the error's dimension if the filter is consistent (its errors zero-mean with covariance :math:`P_k`).
 Averaged over :math:`N` independent runs (ANEES),
 :math:`N \bar\epsilon_k \sim \chi^2(nN)`, which gives the two-sided band a
 consistent filter's ANEES falls in with the stated probability (Bar-Shalom,
@@ -44,7 +44,6 @@ import pandas as pd
 from scipy.stats import chi2
 
 from benchmarks.metrics import angle_unit
-from benchmarks.metrics import nees  # noqa: F401 (re-exported: the NEES defined above)
 from dynamics.quaternion import attitude_error_vector_rad
 
 #: The two-sided probability of the ANEES band.
