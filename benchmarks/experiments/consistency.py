@@ -7,7 +7,8 @@ For an estimate with error :math:`e_k` (here the body-frame small angle
 .. math:: \epsilon_k = e_k^\mathsf{T} P_k^{-1} e_k
 
 (:func:`benchmarks.metrics.nees`) is :math:`\chi^2(n)` distributed with
-:math:`n` the error's dimension if the filter is consistent (its errors zero-mean with covariance :math:`P_k`).
+:math:`n` the error's dimension if the filter is consistent (its errors
+zero-mean with covariance :math:`P_k`).
 Averaged over :math:`N` independent runs (ANEES),
 :math:`N \bar\epsilon_k \sim \chi^2(nN)`, which gives the two-sided band a
 consistent filter's ANEES falls in with the stated probability (Bar-Shalom,
