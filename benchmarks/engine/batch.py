@@ -193,6 +193,8 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, uniforms_out, thr
 
 #: Every estimator with a kernel, in the engine's order (the kernel registry's).
 ENGINE_ESTIMATORS = tuple(KERNELS)
+
+
 def per_run_estimators(scenario: Scenario, runs: RunTable, name: str) -> list:
     """Estimator ``name`` as each run's settings build it (``from_scenario``),
     shared where the settings repeat: the kernels read their settings here."""

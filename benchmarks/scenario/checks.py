@@ -149,6 +149,7 @@ def check_estimator_fields(scenario) -> None:
         "initial_covariance", scenario.initial_covariance, strictly_positive=True))
     _store(scenario, "estimator_options", checked_options(scenario, scenario.estimator_options))
 
+
 def check_run_length(tstop: float, dt: float) -> None:
     """At least one step (``tstop >= dt``) and at most :data:`MAX_STEPS`."""
     if tstop < dt:
