@@ -8,6 +8,7 @@ import pytest
 
 from benchmarks.scenario import SECTIONS, UNVIEWED_SECTIONS, Scenario
 from benchmarks.scenario.sections import SectionView, add_section_views
+from dynamics.validation import InvalidParameterError
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -60,9 +61,44 @@ def test_a_view_follows_the_scenario_and_only_reads():
     with pytest.raises(AttributeError, match=r"\[magnetometer\] has no key 'sigma'; its keys: "
                                              r"interval_s, sigma_nT, bias_nT, soft_iron"):
         scenario.magnetometer.sigma
-    with pytest.raises(AttributeError, match=r"read-only.*replace\(magnetometer_sigma_nT="):
+    with pytest.raises(AttributeError,
+                       match=r"read-only.*replace\(magnetometer=\{'sigma_nT': \.\.\.\}\)"):
         scenario.magnetometer.sigma_nT = 1.0
     assert scenario.magnetometer.sigma_nT == 42.0
+
+
+def test_replace_reads_a_sections_keys_as_the_file_does(tmp_path):
+    # The same change three ways from Python and once as a file: the scenario
+    # is the same, field by field (datasheet units converted as the file's).
+    path = tmp_path / "change.toml"
+    path.write_text("[gyro]\narw_deg_per_rthr = 0.15\n[magnetometer]\ninterval_s = 0.5\n"
+                    "sigma_nT = 42.0\n[orbit]\naltitude_km = 500.0\n")
+    from_file = Scenario.from_toml(path).as_dict()
+    base = Scenario()
+    by_section = base.replace(gyro={"arw_deg_per_rthr": 0.15},
+                              magnetometer={"interval_s": 0.5, "sigma_nT": 42.0},
+                              orbit={"altitude_km": 500.0})
+    by_key = base.replace(**{"gyro.arw_deg_per_rthr": 0.15, "magnetometer.interval_s": 0.5,
+                             "magnetometer.sigma_nT": 42.0, "orbit.altitude_km": 500.0})
+    by_field = base.replace(gyro_noise=by_section.gyro_noise, magnetometer_interval_s=0.5,
+                            magnetometer_sigma_nT=42.0, orbit_altitude_km=500.0)
+    assert by_section.as_dict() == by_key.as_dict() == by_field.as_dict() == from_file
+    assert by_section.gyro.arw_deg_per_rthr == pytest.approx(0.15, rel=1e-14)
+    assert by_section.gyro_noise != base.gyro_noise
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"gyro": 0.15}, r"gyro = 0.15: must be a dict of the section's keys"),
+    ({"gyro": {"arw": 0.15}}, r"gyro.arw = 0.15: is not a setting of \[gyro\]; known: "),
+    ({"gyro": {"arw_deg_per_rthr": 0.15}, "gyro_noise": 1e-5},
+     r"sets gyro_noise, which another key already sets"),
+    ({"gyro": {"arw_deg_per_rthr": 0.15}, "gyro.arw_deg_per_rthr": 0.2},
+     r"gyro.arw_deg_per_rthr = 0.2: is given twice"),
+    ({"gyro.arw_deg_per_rthr": -1.0}, r"gyro.arw_deg_per_rthr"),
+])
+def test_replace_names_a_bad_section_change(changes, message):
+    with pytest.raises(InvalidParameterError, match=message):
+        Scenario().replace(**changes)
 
 
 def test_site_keeps_its_meaning_and_no_section_hides_a_member():

@@ -36,12 +36,11 @@ from benchmarks.scenario.checks import (
     MAX_GYRO_NOISE_RADPS, MAX_RATE_RADPS, MAX_STAR_NOISE, MAX_STEPS, ORBIT_CHECK_STEPS,
     STAR_TRACKER_MODELS, check_environment, check_estimator_fields, check_run_and_truth,
     check_sensors, derive_estimator_fields, site_coordinates, warn_of_idle_sensors)
-from benchmarks.scenario.sections import add_section_views
+from benchmarks.scenario.sections import add_section_views, field_changes
 from benchmarks.scenario.settings import (
     CIRCULAR_ORBIT_FIELDS, DATASHEET_KEYS, SECTIONS, SETTINGS, SWITCHES, WORKSHOP_FIELDS,
     SectionKey, Setting, allowed_modules, check_import_consent, estimator_sections,
     flatten_sections, layered_settings, plain_value, read_toml)
-from dynamics.validation import InvalidParameterError
 from sensors.star_tracker import on_gyro_grid
 from sensors.sun_sensor import CUBE_FACES
 
@@ -232,12 +231,10 @@ class Scenario:
         return np.arange(self.n_steps) * self.dt
 
     def replace(self, **changes) -> "Scenario":
-        """A copy with some fields changed (validated like the original)."""
-        unknown = set(changes) - set(field_names())
-        if unknown:
-            name = sorted(unknown)[0]
-            raise InvalidParameterError(name, changes[name], "is not a scenario setting; "
-                                        f"known: {', '.join(field_names())}")
+        """A copy with some fields changed (validated like the original), by
+        field name or by a section's keys as the file writes them:
+        ``replace(gyro={"arw_deg_per_rthr": 0.15})`` (:func:`field_changes`)."""
+        changes = field_changes(changes, field_names())
         for name in self.derived_fields:
             changes.setdefault(name, None)       # derived again from the new sensors
         return dataclasses.replace(self, **changes)

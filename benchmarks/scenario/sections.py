@@ -13,11 +13,14 @@ A key in datasheet units is converted back from the field it sets (its
 :data:`~benchmarks.scenario.settings.DATASHEET_KEYS`); any other key is the
 field's value itself. Top-level keys (``tstop``, ``dt``, ``initial_state``)
 are attributes of the scenario already. A view only reads: a scenario is
-changed with :meth:`~benchmarks.scenario.Scenario.replace`.
+changed with :meth:`~benchmarks.scenario.Scenario.replace`, which takes a
+section's keys by the same names (``scenario.replace(gyro={"arw_deg_per_rthr":
+0.15})``).
 """
 from __future__ import annotations
 
-from benchmarks.scenario.settings import SECTIONS
+from benchmarks.scenario.settings import SECTIONS, flatten_sections, plain_value
+from dynamics.validation import InvalidParameterError
 
 
 class SectionView:
@@ -41,10 +44,8 @@ class SectionView:
         return spec.read_back(value) if spec.read_back is not None else value
 
     def __setattr__(self, key: str, value) -> None:
-        spec = SECTIONS[self._section].get(key)
-        field = spec.field if spec is not None else "FIELD"
         raise AttributeError(f"[{self._section}] of a scenario is read-only; change it with "
-                             f"scenario.replace({field}=...)")
+                             f"scenario.replace({self._section}={{{key!r}: ...}})")
 
     def __reduce__(self):            # copy and pickle: the same section of the scenario
         return SectionView, (self._scenario, self._section)
@@ -73,3 +74,38 @@ def add_section_views(cls, *, leave_out=()) -> None:
             raise TypeError(f"[{section}] would hide {cls.__name__}.{section}; leave it out "
                             "of the section views or rename one of them")
         setattr(cls, section, section_view(section))
+
+
+def field_changes(changes: dict, fields) -> dict:
+    """:meth:`~benchmarks.scenario.Scenario.replace`'s ``changes`` as values of
+    ``fields``: a section's keys, given as ``SECTION={KEY: value}`` or as
+    ``SECTION.KEY`` (``--set``'s name), read as the file's ``[SECTION]`` reads
+    them (datasheet units included, :func:`flatten_sections`); a field's
+    name as it is. An unknown name is refused, naming the known ones."""
+    document = {}
+    for name, value in changes.items():
+        section, dot, key = name.partition(".")
+        if name in SECTIONS:
+            if not isinstance(value, dict):
+                example = next(iter(SECTIONS[name]))
+                raise InvalidParameterError(name, plain_value(value), "must be a dict of the "
+                                            f"section's keys, e.g. {name}={{{example!r}: ...}}")
+            section, items = name, value.items()
+        elif dot and section in SECTIONS:
+            items = ((key, value),)
+        else:
+            document[name] = value
+            continue
+        keys = document.setdefault(section, {})
+        for item, item_value in items:
+            if item in keys:
+                raise InvalidParameterError(f"{section}.{item}", plain_value(item_value),
+                                            "is given twice")
+            keys[item] = item_value
+    flat = flatten_sections(document)
+    unknown = sorted(set(flat) - set(fields))
+    if unknown:
+        raise InvalidParameterError(unknown[0], flat[unknown[0]], "is not a scenario setting; "
+                                    f"known: {', '.join(fields)}; or a section's keys, e.g. "
+                                    "gyro={'arw_deg_per_rthr': ...}")
+    return flat

@@ -338,7 +338,7 @@ def flatten_sections(data: dict) -> dict:
     def put(field_name, value, where):
         if field_name in flat:
             raise InvalidParameterError(where, plain_value(value), f"sets {field_name}, which "
-                                        "is already set elsewhere in the file")
+                                        "another key already sets")
         flat[field_name] = value
 
     for key, value in data.items():
