@@ -279,10 +279,8 @@ def _estimates(estimator, record, vectors, traces: bool, progress_bar) -> tuple:
     method = estimator.track if traces else estimator.run
     shown = ({"progress": progress_bar} if progress_bar is not None
              and "progress" in inspect.signature(method).parameters else {})
-    if traces:
-        trace = estimator.track(*record, vectors=vectors, **shown)
-        return trace.quat, trace
-    return estimator.run(*record, vectors=vectors, **shown), None
+    made = method(*record, vectors=vectors, **shown)
+    return (made.quat, made) if traces else (made, None)
 
 
 def simulate(scenario: Scenario | None = None, estimators=WORKSHOP_ESTIMATORS,

@@ -324,7 +324,7 @@ def gate_thresholds(estimators) -> dict:
     ``(B,)`` bool, and ``gate`` ``(B, 4)``, the χ² threshold of a reading of
     1, 2 or 3 degrees of freedom at its ``gate_probability``
     (:func:`estimators.gating.gate_threshold`; infinite where it does not gate)."""
-    from estimators.base import gate_threshold
+    from estimators.gating import gate_threshold
     gate = np.full((len(estimators), 4), math.inf)
     for run, estimator in enumerate(estimators):
         if estimator.gate_probability is not None:
