@@ -16,13 +16,12 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 
 #: The kernels compiled together, one group per process: about equal compile
-#: times, the longest first (measured alone on a cold cache here, two at a
-#: time: the MEKF 100 s, USQUE about 80 s, the EKF about 35 s, dead reckoning
-#: with resets about 20 s, without about 16 s, on a slow day). The coarse sun
-#: sensors' compiled readings (:mod:`sensors.sun_faces`, a few seconds) go
-#: with the first group.
-GROUPS = (("usque", "ekf", "coarse-sun-sensors"),
-          ("mekf", "dead-reckoning-resets", "dead-reckoning"))
+#: times, the longest first (measured here on a cold cache, two processes at
+#: a time: the MEKF and USQUE about 73 s each, the EKF 23 s, dead reckoning
+#: with resets 9 s, without 6 s). The coarse sun sensors' compiled readings
+#: (:mod:`sensors.sun_faces`, a few seconds) go with the first group.
+GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "coarse-sun-sensors"),
+          ("mekf", "ekf"))
 
 
 def compile_kernels(names) -> tuple:

@@ -165,7 +165,7 @@ def nees_arrays(record, row):
             record.variances[row], record.likelihood[row])
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples):
     """Step ``k`` is where ``run`` stopped being finite, unless it already had:
     from ``k`` on its estimate and error are NaN

@@ -40,7 +40,8 @@ def advance(block, sensors, state, record, row):
      health) = error_arrays(record, row)
     q_all, previous_all, step_average = state.q, state.previous_rate, state.step_average
     half_dt = 0.5 * dt
-    for run in prange(q_all.shape[0]):
+    for index in prange(q_all.shape[0]):
+        run = np.int64(index)
         w = np.empty(3)
         F = np.empty((4, 4))
         bits = np.empty(1)

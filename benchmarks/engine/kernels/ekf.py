@@ -49,7 +49,7 @@ def nis_dof(estimators) -> int:
     return estimators[0].filter.dim_z
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _ekf_update(x, P, z, R, scratch):
     """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
     P = (I - K) P (I - K)ᵀ + K R Kᵀ. Returns the NIS and det S."""
@@ -120,16 +120,16 @@ def advance(block, sensors, state, record, row):
      variances, likelihood) = nees_arrays(record, row)
     x_all, P_all, q_variance, R_all = state.x, state.P, state.q_variance, state.R
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
-    for run in prange(x_all.shape[0]):
+    for index in prange(x_all.shape[0]):
+        run = np.int64(index)
         w, z, dq = np.empty(3), np.empty(4), np.empty(4)
         prior, aligned = np.empty(4), np.empty(4)
         F = np.empty((4, 4))
         scratch = np.empty((5, 4, 4))
         scratch6 = np.empty((7, 6, 6))
         projected = np.empty((3, 3))
-        bits = np.empty(1)
+        bits, factor = np.empty(1), np.empty((6, 6))
         bits_int = bits.view(np.int64)
-        factor = np.empty((6, 6))
         x, P = x_all[run], P_all[run]
         countdown, reading = first_countdown(k0, steps_between[run]), 0
         for j in range(steps):

@@ -242,12 +242,12 @@ def advance(block, sensors, state, record, row):
     trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
                                            state.end)
     hard_iron, mag_bias_all, n = state.hard_iron, state.mag_bias, P_all.shape[1]
-    for run in prange(q_all.shape[0]):
+    for index in prange(q_all.shape[0]):
+        run = np.int64(index)
         w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch6 = np.empty((10, 9, 9))            # a constant shape (module docstring)
-        bits = np.empty(1)
+        bits, factor = np.empty(1), np.empty((9, 9))
         bits_int = bits.view(np.int64)
-        factor = np.empty((9, 9))
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, steps_between[run]), 0
         for j in range(steps):

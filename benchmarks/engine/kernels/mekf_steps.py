@@ -114,7 +114,7 @@ def joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq, 
                          mag_bias, bias_columns, P.shape[0])
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _joseph_steps(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq, mag_bias,
                   bias_columns, n):
     """:func:`joseph_update`'s arithmetic for ``n`` states."""

@@ -131,7 +131,7 @@ def star_step(z, dq, run, j, countdown, reading, q_true, rotation_model, std, st
     return available, steps_between[run] - 1, reading + 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def star_reading(z, dq, run, t, r, q_true, rotation_model, std, normals, sigma, mount,
                  canonical, outage, dropout_probability, uniforms):
     """The tracker's reading ``r`` of the block, at its index ``t``, into ``z``;

@@ -317,12 +317,12 @@ def advance(block, sensors, state, record, row):
     imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
         state.imu_rate_lp
     strapdown, rotation = state.imu_strapdown, state.imu_rotation
-    for run in prange(q_all.shape[0]):
+    for index in prange(q_all.shape[0]):
+        run = np.int64(index)
         w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
         scratch = np.empty((6, 6, 6))
         propagated = np.empty((N_SIGMAS, STATE_SIZE))
-        R_vector, nis = np.empty((3, 3)), np.empty(1)
-        bits = np.empty(1)
+        R_vector, nis, bits = np.empty((3, 3)), np.empty(1), np.empty(1)
         bits_int = bits.view(np.int64)
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
         Wm, Wc = Wm_all[run], Wc_all[run]
