@@ -17,8 +17,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 #: The kernels compiled together, one group per process: about equal compile
 #: times, the longest first (measured here on a cold cache, two processes at
-#: a time: the MEKF and USQUE about 73 s each, the EKF 23 s, dead reckoning
-#: with resets 9 s, without 6 s). The coarse sun sensors' compiled readings
+#: a time: the MEKF and USQUE about 55 s each, the EKF 17 s, dead reckoning
+#: with resets 6 s, without 5 s). The coarse sun sensors' compiled readings
 #: (:mod:`sensors.sun_faces`, a few seconds) go with the first group.
 GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "coarse-sun-sensors"),
           ("mekf", "ekf"))

@@ -56,6 +56,8 @@ array it takes, every step (the MEKF's loop ran 20 % slower with its
 propagation called). An update, which a reading makes, and a divergence's
 bookkeeping are called: inlined, they were compiled again at each caller
 (the MEKF's Joseph update, 12 s of its compile; the EKF's update, 8 s).
+Nor does a loop get a copy of its own for a constant length: the MEKF's
+update for six states ran no faster so, and took 10 s of its compile.
 """
 from __future__ import annotations
 

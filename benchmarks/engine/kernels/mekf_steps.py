@@ -105,19 +105,8 @@ def joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq, 
     in its gyro-bias columns unless ``bias_columns``), ``K = P Hᵀ S⁻¹`` and
     Joseph's form, then the reset (the hard-iron estimate ``mag_bias`` too,
     where P has its states); not applied if gating rejects it. Returns the
-    NIS, whether it was applied and det S. Six states compile to loops of
-    constant length of their own."""
-    if P.shape[0] == 6:
-        return _joseph_steps(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq,
-                             mag_bias, bias_columns, 6)
-    return _joseph_steps(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq,
-                         mag_bias, bias_columns, P.shape[0])
-
-
-@njit(cache=True, error_model="numpy")
-def _joseph_steps(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq, mag_bias,
-                  bias_columns, n):
-    """:func:`joseph_update`'s arithmetic for ``n`` states."""
+    NIS, whether it was applied and det S."""
+    n = P.shape[0]
     PHT, S, inverse, K, IK, T, KR = (scratch[0], scratch[1], scratch[2], scratch[3],
                                      scratch[4], scratch[5], scratch[6])
     for i in range(n):
