@@ -120,6 +120,7 @@ def test_workshop_writes_report_with_every_figure(tmp_path):
     assert "Func-count" in report and "| ekf |" in report
 
 
+@pytest.mark.slow      # a process of its own, importing everything: 8 s
 def test_notebook_script_runs_as_plain_python(tmp_path):
     script = (Path(__file__).resolve().parents[1] / "benchmarks" / "experiments"
               / "workshop_notebook.py")

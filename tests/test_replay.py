@@ -89,6 +89,7 @@ def test_the_pseudo_star_tracker_has_the_requested_sigma():
     assert not low < statistic(0.9 * sigma_deg) < high
 
 
+@pytest.mark.slow      # the per-run MEKF over the whole trial, 52,000 steps: 8 s
 def test_the_mekf_finds_the_real_bias_on_trial_02():
     # The gyro's mean over the initial rest is its switch-on bias (about
     # 0.2 °/s per axis). Scale and misalignment errors move the estimate while

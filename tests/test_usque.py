@@ -76,6 +76,7 @@ def convergence_time_s(result, name, threshold_deg):
     return 0.0 if not len(above) else result.time_s[min(above[-1] + 1, len(result.time_s) - 1)]
 
 
+@pytest.mark.slow      # four seeds of 120 s on both per-run filters: 6 s
 def test_from_a_large_error_usque_converges_at_least_as_fast_as_the_mekf():
     # 119 degrees off (rotation vector [100, -60, 80] deg), told σ = 57° per axis.
     options = dict(initial_attitude=quat_from_rotvec(np.radians([100, -60, 80])).tolist(),
