@@ -40,6 +40,13 @@ class InvalidParameterError(ValueError):
         self.rule = rule
         super().__init__(f"{name} = {_show(value)}: {rule}")
 
+    def __reduce__(self):
+        """Pickled by its three parts (an exception pickles its message
+        alone, which this constructor cannot take): raised in another
+        process (a campaign's worker, a Dask cluster's), it reaches the
+        caller as itself, one line, not as an unpickling error."""
+        return type(self), (self.name, self.value, self.rule)
+
 
 def _show(value) -> str:
     """``value`` as the error shows it: shortened to 80 characters, except a

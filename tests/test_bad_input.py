@@ -203,3 +203,24 @@ def test_rotation_tracker_settings_are_checked_whatever_the_model(tmp_path, caps
     assert main(["compare", "--scenario", str(path), "--out", str(tmp_path / "x")]) == 2
     key = name.replace("star_tracker_", "star_tracker.", 1)
     assert capsys.readouterr().err.startswith(f"attitude-bench: error: {key} ({name}) = ")
+
+
+@pytest.mark.parametrize("module, name", [("dynamics.validation", "InvalidParameterError"),
+                                          ("estimators.readings", "InvalidMeasurementError"),
+                                          ("estimators.stepping", "InvalidEstimateError")])
+def test_a_refusal_raised_in_another_process_reaches_the_caller_as_itself(module, name):
+    # A campaign's worker (a process pool's, a Dask cluster's) sends its
+    # exception back pickled: before, unpickling failed (the constructor
+    # takes three parts) and the caller saw a broken pool, not the line.
+    import importlib
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+    cls = getattr(importlib.import_module(module), name)
+    error = cls("gyro.arw_deg_per_rthr", -1.0, "must be >= 0")
+    copy = pickle.loads(pickle.dumps(error))
+    assert type(copy) is cls
+    assert str(copy) == str(error) == "gyro.arw_deg_per_rthr = -1.0: must be >= 0"
+    assert (copy.name, copy.value, copy.rule) == (error.name, error.value, error.rule)
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        with pytest.raises(InvalidParameterError, match=r"^seed = -1: must be a whole number"):
+            pool.submit(make_runs, Scenario(), [-1]).result()
