@@ -1,5 +1,9 @@
 """Inputs that used to end in a traceback or a silent surprise: each now gets
 one clear line (issue 9's "What was seen")."""
+import importlib
+import pickle
+from concurrent.futures import ProcessPoolExecutor
+
 import numpy as np
 import pytest
 
@@ -212,9 +216,6 @@ def test_a_refusal_raised_in_another_process_reaches_the_caller_as_itself(module
     # A campaign's worker (a process pool's, a Dask cluster's) sends its
     # exception back pickled: before, unpickling failed (the constructor
     # takes three parts) and the caller saw a broken pool, not the line.
-    import importlib
-    import pickle
-    from concurrent.futures import ProcessPoolExecutor
     cls = getattr(importlib.import_module(module), name)
     error = cls("gyro.arw_deg_per_rthr", -1.0, "must be >= 0")
     copy = pickle.loads(pickle.dumps(error))

@@ -46,8 +46,8 @@ field there costs a reference count (the loop took three times as long).
 Its run index is made ``run = np.int64(index)`` first: numba types the
 ``prange`` index as a signed integer where it types the kernel and as an
 unsigned one inside the parallel loop, so every compiled helper taking
-``run`` would be compiled twice (the MEKF's and USQUE's updates, with their
-IMU models, about 20 s of the warm-up's compile).
+``run`` would be compiled twice (the second copies of the MEKF's and
+USQUE's reading helpers, with their IMU models, took about 15 s).
 
 What a kernel inlines (``inline="always"``) and what it calls: a helper run
 at every step (the gyro's reading, the propagation, the output's
@@ -56,8 +56,8 @@ array it takes, every step (the MEKF's loop ran 20 % slower with its
 propagation called). An update, which a reading makes, and a divergence's
 bookkeeping are called: inlined, they were compiled again at each caller
 (the MEKF's Joseph update, 12 s of its compile; the EKF's update, 8 s).
-Nor does a loop get a copy of its own for a constant length: the MEKF's
-update for six states ran no faster so, and took 10 s of its compile.
+The MEKF's Joseph update has no copy of its own for six states (loops of
+a constant length): it ran no faster so, and took 10 s of the compile.
 """
 from __future__ import annotations
 
