@@ -219,6 +219,13 @@ class SigmaPointImuUpdates(ImuUpdates):
         self._reset()
         self._updated = True
 
+    def _forget_heading(self, variance: float) -> None:
+        """The heading's variance grows by ``variance`` along the vertical ``v``
+        (body frame); the GRP error is the rotation angle to first order."""
+        v = to_body_frame(self.estimate, UP)
+        self.filter.P[:3, :3] += variance * np.outer(v, v)
+        self._updated = True
+
     def _heading_update(self, psi: float, variance: float, validated: bool, field,
                         reference) -> None:
         """The heading-only update: each sigma point's heading error

@@ -107,10 +107,11 @@ class ImuModels:
         return interval
 
     def field_reading(self, q: np.ndarray, field: np.ndarray, reference: np.ndarray,
-                      reference_known: bool = False) -> tuple[float, float, float, bool]:
+                      reference_known: bool = False) -> tuple[float, float, float, bool, bool]:
         """One magnetometer reading: the heading error ``ψ`` (rad), the time
         since the last reading, the trust (:func:`heading.trust_step`: 0 skip,
-        1 use, 2 use with twice the σ) and whether the field is validated. A
+        1 use, 2 use with twice the σ), whether the field is validated, and
+        whether the heading is to be forgotten first (:func:`heading.forget_heading`). A
         known reference (``reference_known``) is the trust's reference from
         the first reading on; otherwise the first reading's norm and dip are
         (:func:`heading.first_state`), and the reference is learnt from there."""
@@ -131,4 +132,5 @@ class ImuModels:
         trust = heading.trust_step(norm, dip, rate, interval, self.trust, steady)
         psi = math.atan2(field_e[0], field_e[1]) - math.atan2(reference[0], reference[1])
         psi = (psi + math.pi) % (2.0 * math.pi) - math.pi
-        return psi, interval, trust, heading.validated(self.trust)
+        return (psi, interval, trust, heading.validated(self.trust),
+                heading.forget_heading(self.trust))

@@ -27,7 +27,7 @@ import numpy as np
 
 from dynamics.quaternion import skew, to_body_frame
 from dynamics.validation import boolean, finite_number, one_of
-from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels
+from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels, heading
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -97,8 +97,10 @@ class ImuUpdates:
         """The heading-only update, as far as the field is trusted."""
         field = np.asarray(observation.body, dtype=float)
         reference = np.asarray(observation.reference, dtype=float)
-        psi, interval, trust, validated = self.imu.field_reading(
+        psi, interval, trust, validated, forget = self.imu.field_reading(
             self.estimate, field, reference, getattr(observation, "reference_known", True))
+        if forget:
+            self._forget_heading(heading.FORGOTTEN_HEADING_SIGMA_RAD ** 2)
         if trust == 0.0:
             self._reject("magnetometer")
             return
@@ -134,6 +136,12 @@ class ErrorStateUpdates(ImuUpdates):
         H[:, 3:6] = np.eye(3)
         self._error_update(rate - self.beta_hat, H, variance * np.eye(3), 3, "rest",
                            gated=False)
+
+    def _forget_heading(self, variance: float) -> None:
+        """The heading's variance grows by ``variance``: ``P_θθ += variance v vᵀ``,
+        ``v`` the vertical in the body frame (the heading's axis)."""
+        v = to_body_frame(self.q_hat, UP)
+        self.filter.P[:3, :3] += variance * np.outer(v, v)
 
     def _heading_update(self, psi: float, variance: float, validated: bool, field,
                         reference) -> None:

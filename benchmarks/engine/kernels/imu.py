@@ -54,6 +54,8 @@ _candidate_step = _compiled(heading._candidate_step)
 trust_step = _compiled(heading.trust_step, _candidate_step=_candidate_step)
 steady_step = _compiled(heading.steady_step, lowpass=_LOWPASS, rotate=_rotate)
 validated = _compiled(heading.validated)
+_forget = _compiled(heading.forget_heading)
+FORGOTTEN_HEADING_VARIANCE = heading.FORGOTTEN_HEADING_SIGMA_RAD ** 2
 new_trust = _compiled(heading.new_state)
 first_trust = _compiled(heading.first_state, new_state=new_trust)
 
@@ -135,7 +137,7 @@ def accelerometer_reading(state, run, specific_force, dt):
 def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field, reference,
                   known, dt, scratch):
     """:meth:`estimators.imu.ImuModels.field_reading`: ψ, the interval, the
-    trust and whether the field is validated."""
+    trust, whether the field is validated and whether to forget the heading."""
     interval = max(counts[run, SINCE_MAG], 1) * dt
     counts[run, SINCE_MAG] = 0
     if known and counts[run, FIELDS] == 0:
@@ -157,7 +159,19 @@ def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field,
                          interval, trust[run], steady)
     psi = math.atan2(scratch[0], scratch[1]) - math.atan2(reference[0], reference[1])
     psi = (psi + math.pi) % (2.0 * math.pi) - math.pi
-    return psi, interval, trusted, validated(trust[run])
+    return psi, interval, trusted, validated(trust[run]), _forget(trust[run])
+
+
+@njit(cache=True, error_model="numpy")
+def forget_heading(q, P):
+    """``ErrorStateUpdates._forget_heading``: ``P_θθ += σ² v vᵀ`` (σ
+    :data:`~estimators.imu.heading.FORGOTTEN_HEADING_SIGMA_RAD`), ``v`` the
+    vertical in the body frame of ``q``."""
+    variance = FORGOTTEN_HEADING_VARIANCE
+    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    for i in range(3):
+        for j in range(3):
+            P[i, j] += variance * v[i] * v[j]
 
 
 @njit(cache=True, error_model="numpy")

@@ -169,9 +169,11 @@ def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, k
         return state.imu_lowpass
     if not (magnetic[s] and state.imu_heading):
         return False
-    psi, interval, trust, validated = imu.field_reading(
+    psi, interval, trust, validated, forget = imu.field_reading(
         state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
         state.imu_field, run, q, body[run, j, s], reference[j, s], known[s], dt, np.empty(3))
+    if forget:
+        imu.forget_heading(q, P)
     if trust == 0.0:
         rejected[run, s] += 1
         return True

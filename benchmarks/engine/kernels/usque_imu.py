@@ -167,25 +167,39 @@ def reading(q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, 
         return state.imu_lowpass, True, updated
     if not (magnetic[s] and state.imu_heading):
         return False, True, updated
+    factored, updated = _field_reading(q, x, P, sigmas, run, body[run, j, s], reference[j, s],
+                                       known[s], dt, gating, gate[1], rejected[run], s,
+                                       streaming, likelihood, state, spread, Wm, Wc, updated,
+                                       scratch)
+    return True, factored, updated
+
+
+@njit(cache=True, error_model="numpy")
+def _field_reading(q, x, P, sigmas, run, field, reference, known, dt, gating, gate, rejected,
+                   s, streaming, likelihood, state, spread, Wm, Wc, updated, scratch):
+    """A magnetometer reading through the heading model (``ImuUpdates._heading``):
+    ``(factored, updated)`` as :func:`reading` returns them."""
     estimate = np.empty(4)
     output(q, x, estimate)
-    psi, interval, trust, validated = imu.field_reading(
+    psi, interval, trust, validated, forget = imu.field_reading(
         state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
-        state.imu_field, run, estimate, body[run, j, s], reference[j, s], known[s], dt,
-        np.empty(3))
+        state.imu_field, run, estimate, field, reference, known, dt, np.empty(3))
+    if forget:
+        imu.forget_heading(estimate, P)
+        updated = True
     if trust == 0.0:                   # an untrusted field: no update, the reset all the same
-        rejected[run, s] += 1
+        rejected[s] += 1
         if x[0] != 0.0 or x[1] != 0.0 or x[2] != 0.0:
             fold_reference(q, x)
-        return True, True, True
+        return True, True
     if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
-        return True, False, updated
-    nis, used, S = heading_update(q, x, P, sigmas, body[run, j, s], psi,
-                                  trust * trust * densities[1] / interval, validated, Wm, Wc,
-                                  gating, gate[1])
+        return False, updated
+    nis, used, S = heading_update(q, x, P, sigmas, field, psi,
+                                  trust * trust * state.imu_densities[run, 1] / interval,
+                                  validated, Wm, Wc, gating, gate)
     if streaming and used:
         fold_innovation(run, nis, S, likelihood)
     if not used:
-        rejected[run, s] += 1
+        rejected[s] += 1
     fold_reference(q, x)
-    return True, True, True
+    return True, True
