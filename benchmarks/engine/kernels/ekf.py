@@ -104,6 +104,30 @@ def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
         P[i, i] += q_variance
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _star_update(run, x, P, z, aligned, R, align_sign, scratch, check, health, factor,
+                 streaming, nis_sum, nis_count, likelihood):
+    """A star tracker reading: its sign turned to the estimate's where the
+    filter aligns it, the update, its health and its NIS."""
+    flip = align_sign and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2] + x[3] * z[3]) < 0
+    for i in range(4):
+        aligned[i] = -z[i] if flip else z[i]
+    nis, determinant = _ekf_update(x, P, aligned, R, scratch)
+    if check:   # the additive update leaves |x| off 1 by design
+        check_health(x, False, P, 4, health, factor)
+    if streaming:
+        nis_sum[run] += nis
+        nis_count[run] += 1
+        fold_innovation(run, nis, determinant, likelihood)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch():
+    """One run's working arrays (allocated once per run, in its thread)."""
+    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty((4, 4)),
+            np.empty((5, 4, 4)), np.empty((7, 6, 6)), np.empty((3, 3)), np.empty(1),
+            np.empty((6, 6)))
+
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
@@ -112,8 +136,7 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
-     outage, dropout_probability, uniforms) = star_arrays(block)
+    star = star_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -122,24 +145,16 @@ def advance(block, sensors, state, record, row):
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
     for index in prange(x_all.shape[0]):
         run = np.int64(index)
-        w, z, dq = np.empty(3), np.empty(4), np.empty(4)
-        prior, aligned = np.empty(4), np.empty(4)
-        F = np.empty((4, 4))
-        scratch = np.empty((5, 4, 4))
-        scratch6 = np.empty((7, 6, 6))
-        projected = np.empty((3, 3))
-        bits, factor = np.empty(1), np.empty((6, 6))
+        w, z, dq, prior, aligned, F, scratch, scratch6, projected, bits, factor = _run_scratch()
         bits_int = bits.view(np.int64)
         x, P = x_all[run], P_all[run]
-        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
                          has_bias, bias_model, bias, bias_last)
-            available, countdown, reading = star_step(
-                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
-                steps_between, star_normals, sigma_rad, mount, canonical, outage,
-                dropout_probability, uniforms)
+            available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
+                                                      star)
             for i in range(4):
                 prior[i] = x[i]
             if (streaming or keep_traces) and not posterior:
@@ -149,17 +164,8 @@ def advance(block, sensors, state, record, row):
                     fold_nees(run, k, nees(q_true[j], x, projected, scratch6), nees_every,
                               settle, nees_samples, nees_sum)
             if available:
-                flip = align_sign and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2]
-                                       + x[3] * z[3]) < 0
-                for i in range(4):
-                    aligned[i] = -z[i] if flip else z[i]
-                nis, determinant = _ekf_update(x, P, aligned, R_all[run], scratch)
-                if check:   # the additive update leaves |x| off 1 by design
-                    check_health(x, False, P, 4, health[run], factor)
-                if streaming:
-                    nis_sum[run] += nis
-                    nis_count[run] += 1
-                    fold_innovation(run, nis, determinant, likelihood)
+                _star_update(run, x, P, z, aligned, R_all[run], align_sign, scratch, check,
+                             health[run], factor, streaming, nis_sum, nis_count, likelihood)
             if posterior:    # its direction, as QuaternionEKF._record outputs it
                 norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
                 for i in range(4):

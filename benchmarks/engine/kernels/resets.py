@@ -47,8 +47,7 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
-     outage, dropout_probability, uniforms) = star_arrays(block)
+    star = star_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     q_all, previous_all, step_average = state.q, state.previous_rate, state.step_average
@@ -61,15 +60,13 @@ def advance(block, sensors, state, record, row):
         bits_int = bits.view(np.int64)
         factor = np.empty((6, 6))
         q, previous_rate = q_all[run], previous_all[run]
-        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
                          has_bias, bias_model, bias, bias_last)
-            available, countdown, reading = star_step(
-                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
-                steps_between, star_normals, sigma_rad, mount, canonical, outage,
-                dropout_probability, uniforms)
+            available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
+                                                      star)
             if available:
                 flip = False
                 if align_sign:

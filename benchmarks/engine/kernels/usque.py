@@ -295,8 +295,7 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    (rotation_model, star_std, steps_between, star_normals, sigma_rad, mount, canonical,
-     outage, dropout_probability, uniforms) = star_arrays(block)
+    star = star_arrays(block)
     (vector_body, vector_reference, vector_variance, vector_available,
      vector_dof, vector_magnetic, vector_gravity, vector_known) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
@@ -326,15 +325,13 @@ def advance(block, sensors, state, record, row):
         bits_int = bits.view(np.int64)
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
         Wm, Wc = Wm_all[run], Wc_all[run]
-        countdown, reading = first_countdown(k0, steps_between[run]), 0
+        countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
                          has_bias, bias_model, bias, bias_last)
-            available, countdown, reading = star_step(
-                z, dq, run, j, countdown, reading, q_true, rotation_model, star_std,
-                steps_between, star_normals, sigma_rad, mount, canonical, outage,
-                dropout_probability, uniforms)
+            available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
+                                                      star)
             if diverged[run] >= 0:       # the per-run class no longer steps
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
