@@ -220,67 +220,6 @@ def _vector_reading(q, beta, P, run, j, s, dt, body, reference, variance, gravit
     return True
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _vector_readings(q, beta, P, run, j, dt, body, reference, variance, available, dof,
-                     magnetic, gravity, known, gating, gate, rejected, streaming, likelihood,
-                     state, scratch, dq, imu_on, hard_iron, magnetic_tolerance, mag_bias, check,
-                     health, factor):
-    """Step ``j``'s vector readings in their order (:func:`_vector_reading`),
-    the filter's health checked after each that touched it."""
-    n = P.shape[0]
-    for s in range(dof.shape[0]):
-        if available[run, j, s] and _vector_reading(
-                q, beta, P, run, j, s, dt, body, reference, variance, gravity, magnetic, known,
-                dof, gating, gate, rejected, streaming, likelihood, state, scratch, dq, imu_on,
-                hard_iron, magnetic_tolerance, mag_bias) and check:
-            check_health(q, True, P, n, health, factor)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _star_reading(run, q, beta, P, z, R, gating, gate, scratch, dq, mag_bias, check, health,
-                  factor, streaming, nis_sum, nis_count, likelihood):
-    """A star tracker reading: the gated update and its reset, the filter's
-    health, its NIS."""
-    nis, applied, determinant = star_update(q, beta, P, z, R, gating, gate, scratch, dq,
-                                            mag_bias)
-    if check:
-        check_health(q, True, P, P.shape[0], health, factor)
-    if streaming and applied:
-        nis_sum[run] += nis
-        nis_count[run] += 1
-        fold_innovation(run, nis, determinant, likelihood)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _keep(run, k, last_step, q_true_k, q, out, beta, P, beta_last, P_last, variances,
-          keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch):
-    """The estimate output at step ``k`` is ``q`` now (before the step's
-    readings, or after them): copied into ``out``, and :func:`keep_output`."""
-    for i in range(4):
-        out[i] = q[i]
-    keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, variances,
-                keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _state_arrays(state):
-    """What the parallel loop reads of the state, out of its named tuple
-    (before the loop: see :mod:`benchmarks.engine.kernels.sensors`)."""
-    return (state.imu_on, state.imu_counts, state.imu_detector, state.imu_rate_lp, state.q,
-            state.beta, state.P, state.R, state.noise, state.bias_rw, state.posterior,
-            state.beta_last, state.P_last, state.gating, state.gate, state.magnetic_tolerance,
-            state.trapezoid, state.rate_prev, state.has_rate, state.end, state.hard_iron,
-            state.mag_bias, state.imu_strapdown, state.imu_rotation)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _run_scratch():
-    """One run's working arrays (allocated once per run, in its thread); the
-    scratch of a constant shape (module docstring)."""
-    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
-            np.empty((10, 9, 9)), np.empty(1), np.empty((9, 9)))
-
-
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
@@ -288,19 +227,27 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    star, vectors = star_arrays(block), vector_arrays(block)
+    star = star_arrays(block)
+    (vector_body, vector_reference, vector_variance, vector_available,
+     vector_dof, vector_magnetic, vector_gravity, vector_known) = vector_arrays(block)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = nees_arrays(record, row)
-    (imu_on, counts, detector, rate_lp, q_all, beta_all, P_all, R_all, noise, bias_rw, posterior,
-     beta_last, P_last, gating, gate, magnetic_tolerance, trapezoid, rate_prev, has_rate, end,
-     hard_iron, mag_bias_all, strapdown, rotation) = _state_arrays(state)
-    (body, reference, variance, available_vectors, dof, magnetic, gravity, known) = vectors
-    rejected, n = record.rejected[row], P_all.shape[1]
+    imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
+        state.imu_rate_lp
+    q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
+    noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
+    beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
+    rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
+    trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
+                                           state.end)
+    hard_iron, mag_bias_all, n = state.hard_iron, state.mag_bias, P_all.shape[1]
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
-        w, z, dq, out, mean, scratch6, bits, factor = _run_scratch()
+        w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
+        scratch6 = np.empty((10, 9, 9))            # a constant shape (module docstring)
+        bits, factor = np.empty(1), np.empty((9, 9))
         bits_int = bits.view(np.int64)
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
@@ -314,29 +261,43 @@ def advance(block, sensors, state, record, row):
                 imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
                 _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
-                           imu_on, strapdown[run], rotation[run, 0])
+                           imu_on, state.imu_strapdown[run], state.imu_rotation[run, 0])
+            for i in range(4):
+                out[i] = q[i]
             if not posterior:
-                _keep(run, k, last_step, q_true[j], q, out, beta, P, beta_last, P_last,
-                      variances, keep_traces, streaming, nees_every, settle, nees_samples,
-                      nees_sum, scratch6)
+                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch6)
             if available:
-                _star_reading(run, q, beta, P, z, R_all[run], gating[run], gate[run, 3],
-                              scratch6, dq, mag_bias, check, health[run], factor, streaming,
-                              nis_sum, nis_count, likelihood)
-            _vector_readings(q, beta, P, run, j, dt, body, reference, variance,
-                             available_vectors, dof, magnetic, gravity, known, gating, gate,
-                             rejected, streaming, likelihood, state, scratch6, dq, imu_on,
-                             hard_iron, magnetic_tolerance, mag_bias, check, health[run], factor)
+                nis, applied, determinant = star_update(q, beta, P, z, R_all[run], gating[run],
+                                                         gate[run, 3], scratch6, dq, mag_bias)
+                if check:
+                    check_health(q, True, P, n, health[run], factor)
+                if streaming and applied:
+                    nis_sum[run] += nis
+                    nis_count[run] += 1
+                    fold_innovation(run, nis, determinant, likelihood)
+            for s in range(vector_dof.shape[0]):
+                if vector_available[run, j, s] and _vector_reading(
+                        q, beta, P, run, j, s, dt, vector_body, vector_reference,
+                        vector_variance, vector_gravity, vector_magnetic, vector_known,
+                        vector_dof, gating, gate, rejected, streaming, likelihood, state,
+                        scratch6, dq, imu_on, hard_iron, magnetic_tolerance, mag_bias) \
+                        and check:
+                    check_health(q, True, P, n, health[run], factor)
             if posterior:
-                _keep(run, k, last_step, q_true[j], q, out, beta, P, beta_last, P_last,
-                      variances, keep_traces, streaming, nees_every, settle, nees_samples,
-                      nees_sum, scratch6)
+                for i in range(4):
+                    out[i] = q[i]
+                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
+                            variances, keep_traces, streaming, nees_every, settle,
+                            nees_samples, nees_sum, scratch6)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
                 _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
-                           strapdown[run], rotation[run, 0])
+                           state.imu_strapdown[run], state.imu_rotation[run, 0])
             if not (finite_state(q, 4, P, n) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
                 check_health(q, True, P, n, health[run], factor)
+
