@@ -336,6 +336,7 @@ def test_the_mekf_tuner_lowers_its_training_loss(trial_02_case, monkeypatch):
     assert found["loss"] <= found["loss_default"]
 
 
+@pytest.mark.slow      # two tunings, each scored on the other trial: 4 s
 def test_tuning_all_trials_scores_each_trial_with_the_other_trials_settings(tmp_path, capsys):
     import pandas as pd
     out = tmp_path / "out"

@@ -370,6 +370,7 @@ def test_a_group_mean_is_nan_where_an_estimator_has_no_score_on_one_of_its_trial
 
 # --- what the tables say --------------------------------------------------------------------
 
+@pytest.mark.slow      # the per-run EKF over a whole trial: 5 s
 def test_the_trial_table_shows_the_share_of_readings_each_filter_rejected(tmp_path, capsys):
     def dropouts(arrays):
         arrays["imu_acc_mps2"][2000:2010] = 0.0        # ten readings that are none

@@ -364,6 +364,7 @@ def test_integer_epoch_nanoseconds_keep_the_clock(trial, tmp_path):
     assert declared.rate_hz == pytest.approx(1e9 / step_ns, rel=1e-12)
 
 
+@pytest.mark.slow      # the per-run replay of a whole trial, twice: 5 s
 def test_replay_takes_a_declared_recording_as_its_npz(trial, tmp_path):
     # The gyro-only replay (a pseudo star tracker made from the reference)
     # on a declared CSV and on the same samples as the toolkit's .npz.

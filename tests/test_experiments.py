@@ -137,6 +137,7 @@ def test_notebook_script_runs_as_plain_python(tmp_path):
     assert (tmp_path / "compare.png").is_file() and (tmp_path / "landscape.png").is_file()
 
 
+@pytest.mark.slow      # the whole report with its figures: 4 s
 def test_flight_study_report_has_its_sections_figures_and_numbers(tmp_path, monkeypatch):
     from benchmarks.experiments import flight_study
     # The study's own sizes take about a minute; the same code on small ones.

@@ -156,7 +156,8 @@ def test_triads_batch_anchors_on_the_heavier_reading_as_solve_does(trial):
     assert np.max(np.abs(run.estimates - light.estimates)) > 1e-3
 
 
-@pytest.mark.parametrize("name", ["mekf", "usque"])
+@pytest.mark.parametrize("name", [
+    "mekf", pytest.param("usque", marks=pytest.mark.slow)])  # USQUE per-run twice: 6 s
 def test_a_disturbed_field_is_rejected_by_its_magnitude_on_both_paths(trial, name):
     scenario, omega, vectors = trial
     accelerometer, magnetometer = vectors

@@ -289,6 +289,7 @@ def test_compare_refuses_a_seed_it_trained_on_and_bounds_beside_an_estimator(tmp
     assert "--bounds is pc_exponent's interval without --estimator" in capsys.readouterr().err
 
 
+@pytest.mark.slow      # a tuning, then its campaign: 4 s
 def test_montecarlo_tuned_runs_its_campaign_with_the_tuned_settings(tmp_path, capsys):
     # The campaign (seeds 0-3) runs the EKF with the pc_exponent tuned on
     # seeds 100-101: the section written is the one the campaign used.

@@ -54,6 +54,7 @@ def paired(options, tstop, seeds):
     return [simulate(scenario, ["mekf", "usque"], seed=seed, traces=True) for seed in seeds]
 
 
+@pytest.mark.slow      # 300 s of both per-run filters: 5 s
 def test_with_tiny_initial_errors_usque_agrees_with_the_mekf_to_first_order():
     # Both start on the truth with a tiny P₀: the sigma points then sample an
     # almost linear model, so the two filters differ only at second order.
