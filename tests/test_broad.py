@@ -326,6 +326,7 @@ def test_madgwick_is_tuned_on_the_authors_grid_to_its_minimum(trial_02_case):
     assert all(found["loss"] <= score(lambda _s, b=b: {"beta": b}) for b in neighbours)
 
 
+@pytest.mark.slow      # a tuning of the MEKF on a whole trial: 4 s
 def test_the_mekf_tuner_lowers_its_training_loss(trial_02_case, monkeypatch):
     from benchmarks.broad import tuning
     monkeypatch.setattr(tuning, "MAX_EVALUATIONS", 14)
@@ -369,6 +370,7 @@ def test_the_authors_grid_gives_their_best_beta_on_trial_02():
     np.testing.assert_allclose(grid.min(axis=0), [1.4835498, 1.1998357, 0.7698124], atol=1e-4)
 
 
+@pytest.mark.slow      # the Kalman filters tuned on each half trial: 4 s
 def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_path,
                                                                           monkeypatch):
     import pandas as pd

@@ -398,6 +398,7 @@ def test_animate_and_workshop_report_divergence(tmp_path, capsys):
     assert "(ekf diverged: no error to rank)" in report
 
 
+@pytest.mark.slow      # the flight study with its figures: 3 s
 def test_the_flight_study_reports_divergence(tmp_path, capsys, monkeypatch):
     from benchmarks.experiments import flight_study
     # The study's own sizes take about a minute; the same code on small ones,

@@ -85,6 +85,7 @@ def test_the_engine_scores_what_the_per_run_path_scores(name, objective):
     assert engine == pytest.approx(score({}), rel=1e-6)
 
 
+@pytest.mark.slow      # the same tuning twice: 3 s
 def test_tuning_is_deterministic_for_a_fixed_seed_set():
     cases = seed_cases(Scenario.from_toml(SCENARIOS / "smallsat.toml").replace(tstop=30.0),
                        [0, 1])
