@@ -251,7 +251,7 @@ def test_an_unconfirmed_first_field_loses_to_a_field_seen_longer():
     # the new field wins once it has been seen the hold time longer than the
     # first was, and at most after FIRST_FIELD_S...
     dt, hold = 0.02, heading.MIN_UNDISTURBED_S
-    for support in (dt, 2.0, 4.0):
+    for support in (dt, 2.0, 4.0, 4.8):          # 4.8 s + the hold: FIRST_FIELD_S is the cap
         expected = hold + min(heading.FIRST_FIELD_S, support + hold)
         assert _replaced_after(support, dt=dt) == pytest.approx(expected, abs=3 * dt), support
     # ...and a first field confirmed (agreed with for FIRST_FIELD_S) needs
@@ -274,6 +274,20 @@ def test_a_candidate_for_the_first_field_outlives_a_brief_disagreement_not_a_las
     lasting = hold + 2 * dt
     assert _replaced_after(2.0, lasting, dt) == pytest.approx(
         1.0 + lasting + hold + 2.0 + hold, abs=3 * dt)
+
+
+def test_a_first_field_replaced_by_a_close_one_keeps_the_heading():
+    # Readings alternate 7 % and 11 % above an unconfirmed first reference
+    # (50 µT): the stronger ones are disturbed, the candidate both agree with
+    # (53.5 µT, the first of them, within the reference's 10 %) is seen twice
+    # as long as the reference and wins the race, and since it is the same
+    # field within the tolerance the heading is not forgotten.
+    state, dt = heading.first_state(50.0, math.radians(60.0)), 0.02
+    forgotten = []
+    for k in range(round(heading.FIRST_FIELD_S / dt)):
+        heading.trust_step(55.5 if k % 2 else 53.5, math.radians(60.0), 0.0, dt, state)
+        forgotten.append(heading.forget_heading(state))
+    assert state[heading.REF_NORM] > 53.0 and not any(forgotten)
 
 
 def test_the_heading_is_forgotten_once_when_the_first_field_is_replaced():
@@ -353,7 +367,7 @@ def test_a_first_field_from_a_magnet_costs_the_heading_two_seconds(filter_class,
 
 @pytest.mark.parametrize("filter_class, gate, magnet_at_start", [
     (MultiplicativeEKF, None, False), (USQUE, None, False), (USQUE, 0.5, False),
-    (MultiplicativeEKF, None, True), (USQUE, None, True)])
+    (MultiplicativeEKF, None, True), (USQUE, None, True), (USQUE, 0.5, True)])
 def test_the_kernel_runs_the_imu_models_as_the_per_run_filter_does(filter_class, gate,
                                                                    magnet_at_start):
     from benchmarks.engine.recorded import run_recorded

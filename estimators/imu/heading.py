@@ -29,7 +29,8 @@ reference norm and its dip within :data:`DIP_TOLERANCE_RAD` of a reference
 dip, for :data:`MIN_UNDISTURBED_S`; the reference follows the undisturbed
 field (time constant :data:`REFERENCE_TIME_CONSTANT_S`). A field that stays
 constant for :data:`NEW_FIELD_S` of motion (:data:`NEW_FIELD_MIN_RATE_RADPS`)
-becomes the new reference (the first one after :data:`FIRST_FIELD_S`): the
+becomes the new reference (VQF's first one after :data:`FIRST_FIELD_S`;
+here the first reference races, below): the
 reference is learnt from the readings the filter trusts, never from a rest
 the recording may not have. A disturbed field is not used for
 :data:`MAX_REJECTION_S`; after that it is used with
@@ -58,7 +59,8 @@ races any other constant field (beyond VQF, whose first field needs
 at any rate of turn, :data:`MIN_UNDISTURBED_S` longer than the reference
 has (at most :data:`FIRST_FIELD_S`), and the heading learnt from the
 replaced field is forgotten (:func:`forget_heading`: the filter's heading
-variance grows by :data:`FORGOTTEN_HEADING_SIGMA_RAD` squared), because the
+variance is raised to :data:`FORGOTTEN_HEADING_SIGMA_RAD` squared,
+:func:`widen_heading`), because the
 start's heading came from that field: a recording that begins beside a
 magnet costs seconds, not the minute a Kalman gain grown small would take
 to turn the heading back. While the first reference is unconfirmed, a
@@ -171,8 +173,9 @@ def trust_step(norm: float, dip: float, rate_lp_norm: float, dt: float, state,
     if close:
         state[UNDISTURBED_S] += dt
         state[SUPPORT_S] += dt
-        if state[SUPPORT_S] >= FIRST_FIELD_S:
+        if state[SUPPORT_S] >= FIRST_FIELD_S and state[CONFIRMED] == 0.0:
             state[CONFIRMED] = 1.0
+            state[CANDIDATE_S] = 0.0     # time at rest counts toward a new field no more
         if state[UNDISTURBED_S] >= MIN_UNDISTURBED_S:
             state[DISTURBED] = 0.0
             state[REF_NORM] += gain * (norm - state[REF_NORM])
@@ -192,10 +195,13 @@ def trust_step(norm: float, dip: float, rate_lp_norm: float, dt: float, state,
 
 def _candidate_step(norm: float, dip: float, rate_lp_norm: float, dt: float, gain: float,
                     state, steady: bool) -> None:
-    """A constant field, steady in the strapdown frame, seen long enough in
-    motion becomes the reference; while the first reference is unconfirmed,
-    a candidate outlives a disagreement shorter than
-    :data:`MIN_UNDISTURBED_S` (module docstring)."""
+    """A constant field, steady in the strapdown frame, seen for
+    :data:`NEW_FIELD_S` in motion becomes the reference; while the first
+    reference is unconfirmed, one seen (at any rate of turn)
+    :data:`MIN_UNDISTURBED_S` longer than it was, at most
+    :data:`FIRST_FIELD_S`, replaces it and asks the filter to forget the
+    heading it gave (FORGET), and a candidate outlives a disagreement shorter
+    than :data:`MIN_UNDISTURBED_S` (module docstring)."""
     agrees = (steady and abs(norm - state[CANDIDATE_NORM]) < NORM_TOLERANCE * state[CANDIDATE_NORM]
               and abs(dip - state[CANDIDATE_DIP]) < DIP_TOLERANCE_RAD)
     if agrees:
@@ -227,11 +233,26 @@ def _candidate_step(norm: float, dip: float, rate_lp_norm: float, dt: float, gai
 
 def forget_heading(state) -> bool:
     """Whether the first reference was replaced since the last call (the
-    heading learnt from it is to be forgotten: the filter's heading variance
-    grows by :data:`FORGOTTEN_HEADING_SIGMA_RAD` squared); clears the flag."""
+    heading learnt from it is to be forgotten, :func:`widen_heading`); clears
+    the flag."""
     replaced = state[FORGET] != 0.0
     state[FORGET] = 0.0
     return replaced
+
+
+def widen_heading(v, P) -> None:
+    """The heading's variance ``vᵀ P_θθ v`` raised to at least
+    :data:`FORGOTTEN_HEADING_SIGMA_RAD` squared, along ``v`` (the vertical
+    in the body frame, the heading's axis): ``P_θθ += max(0, σ² − vᵀ P_θθ v)
+    v vᵀ``; raised, not added to, so that forgetting twice is forgetting once."""
+    current = 0.0
+    for i in range(3):
+        for j in range(3):
+            current += v[i] * P[i, j] * v[j]
+    extra = max(FORGOTTEN_HEADING_SIGMA_RAD ** 2 - current, 0.0)
+    for i in range(3):
+        for j in range(3):
+            P[i, j] += extra * v[i] * v[j]
 
 
 def validated(state) -> bool:

@@ -100,7 +100,7 @@ class ImuUpdates:
         psi, interval, trust, validated, forget = self.imu.field_reading(
             self.estimate, field, reference, getattr(observation, "reference_known", True))
         if forget:
-            self._forget_heading(heading.FORGOTTEN_HEADING_SIGMA_RAD ** 2)
+            self._forget_heading()
         if trust == 0.0:
             self._reject("magnetometer")
             return
@@ -137,11 +137,9 @@ class ErrorStateUpdates(ImuUpdates):
         self._error_update(rate - self.beta_hat, H, variance * np.eye(3), 3, "rest",
                            gated=False)
 
-    def _forget_heading(self, variance: float) -> None:
-        """The heading's variance grows by ``variance``: ``P_θθ += variance v vᵀ``,
-        ``v`` the vertical in the body frame (the heading's axis)."""
-        v = to_body_frame(self.q_hat, UP)
-        self.filter.P[:3, :3] += variance * np.outer(v, v)
+    def _forget_heading(self) -> None:
+        """The heading's variance raised (:func:`estimators.imu.heading.widen_heading`)."""
+        heading.widen_heading(to_body_frame(self.q_hat, UP), self.filter.P)
 
     def _heading_update(self, psi: float, variance: float, validated: bool, field,
                         reference) -> None:

@@ -55,7 +55,7 @@ trust_step = _compiled(heading.trust_step, _candidate_step=_candidate_step)
 steady_step = _compiled(heading.steady_step, lowpass=_LOWPASS, rotate=_rotate)
 validated = _compiled(heading.validated)
 _forget = _compiled(heading.forget_heading)
-FORGOTTEN_HEADING_VARIANCE = heading.FORGOTTEN_HEADING_SIGMA_RAD ** 2
+_widen = _compiled(heading.widen_heading)
 new_trust = _compiled(heading.new_state)
 first_trust = _compiled(heading.first_state, new_state=new_trust)
 
@@ -164,14 +164,9 @@ def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field,
 
 @njit(cache=True, error_model="numpy")
 def forget_heading(q, P):
-    """``ErrorStateUpdates._forget_heading``: ``P_θθ += σ² v vᵀ`` (σ
-    :data:`~estimators.imu.heading.FORGOTTEN_HEADING_SIGMA_RAD`), ``v`` the
-    vertical in the body frame of ``q``."""
-    variance = FORGOTTEN_HEADING_VARIANCE
-    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
-    for i in range(3):
-        for j in range(3):
-            P[i, j] += variance * v[i] * v[j]
+    """``ErrorStateUpdates._forget_heading``: :func:`estimators.imu.heading.widen_heading`
+    along the vertical in the body frame of ``q``."""
+    _widen(to_body_frame(q, np.array([0.0, 0.0, 1.0])), P)
 
 
 @njit(cache=True, error_model="numpy")
