@@ -105,7 +105,7 @@ from dynamics.quaternion import (IDENTITY, grp_from_quat, quat_from_grp, quat_fr
                                  quat_multiply, relative_rotation, to_body_frame)
 from dynamics.validation import InvalidParameterError, axis_standard_deviations, finite_number
 from estimators import imu
-from estimators.imu import gravity, heading
+from estimators.imu import gravity
 from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite_state,
                              gate_probability_setting, norm_tolerance_setting)
 from estimators.imu.updates import UP, ImuUpdates
@@ -220,9 +220,8 @@ class SigmaPointImuUpdates(ImuUpdates):
         self._updated = True
 
     def _forget_heading(self) -> None:
-        """The heading's variance raised (:func:`estimators.imu.heading.widen_heading`;
-        the GRP error is the rotation angle to first order)."""
-        heading.widen_heading(to_body_frame(self.estimate, UP), self.filter.P)
+        """:meth:`ImuUpdates._forget_heading`, and sigma points drawn anew."""
+        super()._forget_heading()
         self._updated = True
 
     def _heading_update(self, psi: float, variance: float, validated: bool, field,

@@ -161,14 +161,21 @@ def steady_step(q_strapdown, field, coeffs, dt: float, state, scratch) -> bool:
     return d0 * d0 + d1 * d1 + d2 * d2 < STEADY_TOLERANCE ** 2 * mean
 
 
+def _close(norm: float, dip: float, reference_norm: float, reference_dip: float) -> bool:
+    """Whether a field of ``norm`` and ``dip`` is the field of the reference
+    ones: within :data:`NORM_TOLERANCE` of its norm and :data:`DIP_TOLERANCE_RAD`
+    of its dip."""
+    return (abs(norm - reference_norm) < NORM_TOLERANCE * reference_norm
+            and abs(dip - reference_dip) < DIP_TOLERANCE_RAD)
+
+
 def trust_step(norm: float, dip: float, rate_lp_norm: float, dt: float, state,
                steady: bool = True) -> float:
     """One reading's trust, ``dt`` s after the last (module docstring): 1.0
     to use it, :data:`REJECTION_FACTOR` to use it with that many times its σ,
     0.0 not to use it; ``steady``: whether it is steady in the strapdown
     frame (:func:`steady_step`)."""
-    close = (steady and abs(norm - state[REF_NORM]) < NORM_TOLERANCE * state[REF_NORM]
-             and abs(dip - state[REF_DIP]) < DIP_TOLERANCE_RAD)
+    close = steady and _close(norm, dip, state[REF_NORM], state[REF_DIP])
     gain = 1.0 - math.exp(-dt / REFERENCE_TIME_CONSTANT_S)
     if close:
         state[UNDISTURBED_S] += dt
@@ -202,8 +209,7 @@ def _candidate_step(norm: float, dip: float, rate_lp_norm: float, dt: float, gai
     :data:`FIRST_FIELD_S`, replaces it and asks the filter to forget the
     heading it gave (FORGET), and a candidate outlives a disagreement shorter
     than :data:`MIN_UNDISTURBED_S` (module docstring)."""
-    agrees = (steady and abs(norm - state[CANDIDATE_NORM]) < NORM_TOLERANCE * state[CANDIDATE_NORM]
-              and abs(dip - state[CANDIDATE_DIP]) < DIP_TOLERANCE_RAD)
+    agrees = steady and _close(norm, dip, state[CANDIDATE_NORM], state[CANDIDATE_DIP])
     if agrees:
         state[CANDIDATE_MISSED_S] = 0.0
         if rate_lp_norm >= NEW_FIELD_MIN_RATE_RADPS or state[CONFIRMED] == 0.0:
@@ -213,8 +219,8 @@ def _candidate_step(norm: float, dip: float, rate_lp_norm: float, dt: float, gai
         first = state[CONFIRMED] == 0.0 and state[CANDIDATE_S] >= min(
             FIRST_FIELD_S, state[SUPPORT_S] + MIN_UNDISTURBED_S)
         if state[DISTURBED] > 0.0 and (state[CANDIDATE_S] >= NEW_FIELD_S or first):
-            same = (abs(state[CANDIDATE_NORM] - state[REF_NORM]) < NORM_TOLERANCE * state[REF_NORM]
-                    and abs(state[CANDIDATE_DIP] - state[REF_DIP]) < DIP_TOLERANCE_RAD)
+            same = _close(state[CANDIDATE_NORM], state[CANDIDATE_DIP], state[REF_NORM],
+                          state[REF_DIP])
             if not (same or state[CONFIRMED] > 0.0):
                 state[FORGET] = 1.0
             state[REF_NORM], state[REF_DIP] = state[CANDIDATE_NORM], state[CANDIDATE_DIP]

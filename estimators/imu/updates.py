@@ -107,6 +107,12 @@ class ImuUpdates:
         self._heading_update(psi, trust * trust * self.heading_density / interval, validated,
                              field, reference)
 
+    def _forget_heading(self) -> None:
+        """The heading's variance raised along the vertical of :attr:`estimate`
+        (:func:`estimators.imu.heading.widen_heading`; for USQUE's GRPs, the
+        rotation angle to first order)."""
+        heading.widen_heading(to_body_frame(self.estimate, UP), self.filter.P)
+
 
 def imu_models_on(settings) -> bool:
     """Whether ``settings`` (a filter's constructor keywords, or its
@@ -136,10 +142,6 @@ class ErrorStateUpdates(ImuUpdates):
         H[:, 3:6] = np.eye(3)
         self._error_update(rate - self.beta_hat, H, variance * np.eye(3), 3, "rest",
                            gated=False)
-
-    def _forget_heading(self) -> None:
-        """The heading's variance raised (:func:`estimators.imu.heading.widen_heading`)."""
-        heading.widen_heading(to_body_frame(self.q_hat, UP), self.filter.P)
 
     def _heading_update(self, psi: float, variance: float, validated: bool, field,
                         reference) -> None:

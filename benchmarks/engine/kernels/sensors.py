@@ -92,6 +92,10 @@ def gyro_arrays(block, sensors):
             sensors.bias_last)
 
 
+#: Where the steps between a run's readings are in :func:`star_arrays`' tuple.
+STEPS_BETWEEN = 2
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def star_arrays(block):
     """What :func:`star_reading` reads, likewise."""
@@ -105,7 +109,7 @@ def first_countdown(k0, star, run):
     """Steps from step ``k0`` to run ``run``'s next star tracker reading
     (``star``: :func:`star_arrays`; readings at k ≡ 0 mod its steps between
     readings): a countdown, instead of a modulo every step."""
-    m = star[2][run]
+    m = star[STEPS_BETWEEN][run]
     return (m - k0 % m) % m
 
 
