@@ -56,22 +56,43 @@ def matmul4(a, b, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def joseph_covariance(P, IK, KRK, T, n=6):
+def joseph_covariance(P, IK, KRK, T, n=6, bias_identity=False):
     """Joseph's form of an ``n``-state covariance update, in place:
     P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ, given ``IK`` = I − KH and ``KRK`` =
     K R Kᵀ; ``T`` (n, n) scratch. Inlined, so that a constant ``n`` is
-    compiled into unrolled loops."""
+    compiled into unrolled loops.
+
+    ``bias_identity``: H is zero in the gyro-bias columns (3 to 5), so IK's
+    are the identity's and their products are skipped: a skipped product is
+    ±0 (finite entries), and adding ±0 leaves a sum begun at +0 as it is, so
+    every entry is the full product's to the bit, in half the arithmetic."""
     for i in range(n):
         for j in range(n):
             total = 0.0
-            for m in range(n):
-                total += IK[i, m] * P[m, j]
+            if bias_identity:
+                for m in range(3):
+                    total += IK[i, m] * P[m, j]
+                if 3 <= i < 6:
+                    total += P[i, j]
+                for m in range(6, n):
+                    total += IK[i, m] * P[m, j]
+            else:
+                for m in range(n):
+                    total += IK[i, m] * P[m, j]
             T[i, j] = total
     for i in range(n):
         for j in range(n):
             first = 0.0
-            for m in range(n):
-                first += T[i, m] * IK[j, m]
+            if bias_identity:
+                for m in range(3):
+                    first += T[i, m] * IK[j, m]
+                if 3 <= j < 6:
+                    first += T[i, j]
+                for m in range(6, n):
+                    first += T[i, m] * IK[j, m]
+            else:
+                for m in range(n):
+                    first += T[i, m] * IK[j, m]
             P[i, j] = first + KRK[i, j]
 
 

@@ -148,7 +148,8 @@ def joseph_update(q, beta, P, y0, y1, y2, H, R, gating, threshold, scratch, dq, 
     for i in range(n):
         for j in range(n):
             KRK[i, j] = KR[i, 0] * K[j, 0] + KR[i, 1] * K[j, 1] + KR[i, 2] * K[j, 2]
-    joseph_covariance(P, IK, KRK, T, n)
+    # Without bias columns in H, I − KH's are the identity's: their products are skipped.
+    joseph_covariance(P, IK, KRK, T, n, not bias_columns)
     quat_exp(dx[0], dx[1], dx[2], dq)
     quat_times_normalized(q, dq, q)
     beta[0] += dx[3]
