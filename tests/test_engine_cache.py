@@ -5,6 +5,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import pytest
+
 from benchmarks.engine import cache
 
 ROOT = Path(cache.__file__).resolve().parents[2]
@@ -76,3 +78,12 @@ def test_the_same_digest_keeps_the_cached_code(tmp_path):
     assert cache.refresh(directory, "one", {"mekf", "other"}) == 0
     assert (directory / "mekf.advance-1.py311.nbi").exists()
     assert (directory / "other.f-3.py311.nbi").read_bytes() == b"compiled again"
+
+
+def test_a_cache_that_cannot_be_written_is_warned_of_not_fatal(monkeypatch):
+    def refuse(*_):
+        raise PermissionError("read-only")
+    monkeypatch.setattr(cache, "refresh", refuse)
+    monkeypatch.setattr(cache, "_checked", False)
+    with pytest.warns(UserWarning, match="could not be checked"):
+        cache.keep_fresh()

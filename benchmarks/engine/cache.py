@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import warnings
 from pathlib import Path
 
 #: The project's top-level packages: imports of these are followed.
@@ -111,5 +112,10 @@ def keep_fresh() -> None:
     cache_dir = getattr(getattr(common.record_error, "_cache", None), "_cache_path", None)
     if cache_dir is None:       # caching off (NUMBA_DISABLE_JIT): nothing to keep
         return
-    refresh(Path(cache_dir), sources_digest(kernel_sources()),
-            {path.stem for path in _KERNELS.glob("*.py")})
+    try:
+        refresh(Path(cache_dir), sources_digest(kernel_sources()),
+                {path.stem for path in _KERNELS.glob("*.py")})
+    except OSError as err:      # a cache numba may read but this user may not write
+        warnings.warn(f"the kernels' cache in {cache_dir} could not be checked against "
+                      f"their sources ({err}); if a kernel's helper was edited since it "
+                      "was compiled, remove that cache's *.nbi and *.nbc files")
