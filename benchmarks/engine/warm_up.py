@@ -40,8 +40,9 @@ def compile_kernels(names) -> tuple:
 
 
 def warm_up(processes: int = len(GROUPS)) -> None:
-    """Compile every group of :data:`GROUPS`, ``processes`` at a time (the
-    cache first made true to the sources here, not in each process)."""
+    """Compile every group of :data:`GROUPS`, ``processes`` at a time. The
+    cache is first made true to the sources here, before the processes
+    start: each then finds it so, and none removes what another compiles."""
     from benchmarks.engine.cache import keep_fresh
     keep_fresh()
     if processes <= 1:
