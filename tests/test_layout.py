@@ -170,15 +170,6 @@ def test_no_module_imports_another_modules_private_name():
 
 #: No function grows past what one can read at a glance (issue 31).
 MAX_FUNCTION_LINES = 60
-#: ... but the MEKF's and USQUE's parallel loops, at most as long as they are
-#: now: numba's parallel loop must read plain arrays, each unpacked before it
-#: from the block, the record and the state in one place (the kernels
-#: package's docstring), and that unpacking is most of their length. Cut to
-#: 60 lines by inlined helpers, they ran as fast but took longer to compile
-#: (numba's parallel lowering: the MEKF 64 -> 77 s, USQUE 60 -> 84 s); the
-#: EKF's loop, shorter, is within the limit at no cost.
-KERNEL_LOOPS = {"benchmarks/engine/kernels/mekf.py:advance": 79,
-                "benchmarks/engine/kernels/usque.py:advance": 95}
 #: No module or class of the project grows past what one can hold in mind.
 MAX_MODULE_LINES = 500
 MAX_CLASS_LINES = 200
@@ -198,7 +189,7 @@ def _definitions(root, packages, kinds):
 def long_functions(root, packages) -> list:
     kinds = (ast.FunctionDef, ast.AsyncFunctionDef)
     return [f"{name} ({lines} lines)" for name, lines in _definitions(root, packages, kinds)
-            if lines > KERNEL_LOOPS.get(name, MAX_FUNCTION_LINES)]
+            if lines > MAX_FUNCTION_LINES]
 
 
 def long_classes(root, packages) -> list:
@@ -215,14 +206,6 @@ def long_modules(root, packages) -> list:
 def test_no_function_of_the_project_is_longer_than_a_screenful():
     long = long_functions(ROOT, PACKAGES + ("tests",))
     assert not long, f"longer than {MAX_FUNCTION_LINES} lines: {', '.join(long)}"
-
-
-def test_the_kernel_loops_let_off_are_still_there_and_still_long():
-    # A kernel loop shortened to the house's limit, or renamed, leaves the
-    # list (an entry naming nothing, or nothing long, would let a newcomer through).
-    found = dict(_definitions(ROOT, ("benchmarks",), ast.FunctionDef))
-    assert set(KERNEL_LOOPS) <= set(found)
-    assert all(found[name] > MAX_FUNCTION_LINES for name in KERNEL_LOOPS)
 
 
 def test_no_class_of_the_project_is_longer_than_a_few_screens():

@@ -47,10 +47,12 @@ So each kernel unpacks its block, its record and its state before the loop
 (``gyro_arrays`` …). An array read every step is passed on by itself: a
 plain tuple's item read in the loop costs a reference count too (the EKF's
 batch 5 % slower with the gyro's arrays as a tuple); the star tracker's,
-read at its readings, go as their tuple (no change measured). The MEKF's
-and USQUE's loops stay longer than a screen: made of inlined helpers, they
-ran as fast, but numba's parallel lowering of the bigger loop body took
-13 s and 24 s longer to compile.
+read at its readings, go as their tuple (no change measured). An inlined
+helper that runs only where a reading comes may read the block's and the
+state's arrays itself (the MEKF's ``_vector_reading``); called with the two
+tuples, it took a third longer on a recording, which has readings at every
+sample: a called function counts a reference of every array of a tuple it
+takes.
 
 Its run index is made ``run = np.int64(index)`` first: numba types the
 ``prange`` index as a signed integer where it types the kernel and as an
@@ -65,6 +67,10 @@ array it takes, every step (the MEKF's loop ran 20 % slower with its
 propagation called). An update, which a reading makes, and a divergence's
 bookkeeping are called: inlined, they were compiled again at each caller
 (the MEKF's Joseph update, 12 s of its compile; the EKF's update, 8 s).
+USQUE's propagation is called although it runs every step: its 13 sigma
+points outweigh the call, and inlined at its two places (before the
+readings with the trapezoidal rate, after them otherwise) it took 9 s more
+to compile.
 The MEKF's Joseph update has no copy of its own for six states (loops of
 a constant length): it ran no faster so, and took 10 s of the compile.
 """

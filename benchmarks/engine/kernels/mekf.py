@@ -30,7 +30,7 @@ from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_p
                                                   gravity_update, propagate_covariance,
                                                   star_update, vector_update)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
-                                               star_arrays, star_step, vector_arrays)
+                                               star_arrays, star_step)
 from estimators.imu.updates import imu_models_on
 from estimators.mekf import estimates_hard_iron
 
@@ -128,6 +128,15 @@ def final(state, estimators) -> dict:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch():
+    """One run's working arrays (allocated once per run, in its thread): the
+    scratch matrices of a constant shape (the module's docstring)."""
+    bits = np.empty(1)
+    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
+            np.empty((10, 9, 9)), bits, bits.view(np.int64), np.empty((9, 9)))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapdown, rotation):
     """:func:`propagate_covariance`, and the IMU models' strapdown by the same
     bias-corrected rotation (MultiplicativeEKF.propagate)."""
@@ -142,19 +151,35 @@ def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapd
         carry_constant_states(P, scratch[2], scratch[3], scratch[0])
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _star_reading(q, beta, P, z, run, R, gating, gate, scratch, dq, mag_bias, check, health,
+                  factor, streaming, nis_sum, nis_count, likelihood):
+    """A star tracker reading (MultiplicativeEKF.correct, gated as the filter
+    gates it), the health check after it and its NIS. The update is called,
+    as every update is (the kernels package's docstring)."""
+    nis, applied, determinant = star_update(q, beta, P, z, R, gating, gate, scratch, dq,
+                                            mag_bias)
+    if check:
+        check_health(q, True, P, P.shape[0], health, factor)
+    if streaming and applied:
+        nis_sum[run] += nis
+        nis_count[run] += 1
+        fold_innovation(run, nis, determinant, likelihood)
+
+
 @njit(cache=True, error_model="numpy")
-def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, known, dof,
-                gating, gate, rejected, streaming, likelihood, state, scratch, dq):
-    """A vector reading through the IMU models where the settings ask
-    (estimators.imu.updates.ImuUpdates._imu_reading): True if they took it."""
-    densities = state.imu_densities[run]
-    if gravity[s]:
-        force = body[run, j, s]
-        up, drift, interval, at_rest = imu.accelerometer_reading(state, run, force, dt)
+def _imu_vector(q, beta, P, run, s, dt, body, reference, gravity, magnetic, known, dof, state,
+                rejected, streaming, likelihood, scratch, dq):
+    """Vector reading ``s``, ``body`` (of ``reference``), through the IMU
+    models where the settings ask (estimators.imu.updates.ImuUpdates._imu_reading):
+    True if they took it."""
+    densities, gating, gate = state.imu_densities[run], state.gating, state.gate
+    if gravity:
+        up, drift, interval, at_rest = imu.accelerometer_reading(state, run, body, dt)
         last, kept = (0.0, 0.0), True
         if state.imu_lowpass:
             nis, applied, determinant = gravity_update(
-                q, beta, P, up, densities[0] / interval, drift, gating[run], gate[run, dof[s]],
+                q, beta, P, up, densities[0] / interval, drift, gating[run], gate[run, dof],
                 scratch, dq, state.mag_bias[run])
             if applied:
                 last = (nis, determinant)
@@ -167,11 +192,11 @@ def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, k
         if streaming and kept and state.imu_lowpass:
             fold_innovation(run, last[0], last[1], likelihood)
         return state.imu_lowpass
-    if not (magnetic[s] and state.imu_heading):
+    if not (magnetic and state.imu_heading):
         return False
     psi, interval, trust, validated, forget = imu.field_reading(
         state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
-        state.imu_field, run, q, body[run, j, s], reference[j, s], known[s], dt, np.empty(3))
+        state.imu_field, run, q, body, reference, known, dt, np.empty(3))
     if forget:
         imu.forget_heading(q, P)
     if trust == 0.0:
@@ -193,31 +218,45 @@ def _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic, k
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _vector_reading(q, beta, P, run, j, s, dt, body, reference, variance, gravity, magnetic,
-                    known, dof, gating, gate, rejected, streaming, likelihood, state, scratch,
-                    dq, imu_on, hard_iron, magnetic_tolerance, mag_bias):
+def _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected, streaming, likelihood,
+                    scratch, dq, mag_bias, check, health, factor):
     """Vector reading ``s`` of step ``j``: through the IMU models where they
     take it (:func:`_imu_vector`), else the magnetic norm test and the gated
-    update with its reset (MultiplicativeEKF.correct_vector). True if the
-    filter's state was touched (its health is then checked), False for a
-    field refused by the norm test."""
-    if imu_on and _imu_vector(q, beta, P, run, j, s, dt, body, reference, gravity, magnetic,
-                              known, dof, gating, gate, rejected, streaming, likelihood, state,
-                              scratch, dq):
-        return True
-    reads_hard_iron = hard_iron and magnetic[s]
-    if magnetic[s] and not field_passes(body[run, j, s], reference[j, s],
-                                        magnetic_tolerance[run], mag_bias, reads_hard_iron):
-        rejected[run, s] += 1      # a disturbed field: no update
-        return False
-    nis, applied, determinant = vector_update(
-        q, beta, P, body[run, j, s], reference[j, s], variance[run, j, s], gating[run],
-        gate[run, dof[s]], scratch, dq, mag_bias, reads_hard_iron)
-    if streaming and applied:
-        fold_innovation(run, nis, determinant, likelihood)
-    if not applied:
-        rejected[run, s] += 1
-    return True
+    update with its reset (MultiplicativeEKF.correct_vector); the health check
+    after it where the filter's state was touched (not after a field the norm
+    test refused). Inlined, as what runs every step on a recording is; the
+    updates it makes are called (the kernels package's docstring)."""
+    body, reference = block.vector_body[run, j, s], block.vector_reference[j, s]
+    if not (state.imu_on and _imu_vector(
+            q, beta, P, run, s, dt, body, reference, block.vector_gravity[s],
+            block.vector_magnetic[s], block.vector_known[s], block.vector_dof[s], state,
+            rejected, streaming, likelihood, scratch, dq)):
+        reads_hard_iron = state.hard_iron and block.vector_magnetic[s]
+        if block.vector_magnetic[s] and not field_passes(
+                body, reference, state.magnetic_tolerance[run], mag_bias, reads_hard_iron):
+            rejected[run, s] += 1      # a disturbed field: no update
+            return
+        nis, applied, determinant = vector_update(
+            q, beta, P, body, reference, block.vector_variance[run, j, s], state.gating[run],
+            state.gate[run, block.vector_dof[s]], scratch, dq, mag_bias, reads_hard_iron)
+        if streaming and applied:
+            fold_innovation(run, nis, determinant, likelihood)
+        if not applied:
+            rejected[run, s] += 1
+    if check:
+        check_health(q, True, P, P.shape[0], health, factor)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _output(q, out, run, k, last_step, q_true_k, beta, P, beta_last, P_last, variances,
+            keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch):
+    """The estimate output at step ``k`` is ``q`` now (before or after the
+    step's readings, as the filter outputs): kept in ``out`` and by
+    :func:`keep_output`."""
+    for i in range(4):
+        out[i] = q[i]
+    keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, variances,
+                keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
@@ -227,28 +266,21 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    star = star_arrays(block)
-    (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof, vector_magnetic, vector_gravity, vector_known) = vector_arrays(block)
+    star, vector_available = star_arrays(block), block.vector_available     # (B, steps, S)
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = nees_arrays(record, row)
     imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
         state.imu_rate_lp
-    q_all, beta_all, P_all, R_all = state.q, state.beta, state.P, state.R
+    q_all, beta_all, P_all, mag_bias_all = state.q, state.beta, state.P, state.mag_bias
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
-    beta_last, P_last, gating, gate = state.beta_last, state.P_last, state.gating, state.gate
-    rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
+    beta_last, P_last, rejected = state.beta_last, state.P_last, record.rejected[row]
     trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
                                            state.end)
-    hard_iron, mag_bias_all, n = state.hard_iron, state.mag_bias, P_all.shape[1]
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
-        w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
-        scratch6 = np.empty((10, 9, 9))            # a constant shape (module docstring)
-        bits, factor = np.empty(1), np.empty((9, 9))
-        bits_int = bits.view(np.int64)
+        w, z, dq, out, mean, scratch6, bits, bits_int, factor = _run_scratch()
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
@@ -262,42 +294,29 @@ def advance(block, sensors, state, record, row):
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
                 _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
                            imu_on, state.imu_strapdown[run], state.imu_rotation[run, 0])
-            for i in range(4):
-                out[i] = q[i]
             if not posterior:
-                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
-                            variances, keep_traces, streaming, nees_every, settle,
-                            nees_samples, nees_sum, scratch6)
+                _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
+                        variances, keep_traces, streaming, nees_every, settle, nees_samples,
+                        nees_sum, scratch6)
             if available:
-                nis, applied, determinant = star_update(q, beta, P, z, R_all[run], gating[run],
-                                                         gate[run, 3], scratch6, dq, mag_bias)
-                if check:
-                    check_health(q, True, P, n, health[run], factor)
-                if streaming and applied:
-                    nis_sum[run] += nis
-                    nis_count[run] += 1
-                    fold_innovation(run, nis, determinant, likelihood)
-            for s in range(vector_dof.shape[0]):
-                if vector_available[run, j, s] and _vector_reading(
-                        q, beta, P, run, j, s, dt, vector_body, vector_reference,
-                        vector_variance, vector_gravity, vector_magnetic, vector_known,
-                        vector_dof, gating, gate, rejected, streaming, likelihood, state,
-                        scratch6, dq, imu_on, hard_iron, magnetic_tolerance, mag_bias) \
-                        and check:
-                    check_health(q, True, P, n, health[run], factor)
+                _star_reading(q, beta, P, z, run, state.R[run], state.gating[run],
+                              state.gate[run, 3], scratch6, dq, mag_bias, check, health[run],
+                              factor, streaming, nis_sum, nis_count, likelihood)
+            for s in range(vector_available.shape[2]):
+                if vector_available[run, j, s]:
+                    _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected,
+                                    streaming, likelihood, scratch6, dq, mag_bias, check,
+                                    health[run], factor)
             if posterior:
-                for i in range(4):
-                    out[i] = q[i]
-                keep_output(run, k, last_step, q_true[j], out, beta, P, beta_last, P_last,
-                            variances, keep_traces, streaming, nees_every, settle,
-                            nees_samples, nees_sum, scratch6)
+                _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
+                        variances, keep_traces, streaming, nees_every, settle, nees_samples,
+                        nees_sum, scratch6)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
                 _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
                            state.imu_strapdown[run], state.imu_rotation[run, 0])
-            if not (finite_state(q, 4, P, n) and finite_state(beta, 3, P, 0)):
+            if not (finite_state(q, 4, P, P.shape[0]) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
-                check_health(q, True, P, n, health[run], factor)
-
+                check_health(q, True, P, P.shape[0], health[run], factor)

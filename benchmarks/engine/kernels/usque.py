@@ -37,8 +37,8 @@ from benchmarks.engine.kernels.algebra import quat_exp, to_body_frame
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
                                               norm_tolerances, passes_norm, mark_diverged,
-                                              nees_arrays, rate_states, record_error,
-                                              trapezoid_rate)
+                                              nees_arrays, rate_arrays, rate_states,
+                                              record_error, trapezoid_rate)
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
 from benchmarks.engine.kernels.unscented import (N_SIGMAS, fold_reference, grp_from_quat,
@@ -91,6 +91,14 @@ class State(NamedTuple):
     imu_counts: np.ndarray
     imu_rotation: np.ndarray
     imu_field: np.ndarray
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _filter_arrays(state):
+    """The filters' arrays of the state, taken out of its tuple (before the
+    parallel loop: see the kernels package's docstring)."""
+    return (state.q, state.x, state.P, state.sigmas, state.noise, state.bias_rw, state.spread,
+            state.Wm, state.Wc, state.beta_last, state.P_last, state.posterior)
 
 
 def _spread(points) -> float:
@@ -231,60 +239,105 @@ def _any_reading(available, run, j):
 
 
 @njit(cache=True, error_model="numpy")
-def _correct(q, x, P, sigmas, available, z, run, j, R, Wm, Wc, spread, gating, gate,
-             vector_body, vector_reference, vector_variance, vector_available, vector_dof,
-             scratch, predicted, R_vector, nis_out, streaming, likelihood, rejected,
-             vector_magnetic, magnetic_tolerance, vector_gravity, vector_known, dt, state):
+def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, rejected,
+             streaming, nis_sum, nis_count, likelihood, check, health, scratch, predicted,
+             R_vector):
     """The step's updates, as ``USQUE._estimate_at_step`` makes them: the
-    tracker's, then each vector reading's, each followed by the reset (or the
-    reset alone without any reading), each applied one folded into the
-    likelihood sums if ``streaming``. Returns whether the sigma points of
-    every update existed (``False``: the per-run class's Cholesky factor
-    fails) and whether the tracker's reading was applied (its NIS in
-    ``nis_out[0]``); each vector reading gating rejects is counted in
-    ``rejected[run, s]``; the IMU models (:mod:`benchmarks.engine.kernels.usque_imu`)
-    take the readings they model."""
-    updated, applied = False, False
+    tracker's, then each vector reading's (through the IMU models where they
+    take it, :mod:`usque_imu`), each followed by the reset (or the reset alone
+    without any reading); each applied one folded into the likelihood sums,
+    the tracker's NIS into ``nis_sum``, each refused one counted in
+    ``rejected``, the health checked after any reading. False if the sigma
+    points of an update did not exist (the per-run class's Cholesky factor
+    fails): the run diverges there, and its step adds no NIS."""
+    (body, reference, variance, vector_available, dof, magnetic, gravity, known) = vectors
+    spread, gating, gate = state.spread[run], state.gating[run], state.gate[run]
+    updated, applied, nis = False, False, 0.0
     if available:
-        nis_out[0], applied, determinant = _update(q, x, P, sigmas, z, R, Wm, Wc, gating,
-                                                   gate[3], scratch)
+        nis, applied, determinant = _update(q, x, P, sigmas, z, state.R[run], Wm, Wc, gating,
+                                            gate[3], scratch)
         if streaming and applied:
-            fold_innovation(run, nis_out[0], determinant, likelihood)
+            fold_innovation(run, nis, determinant, likelihood)
         fold_reference(q, x)
         updated = True
     elif not _any_reading(vector_available, run, j):
         fold_reference(q, x)
-    for s in range(vector_dof.shape[0]):
-        if vector_available[run, j, s]:
-            if state.imu_on:
-                taken, factored, updated = usque_imu.reading(
-                    q, x, P, sigmas, run, j, s, dt, vector_body, vector_reference,
-                    vector_gravity, vector_magnetic, vector_known, vector_dof, gating, gate,
-                    rejected, streaming, likelihood, state, spread, Wm, Wc, updated, scratch,
-                    predicted, R_vector)
-                if not factored:
-                    return False, applied
-                if taken:
-                    continue
-            # Sigma points about the current (x, P) for a second update within a step.
-            if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
-                return False, applied
-            if vector_magnetic[s] and not passes_norm(vector_body[run, j, s],
-                                                      vector_reference[j, s],
-                                                      magnetic_tolerance):
-                nis, used, determinant = 0.0, False, 1.0   # a disturbed field: the reset alone
-            else:
-                nis, used, determinant = _vector_update(
-                    q, x, P, sigmas, vector_body[run, j, s], vector_reference[j, s],
-                    vector_variance[run, j, s], Wm, Wc, gating, gate[vector_dof[s]], scratch,
-                    predicted, R_vector)
+        return True
+    for s in range(dof.shape[0]):
+        if not vector_available[run, j, s]:
+            continue
+        if state.imu_on:
+            taken, factored, updated = usque_imu.reading(
+                q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, known,
+                dof, gating, gate, rejected, streaming, likelihood, state, spread, Wm, Wc,
+                updated, scratch, predicted, R_vector)
+            if not factored:
+                return False
+            if taken:
+                continue
+        # Sigma points about the current (x, P) for a second update within a step.
+        if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
+            return False
+        if magnetic[s] and not passes_norm(body[run, j, s], reference[j, s],
+                                           state.magnetic_tolerance[run]):
+            used = False               # a disturbed field: the reset alone
+        else:
+            vector_nis, used, determinant = _vector_update(
+                q, x, P, sigmas, body[run, j, s], reference[j, s], variance[run, j, s], Wm,
+                Wc, gating, gate[dof[s]], scratch, predicted, R_vector)
             if streaming and used:
-                fold_innovation(run, nis, determinant, likelihood)
-            if not used:
-                rejected[run, s] += 1
-            fold_reference(q, x)
-            updated = True
-    return True, applied
+                fold_innovation(run, vector_nis, determinant, likelihood)
+        if not used:
+            rejected[run, s] += 1
+        fold_reference(q, x)
+        updated = True
+    if streaming and applied:
+        nis_sum[run] += nis
+        nis_count[run] += 1
+    if check:
+        check_health(q, True, P, 6, health, scratch[0])
+    return True
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch():
+    """One run's working arrays (allocated once per run, in its thread)."""
+    bits = np.empty(1)
+    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
+            np.empty((6, 6, 6)), np.empty((N_SIGMAS, STATE_SIZE)), np.empty((3, 3)), bits,
+            bits.view(np.int64))
+
+
+@njit(cache=True, error_model="numpy")
+def _propagated(q, x, P, sigmas, rate, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
+                propagated, imu_on, strapdown, rotation):
+    """:func:`_predict` with ``rate`` (and the IMU models' strapdown before it):
+    True if its Cholesky factors existed and the state is finite after it.
+    Called, though it runs every step: inlined at the loop's two places, it
+    took 9 s more to compile, and beside the sigma points' propagation its
+    call costs nothing measurable."""
+    if imu_on:
+        usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], rate, x, dt)
+    factored = _predict(q, x, P, sigmas, rate, dt, noise[run], bias_rw[run], spread[run], Wm,
+                        Wc, scratch[0], scratch[1], propagated)
+    return factored and _finite(q, x, P)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _finite(q, x, P):
+    """The divergence test (AttitudeEstimator.state_is_finite) on q̂, x and P."""
+    return finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _output(q, x, out, run, k, last_step, q_true_k, P, beta_last, P_last, variances,
+            keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch):
+    """The estimate output at step ``k`` (:func:`output`, before or after the
+    step's readings, as the filter outputs): in ``out``, and kept by
+    :func:`keep_output`."""
+    output(q, x, out)
+    keep_output(run, k, last_step, q_true_k, out, x[3:], P, beta_last, P_last, variances,
+                keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
@@ -295,37 +348,20 @@ def advance(block, sensors, state, record, row):
         block.q_true
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = gyro_arrays(block, sensors)
-    star = star_arrays(block)
-    (vector_body, vector_reference, vector_variance, vector_available,
-     vector_dof, vector_magnetic, vector_gravity, vector_known) = vector_arrays(block)
+    star, vectors, rejected = star_arrays(block), vector_arrays(block), record.rejected[row]
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = nees_arrays(record, row)
-    q_all, x_all, P_all, sigmas_all, R_all = state.q, state.x, state.P, state.sigmas, state.R
-    noise, bias_rw, spread, Wm_all, Wc_all = (state.noise, state.bias_rw, state.spread,
-                                              state.Wm, state.Wc)
-    beta_last, P_last, posterior = state.beta_last, state.P_last, state.posterior
-    gating, gate = state.gating, state.gate
-    rejected, magnetic_tolerance = record.rejected[row], state.magnetic_tolerance
-    trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
-                                           state.end)
-    # Bound outside the loop, as the MEKF's kernel does: read off the state
-    # tuple inside numba's parallel loop, the inlined gyro_reading's writes
-    # to the counts were lost (every interval one step).
-    imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
-        state.imu_rate_lp
-    strapdown, rotation = state.imu_strapdown, state.imu_rotation
+    (q_all, x_all, P_all, sigmas_all, noise, bias_rw, spread, Wm_all, Wc_all, beta_last,
+     P_last, posterior) = _filter_arrays(state)
+    (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
+     rotation) = rate_arrays(state)
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
-        w, z, dq, out, mean = np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3)
-        scratch = np.empty((6, 6, 6))
-        propagated = np.empty((N_SIGMAS, STATE_SIZE))
-        R_vector, nis, bits = np.empty((3, 3)), np.empty(1), np.empty(1)
-        bits_int = bits.view(np.int64)
+        w, z, dq, out, mean, scratch, propagated, R_vector, bits, bits_int = _run_scratch()
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
-        Wm, Wc = Wm_all[run], Wc_all[run]
-        countdown, reading = first_countdown(k0, star, run), 0
+        Wm, Wc, countdown, reading = Wm_all[run], Wc_all[run], first_countdown(k0, star, run), 0
         for j in range(steps):
             k = k0 + j
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
@@ -337,49 +373,27 @@ def advance(block, sensors, state, record, row):
                 continue
             if imu_on:
                 imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
-            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
-                if state.imu_on:
-                    usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], mean, x,
-                                                  dt)
-                factored = _predict(q, x, P, sigmas, mean, dt, noise[run], bias_rw[run],
-                                    spread[run], Wm, Wc, scratch[0], scratch[1], propagated)
-                if not (factored and finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)):
-                    mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
-                    continue
-            if not posterior:
-                output(q, x, out)
-                keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
-                            variances, keep_traces, streaming, nees_every, settle,
-                            nees_samples, nees_sum, scratch)
-            factored, applied = _correct(
-                q, x, P, sigmas, available, z, run, j, R_all[run], Wm, Wc, spread[run],
-                gating[run], gate[run], vector_body, vector_reference, vector_variance,
-                vector_available, vector_dof, scratch, propagated, R_vector, nis, streaming,
-                likelihood, rejected, vector_magnetic, magnetic_tolerance[run], vector_gravity,
-                vector_known, dt, state)
-            if not factored:
+            if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end) and not \
+                    _propagated(q, x, P, sigmas, mean, dt, run, noise, bias_rw, spread, Wm, Wc,
+                                scratch, propagated, imu_on, strapdown, rotation):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
-            if streaming and applied:
-                nis_sum[run] += nis[0]
-                nis_count[run] += 1
-            if check and (available or _any_reading(vector_available, run, j)):
-                check_health(q, True, P, 6, health[run], scratch[0])
+            if not posterior:
+                _output(q, x, out, run, k, last_step, q_true[j], P, beta_last, P_last, variances,
+                        keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
+            if not _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state,
+                            rejected, streaming, nis_sum, nis_count, likelihood, check,
+                            health[run], scratch, propagated, R_vector):
+                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+                continue
             if posterior:
-                output(q, x, out)
-                keep_output(run, k, last_step, q_true[j], out, x[3:], P, beta_last, P_last,
-                            variances, keep_traces, streaming, nees_every, settle,
-                            nees_samples, nees_sum, scratch)
+                _output(q, x, out, run, k, last_step, q_true[j], P, beta_last, P_last, variances,
+                        keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
-            if not trapezoid[run]:
-                if state.imu_on:
-                    usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], w, x, dt)
-                factored = _predict(q, x, P, sigmas, w, dt, noise[run], bias_rw[run],
-                                    spread[run], Wm, Wc, scratch[0], scratch[1], propagated)
-            else:
-                factored = True
-            if not (factored and finite_state(q, 4, P, 6) and finite_state(x, 6, P, 0)):
+            if not (_finite(q, x, P) if trapezoid[run] else _propagated(
+                    q, x, P, sigmas, w, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
+                    propagated, imu_on, strapdown, rotation)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
                 check_health(q, True, P, 6, health[run], scratch[0])
