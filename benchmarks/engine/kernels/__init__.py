@@ -47,12 +47,13 @@ So each kernel unpacks its block, its record and its state before the loop
 (``gyro_arrays`` …). An array read every step is passed on by itself: a
 plain tuple's item read in the loop costs a reference count too (the EKF's
 batch 5 % slower with the gyro's arrays as a tuple); the star tracker's,
-read at its readings, go as their tuple (no change measured). An inlined
-helper that runs only where a reading comes may read the block's and the
-state's arrays itself (the MEKF's ``_vector_reading``); called with the two
-tuples, it took a third longer on a recording, which has readings at every
-sample: a called function counts a reference of every array of a tuple it
-takes.
+read at its readings, go as their tuple (no change measured). A called
+function counts a reference of every array it takes, alone or in a tuple:
+USQUE's ``_correct``, called every step, takes the vector sensors' arrays
+as their tuple at the cost it had taking them one by one, but the MEKF's
+``_vector_reading``, called with the whole block and state, took a third
+longer on a recording (readings at every sample); inlined, it reads the
+arrays it needs off them where a reading comes.
 
 Its run index is made ``run = np.int64(index)`` first: numba types the
 ``prange`` index as a signed integer where it types the kernel and as an

@@ -354,11 +354,11 @@ def rate_states(estimators) -> dict:
 
 @njit(cache=True, inline="always", error_model="numpy")
 def rate_arrays(state):
-    """A six-state kernel's arrays read at every step besides its filter's:
-    its rate interpolation (:func:`rate_states`) and the IMU models' state
-    (``benchmarks.engine.kernels.imu.imu_state``), taken out of its state's
-    tuple before the parallel loop (read off the tuple inside it, the inlined
-    gyro reading's writes to the IMU models' counts were lost)."""
+    """What a six-state kernel reads at every step besides its filter's
+    arrays: its rate interpolation (:func:`rate_states`), and the IMU models'
+    flag and arrays (``benchmarks.engine.kernels.imu.imu_state``), taken out
+    of its state's tuple before the parallel loop (read off the tuple inside
+    it, the inlined gyro reading's writes to the IMU models' counts were lost)."""
     return (state.trapezoid, state.rate_prev, state.has_rate, state.end, state.imu_on,
             state.imu_counts, state.imu_detector, state.imu_rate_lp, state.imu_strapdown,
             state.imu_rotation)

@@ -24,7 +24,8 @@ from benchmarks.engine.kernels.algebra import to_body_frame
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
                                               mark_diverged, nees_arrays, norm_tolerances,
-                                              rate_states, record_error, trapezoid_rate)
+                                              rate_arrays, rate_states, record_error,
+                                              trapezoid_rate)
 from benchmarks.engine.kernels import imu
 from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_passes,
                                                   gravity_update, propagate_covariance,
@@ -271,13 +272,11 @@ def advance(block, sensors, state, record, row):
      health) = error_arrays(record, row)
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = nees_arrays(record, row)
-    imu_on, counts, detector, rate_lp = state.imu_on, state.imu_counts, state.imu_detector, \
-        state.imu_rate_lp
     q_all, beta_all, P_all, mag_bias_all = state.q, state.beta, state.P, state.mag_bias
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, rejected = state.beta_last, state.P_last, record.rejected[row]
-    trapezoid, rate_prev, has_rate, end = (state.trapezoid, state.rate_prev, state.has_rate,
-                                           state.end)
+    (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
+     rotation) = rate_arrays(state)
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
         w, z, dq, out, mean, scratch6, bits, bits_int, factor = _run_scratch()
@@ -293,7 +292,7 @@ def advance(block, sensors, state, record, row):
                 imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
                 _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
-                           imu_on, state.imu_strapdown[run], state.imu_rotation[run, 0])
+                           imu_on, strapdown[run], rotation[run, 0])
             if not posterior:
                 _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
                         variances, keep_traces, streaming, nees_every, settle, nees_samples,
@@ -315,7 +314,7 @@ def advance(block, sensors, state, record, row):
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
                 _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
-                           state.imu_strapdown[run], state.imu_rotation[run, 0])
+                           strapdown[run], rotation[run, 0])
             if not (finite_state(q, 4, P, P.shape[0]) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:

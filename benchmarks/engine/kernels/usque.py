@@ -246,10 +246,11 @@ def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, 
     tracker's, then each vector reading's (through the IMU models where they
     take it, :mod:`usque_imu`), each followed by the reset (or the reset alone
     without any reading); each applied one folded into the likelihood sums,
-    the tracker's NIS into ``nis_sum``, each refused one counted in
-    ``rejected``, the health checked after any reading. False if the sigma
-    points of an update did not exist (the per-run class's Cholesky factor
-    fails): the run diverges there, and its step adds no NIS."""
+    the tracker's NIS into ``nis_sum``, each vector reading refused (gated, or
+    a disturbed field) counted in ``rejected``, and the health checked once
+    after the step's readings, if it had any. False if the sigma points of an
+    update did not exist (the per-run class's Cholesky factor fails): the run
+    diverges there, and its step adds no NIS."""
     (body, reference, variance, vector_available, dof, magnetic, gravity, known) = vectors
     spread, gating, gate = state.spread[run], state.gating[run], state.gate[run]
     updated, applied, nis = False, False, 0.0
