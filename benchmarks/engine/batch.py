@@ -174,7 +174,7 @@ def make_runs(scenario: Scenario, seeds, **settings) -> RunTable:
 
 
 def _fill_normals(generators, gyro_out, star_out, star_counts, uniforms_out, threads):
-    """Draw each run's next block of random numbers, in the per-run path's order."""
+    """Draw each stream's next block of random numbers, in the per-run path's order."""
     def fill(indices):
         for r in indices:
             gyro_rng, star_rng, dropout_rng = generators[r]
@@ -189,6 +189,19 @@ def _fill_normals(generators, gyro_out, star_out, star_counts, uniforms_out, thr
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
         list(pool.map(fill, np.array_split(np.arange(len(generators)), threads)))
+
+
+def _shared_streams(seeds: np.ndarray, steps_between: np.ndarray) -> tuple:
+    """``(sources, first)``: each run's index among the batch's distinct
+    (seed, tracker interval) pairs, in the order they first come, and the
+    first run of each. Runs that share both draw the same numbers (the same
+    generators, drawn as often), so a sweep of a filter's settings over
+    common seeds (the landscape, a tuning grid) draws each stream once."""
+    index = {}
+    sources = np.array([index.setdefault(key, len(index))
+                        for key in zip(seeds.tolist(), steps_between.tolist())], dtype=np.intp)
+    first = np.unique(sources, return_index=True)[1]
+    return sources, first
 
 
 #: Every estimator with a kernel, in the engine's order (the kernel registry's).
@@ -211,12 +224,15 @@ def per_run_estimators(scenario: Scenario, runs: RunTable, name: str) -> list:
 @dataclass
 class _Sensors:
     """The sensors' settings for every run (a :class:`Block`'s sensor fields
-    but the noise), their generators and the length of a noise block."""
+    but the noise), the generators of their distinct streams and the length of
+    a noise block."""
 
     settings: dict
     tracker: object              # the scenario's star tracker (its outages)
     initial_bias: np.ndarray     # (B, 6) the gyro's true bias at the start: β_0, and b_0
-    generators: list
+    generators: list             # (U,) of each distinct stream (_shared_streams)
+    sources: np.ndarray          # (B,) each run's stream
+    first: np.ndarray            # (U,) each stream's first run
     block_steps: int
     threads: int
     vectors: VectorStreams       # the vector sensors' (none, if no kernel applies them)
@@ -247,14 +263,16 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int,
                              max_block_steps(n_runs, len(streams.sensors)) or scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
     dropout = float(tracker.dropout_probability)
-    generators = [sensor_generators(int(seed)) for seed in runs.seeds]
+    sources, first = _shared_streams(runs.seeds, steps_between)
+    generators = [sensor_generators(int(seed)) for seed in runs.seeds[first]]
     # β_0 and, with a Gauss–Markov part, its stationary start b_0 = σ_b N,
     # drawn from each run's gyro stream before its first step, as sensors.Gyro does.
-    initial_bias = np.zeros((n_runs, 6))
+    initial_bias = np.zeros((len(generators), 6))
     initial_bias[:, :3] = gyro.initial_bias_radps
     if gyro.bias_instability_radps > 0:
         for r, (gyro_rng, _, _) in enumerate(generators):
             initial_bias[r, 3:] = gyro.bias_instability_radps * gyro_rng.standard_normal(3)
+    initial_bias = initial_bias[sources]
     settings = dict(
         gyro_std=np.array([gyro.reading_std(p, dt, gyro.bias_random_walk)
                            for p in runs.gyro_noise]),
@@ -271,8 +289,8 @@ def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int,
         sensor_to_body=np.ascontiguousarray(tracker.sensor_to_body) if rotation else np.eye(3),
         canonical=rotation and tracker.sign == "canonical", dropout_probability=dropout,
         dropout_uniforms=np.empty((n_runs, readings if dropout > 0 else 0)))
-    return _Sensors(settings=settings, tracker=tracker,
-                    initial_bias=initial_bias, generators=generators,
+    return _Sensors(settings=settings, tracker=tracker, initial_bias=initial_bias,
+                    generators=generators, sources=sources, first=first,
                     block_steps=block_steps, threads=threads, vectors=streams)
 
 
@@ -295,12 +313,27 @@ def _block(sensors: _Sensors, scenario: Scenario, k0: int, truth, rates, vectors
     counts = (stop - 1) // steps_between - (k0 - 1) // steps_between
     if sensors.tracker.model == "none":
         counts = np.zeros_like(counts)      # an outage throughout: nothing drawn
-    _fill_normals(sensors.generators, normals, settings["star_normals"], counts,
-                  settings["dropout_uniforms"], sensors.threads)
+    _draw(sensors, normals, settings["star_normals"], counts, settings["dropout_uniforms"])
     outage = sensors.tracker.in_outage(truth.time_s)
     return Block(k0=k0, steps=stop - k0, last_step=scenario.n_steps - 1, dt=scenario.dt,
                  q_true=np.ascontiguousarray(truth.q_true),
                  omega_true=np.ascontiguousarray(rates), outage=outage, **settings, **vectors)
+
+
+def _draw(sensors: _Sensors, gyro_out, star_out, counts, uniforms_out) -> None:
+    """Each run's block of random numbers: drawn into the buffers where every
+    run has a stream of its own, else each distinct stream's drawn once and
+    copied to the runs that share it (:func:`_shared_streams`)."""
+    if len(sensors.first) == len(sensors.sources):
+        _fill_normals(sensors.generators, gyro_out, star_out, counts, uniforms_out,
+                      sensors.threads)
+        return
+    drawn = [np.empty((len(sensors.first),) + out.shape[1:])
+             for out in (gyro_out, star_out, uniforms_out)]
+    _fill_normals(sensors.generators, *drawn[:2], counts[sensors.first], drawn[2],
+                  sensors.threads)
+    for out, values in zip((gyro_out, star_out, uniforms_out), drawn):
+        np.take(values, sensors.sources, axis=0, out=out)
 
 
 def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict, record,
@@ -337,7 +370,7 @@ def _vectors_ahead(pool, sensors: _Sensors, item):
     if item is None:
         return None
     k0, (truth, _) = item
-    return item, pool.submit(vector_block, sensors.vectors, len(sensors.generators), k0,
+    return item, pool.submit(vector_block, sensors.vectors, len(sensors.sources), k0,
                              np.ascontiguousarray(truth.q_true))
 
 
