@@ -248,22 +248,23 @@ class _Sensors:
 def _sensors(scenario: Scenario, runs: RunTable, block_steps: int, threads: int,
              vectors: bool) -> _Sensors:
     """The per-run path's arithmetic, value by value: √(p/dt + σ_u²dt/12) and the
-    tracker's σ, its readings' interval, and the generators of each run's seed
-    (and, if ``vectors``, of its vector sensors: :mod:`benchmarks.engine.vectors`)."""
+    tracker's σ, its readings' interval, and the generators of each distinct
+    stream (:func:`_shared_streams`; and, if ``vectors``, of its vector
+    sensors: :mod:`benchmarks.engine.vectors`)."""
     n_runs, dt = len(runs), scenario.dt
-    streams = vector_streams(scenario if vectors else None, runs.seeds)
     gyro = scenario.build_gyro()
     tracker = scenario.build_star_tracker()
     rotation = tracker.model == "rotation"
     steps_between = np.array([steps_between_readings(t, dt)
                               for t in runs.time_between_measurements], dtype=np.int64)
+    sources, first = _shared_streams(runs.seeds, steps_between)
+    streams = vector_streams(scenario if vectors else None, runs.seeds[first])
     # Keep the gyro buffer's size whatever its columns (3, and 3 more each for a
     # bias walk and a Gauss–Markov part).
     block_steps = max(1, min(block_steps * 3 // gyro.normals_per_step, scenario.n_steps,
                              max_block_steps(n_runs, len(streams.sensors)) or scenario.n_steps))
     readings = -(-block_steps // int(steps_between.min())) + 1
     dropout = float(tracker.dropout_probability)
-    sources, first = _shared_streams(runs.seeds, steps_between)
     generators = [sensor_generators(int(seed)) for seed in runs.seeds[first]]
     # β_0 and, with a Gauss–Markov part, its stationary start b_0 = σ_b N,
     # drawn from each run's gyro stream before its first step, as sensors.Gyro does.
@@ -370,8 +371,17 @@ def _vectors_ahead(pool, sensors: _Sensors, item):
     if item is None:
         return None
     k0, (truth, _) = item
-    return item, pool.submit(vector_block, sensors.vectors, len(sensors.sources), k0,
-                             np.ascontiguousarray(truth.q_true))
+    return item, pool.submit(_vector_readings, sensors, k0, np.ascontiguousarray(truth.q_true))
+
+
+def _vector_readings(sensors: _Sensors, k0: int, q_true: np.ndarray) -> dict:
+    """:func:`vector_block`'s arrays of every run: each distinct stream's
+    readings made once, and copied to the runs that share it."""
+    arrays = vector_block(sensors.vectors, len(sensors.first), k0, q_true)
+    if len(sensors.first) < len(sensors.sources):
+        for name in ("vector_body", "vector_variance", "vector_available"):
+            arrays[name] = np.take(arrays[name], sensors.sources, axis=0)
+    return arrays
 
 
 def run_batch(scenario: Scenario, runs: RunTable, estimators=WORKSHOP_ESTIMATORS,
