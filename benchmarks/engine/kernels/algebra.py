@@ -68,32 +68,29 @@ def joseph_covariance(P, IK, KRK, T, n=6, bias_identity=False):
     every entry is the full product's to the bit, in half the arithmetic."""
     for i in range(n):
         for j in range(n):
-            total = 0.0
-            if bias_identity:
-                for m in range(3):
-                    total += IK[i, m] * P[m, j]
-                if 3 <= i < 6:
-                    total += P[i, j]
-                for m in range(6, n):
-                    total += IK[i, m] * P[m, j]
-            else:
-                for m in range(n):
-                    total += IK[i, m] * P[m, j]
-            T[i, j] = total
+            T[i, j] = _row_times(IK, i, P[:, j], n, bias_identity)
     for i in range(n):
         for j in range(n):
-            first = 0.0
-            if bias_identity:
-                for m in range(3):
-                    first += T[i, m] * IK[j, m]
-                if 3 <= j < 6:
-                    first += T[i, j]
-                for m in range(6, n):
-                    first += T[i, m] * IK[j, m]
-            else:
-                for m in range(n):
-                    first += T[i, m] * IK[j, m]
-            P[i, j] = first + KRK[i, j]
+            P[i, j] = _row_times(IK, j, T[i], n, bias_identity) + KRK[i, j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _row_times(IK, row, v, n, bias_identity):
+    """Σ_m IK[row, m] v[m] over the ``n`` states, in order; with
+    ``bias_identity``, the bias columns' products (IK's identity there) are
+    skipped, ``v[row]`` added for the one on the diagonal."""
+    total = 0.0
+    if bias_identity:
+        for m in range(3):
+            total += IK[row, m] * v[m]
+        if 3 <= row < 6:
+            total += v[row]
+        for m in range(6, n):
+            total += IK[row, m] * v[m]
+    else:
+        for m in range(n):
+            total += IK[row, m] * v[m]
+    return total
 
 
 @njit(cache=True, error_model="numpy")
