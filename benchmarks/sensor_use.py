@@ -139,14 +139,18 @@ def tagged_label(label: str, note: str) -> str:
 def _estimates_hard_iron(item, scenario) -> bool:
     """Whether estimator ``item`` (a name or a per-run object), as
     ``scenario`` configures it, estimates the magnetometer's hard iron (the
-    MEKF's ``magnetometer_bias_states``)."""
+    MEKF's ``magnetometer_bias_states``, or the IMU models' online fit,
+    ``hard_iron_fit``)."""
     from estimators.mekf import estimates_hard_iron
     if isinstance(item, str):
         cls = _class_of(item)
-        if "magnetometer_bias_states" not in getattr(cls, "option_names", tuple)():
+        if not {"magnetometer_bias_states", "hard_iron_fit"} & set(
+                getattr(cls, "option_names", tuple)()):
             return False
-        return estimates_hard_iron(cls.configured_settings(scenario))
-    return estimates_hard_iron(getattr(item, "__dict__", {}))
+        settings = cls.configured_settings(scenario)
+    else:
+        settings = getattr(item, "__dict__", {})
+    return estimates_hard_iron(settings) or bool(settings.get("hard_iron_fit", False))
 
 
 def warn_unmodelled(scenario, estimators, references=None) -> None:

@@ -275,6 +275,10 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
         direction (rad²·s), the heading (rad²·s), the low-passed rate at rest
         (rad²/s²·s); a reading's variance is the density over the time since
         the sensor's last reading.
+    hard_iron_fit : bool
+        Fit the magnetometer's hard iron online from its readings alone and
+        take it off each reading before the heading model reads it
+        (:mod:`estimators.imu.hard_iron`; needs ``magnetometer_model="heading"``).
     magnetometer_bias_states : bool
         Estimate the magnetometer's hard iron as three more error states
         (module docstring; needs ``magnetometer_model="vector"``).
@@ -306,14 +310,16 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
                  gravity_model: str = "reading", magnetometer_model: str = "vector",
                  rest_updates: bool = False, gravity_density: float = imu.GRAVITY_DENSITY,
                  heading_density: float = imu.HEADING_DENSITY,
-                 rest_density: float = imu.REST_DENSITY, magnetometer_bias_states: bool = False,
+                 rest_density: float = imu.REST_DENSITY, hard_iron_fit: bool = False,
+                 magnetometer_bias_states: bool = False,
                  initial_magnetometer_bias_sigma=MAGNETOMETER_BIAS_SIGMA,
                  on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self._configure_imu(gravity_model=gravity_model, magnetometer_model=magnetometer_model,
                             rest_updates=rest_updates, gravity_density=gravity_density,
-                            heading_density=heading_density, rest_density=rest_density)
+                            heading_density=heading_density, rest_density=rest_density,
+                            hard_iron_fit=hard_iron_fit)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,

@@ -65,9 +65,11 @@ propagation) the mean's :math:`\delta p` moves into the reference,
 .. _usque-imu:
 
 **IMU models** (:mod:`estimators.imu`, the MEKF's; ``gravity_model``,
-``magnetometer_model``, ``rest_updates`` as there): each model's reading
-becomes a measurement function of the sigma points, so that the unscented
-transform, not a Jacobian, carries it (Crassidis & Markley 2003, §III):
+``magnetometer_model``, ``rest_updates``, ``hard_iron_fit`` as there; the
+hard iron's fit corrects the field before the heading reads it): each
+model's reading becomes a measurement function of the sigma points, so
+that the unscented transform, not a Jacobian, carries it (Crassidis &
+Markley 2003, §III):
 
 * gravity's low-passed direction :math:`z`:
   :math:`h(\chi) = A(\hat q \otimes \delta q(\delta p))^\mathsf{T} e_z
@@ -265,7 +267,7 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
     initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance,
     rate_interpolation, gravity_model, magnetometer_model, rest_updates,
-    gravity_density, heading_density, rest_density, on_invalid
+    gravity_density, heading_density, rest_density, hard_iron_fit, on_invalid
         As for :class:`~estimators.MultiplicativeEKF` (the IMU models'
         updates made on the sigma points: :ref:`IMU models <usque-imu>` below).
     alpha, beta, kappa : float
@@ -297,12 +299,14 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
                  gravity_model: str = "reading", magnetometer_model: str = "vector",
                  rest_updates: bool = False, gravity_density: float = imu.GRAVITY_DENSITY,
                  heading_density: float = imu.HEADING_DENSITY,
-                 rest_density: float = imu.REST_DENSITY, on_invalid: str = "raise"):
+                 rest_density: float = imu.REST_DENSITY, hard_iron_fit: bool = False,
+                 on_invalid: str = "raise"):
         AttitudeEstimator.__init__(self, dt=dt, initial_attitude=initial_attitude,
                                    on_invalid=on_invalid)
         self._configure_imu(gravity_model=gravity_model, magnetometer_model=magnetometer_model,
                             rest_updates=rest_updates, gravity_density=gravity_density,
-                            heading_density=heading_density, rest_density=rest_density)
+                            heading_density=heading_density, rest_density=rest_density,
+                            hard_iron_fit=hard_iron_fit)
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         alpha, beta, kappa, spread = _scaling(alpha, beta, kappa)

@@ -4,6 +4,8 @@ import numpy as np
 from hypothesis import settings
 import pytest
 
+from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_body_frame
+
 
 @pytest.fixture
 def rng():
@@ -65,3 +67,17 @@ def npz_declaration(**sensors) -> str:
         text += (f'\n[recording.{name}]\ntime = "t"\ncolumns = "{array}"\nunit = "{unit}"\n'
                  + "".join(f"{line}\n" for line in extra))
     return text
+
+
+def turning_imu(rate, dt, rng):
+    """A body turning at ``rate`` ((N, 3) rad/s, body frame) from the
+    identity: its gyro (biased by 0.3, −0.2, 0.1 °/s, noise 1e-3 rad/s from
+    ``rng``), its true attitude, and the gravity its accelerometer reads
+    (9.81 m/s² up, no noise)."""
+    gyro = rate + np.radians([0.3, -0.2, 0.1]) + rng.normal(0, 1e-3, rate.shape)
+    q = np.empty((len(rate), 4))
+    q[0] = [1.0, 0, 0, 0]
+    for k in range(1, len(rate)):
+        q[k] = quat_multiply(q[k - 1], quat_from_rotvec(rate[k] * dt))
+    acc = np.array([to_body_frame(qk, np.array([0.0, 0.0, 9.81])) for qk in q])
+    return gyro, q, acc

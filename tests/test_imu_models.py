@@ -20,6 +20,7 @@ from estimators import USQUE, MekfSmoother, MultiplicativeEKF
 from estimators.imu import ImuModels, heading, lowpass, rest
 from estimators.smoother import fuse, reversed_rates
 from sensors.vector import VectorReadings
+from tests.conftest import turning_imu
 
 
 # --- the low-pass filter ---------------------------------------------------------
@@ -321,12 +322,7 @@ def _tumbling_imu(dt: float, n: int, magnet_at_start: bool = False):
     rng = np.random.default_rng(4)
     t = np.arange(n) * dt
     rate = np.stack([np.sin(t), 0.5 * np.cos(2 * t), 0.3 * np.ones(n)], axis=1)
-    gyro = rate + np.radians([0.3, -0.2, 0.1]) + rng.normal(0, 1e-3, (n, 3))
-    q = np.empty((n, 4))
-    q[0] = [1.0, 0, 0, 0]
-    for k in range(1, n):
-        q[k] = quat_multiply(q[k - 1], quat_from_rotvec(rate[k] * dt))
-    acc = np.array([to_body_frame(qk, np.array([0.0, 0.0, 9.81])) for qk in q])
+    gyro, q, acc = turning_imu(rate, dt, rng)
     acc += rng.normal(0, 0.3, (n, 3)) + 2.0 * np.sin(5 * t)[:, None]     # linear acceleration
     mag = np.array([to_body_frame(qk, np.array([0.0, 20.0, -40.0])) for qk in q])
     mag[600:900] *= 1.4                                                    # a disturbance

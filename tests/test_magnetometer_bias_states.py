@@ -14,7 +14,7 @@ from benchmarks.engine.batch import make_runs, run_batch
 from benchmarks.engine.recorded import path_of
 from benchmarks.engine.runner import run_many
 from dynamics.validation import InvalidParameterError
-from estimators import MultiplicativeEKF
+from estimators import USQUE, MultiplicativeEKF
 from estimators.mekf import MAGNETOMETER_BIAS_SIGMA
 from estimators.smoother import MekfSmoother
 
@@ -99,6 +99,12 @@ def test_an_estimated_hard_iron_is_not_said_to_be_unmodelled(tmp_path):
                    "[0.0, 0.0, 1.0]]\n")
     with pytest.warns(UserWarning, match=r"hard iron .* and soft iron .* model \(mekf\)"):
         simulate(soft, ["mekf"])
+    # A filter that fits the hard iron online (the IMU models' hard_iron_fit) models it.
+    from benchmarks.sensor_use import _estimates_hard_iron
+    fitted = cubesat(tmp_path, 20.0, '[estimators.usque]\nmagnetometer_model = "heading"\n'
+                     'hard_iron_fit = true\n')
+    assert _estimates_hard_iron("usque", fitted) and not _estimates_hard_iron("usque", scenario)
+    assert _estimates_hard_iron(USQUE.from_scenario(fitted), fitted)
 
 
 def test_the_engine_runs_the_states_equal_to_the_per_run_filter_at_every_step(tmp_path):

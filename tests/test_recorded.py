@@ -68,7 +68,7 @@ def test_each_fast_path_gives_the_per_run_estimates_and_rejections(trial, name, 
 def _textbook(scenario, name="mekf", **options):
     """``scenario`` with ``name``'s IMU models off: acc/mag as vector readings."""
     textbook = {"gravity_model": "reading", "magnetometer_model": "vector",
-                "rest_updates": False, "gate_probability": 0.9999}
+                "rest_updates": False, "hard_iron_fit": False, "gate_probability": 0.9999}
     merged = dict(scenario.estimator_options)
     merged[name] = {**merged.get(name, {}), **textbook, **options}
     return scenario.replace(estimator_options=merged)

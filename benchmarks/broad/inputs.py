@@ -23,9 +23,11 @@ says, and ``broad`` prints:
 
 The MEKF and USQUE run the IMU models (:mod:`estimators.imu`, by their
 ``[estimators.mekf]`` and ``[estimators.usque]`` settings:
-:data:`IMU_MODELS`): gravity low-passed in its strapdown frame, the heading-only magnetometer, rest detection with the
-zero-rate update of its bias, and the gyro's reading taken as the rate over
-the interval before it (an IMU's output is filtered inside the sensor).
+:data:`IMU_MODELS`): gravity low-passed in its strapdown frame, the
+heading-only magnetometer with its hard iron fitted online, rest detection
+with the zero-rate update of its bias, and the gyro's reading taken as the
+rate over the interval before it (an IMU's output is filtered inside the
+sensor).
 
 A reading of exactly zero on all three axes is a dropout (no accelerometer
 reads no gravity, no magnetometer no field): it is no reading (``available``
@@ -79,7 +81,7 @@ GATE_PROBABILITY = 0.9999
 MAGNETIC_NORM_TOLERANCE = 0.1
 #: The MEKF's and USQUE's settings on an IMU recording (module docstring).
 IMU_MODELS = {"gravity_model": "lowpass", "magnetometer_model": "heading",
-              "rest_updates": True, "rate_interpolation": "end"}
+              "rest_updates": True, "hard_iron_fit": True, "rate_interpolation": "end"}
 
 
 @dataclass(frozen=True)

@@ -16,12 +16,14 @@ module         what it models
 ``rest``       rest detection, and the zero-rate update of the bias (§3.4)
 ``heading``    the magnetometer as a heading reference only, and when to
                trust it: norm and dip tests, hold, new fields (§3.3)
+``hard_iron``  a magnet on the device, fitted online from the magnetometer's
+               readings alone (beyond VQF; Alonso & Shuster 2002)
 =============  ================================================================
 
 :class:`ImuModels` holds their state for one filter run; the filters
 (:class:`estimators.MultiplicativeEKF`, :class:`estimators.USQUE`) call it
 where their settings ask (``gravity_model``, ``magnetometer_model``,
-``rest_updates``). Its functions work on plain arrays so that the engine
+``rest_updates``, ``hard_iron_fit``). Its functions work on plain arrays so that the engine
 compiles the same ones.
 """
 from __future__ import annotations
@@ -30,7 +32,7 @@ import math
 
 import numpy as np
 
-from estimators.imu import gravity, heading, lowpass, rest
+from estimators.imu import gravity, hard_iron, heading, lowpass, rest
 
 GRAVITY_MODELS = ("reading", "lowpass")
 MAGNETOMETER_MODELS = ("vector", "heading")
@@ -44,11 +46,13 @@ REST_DENSITY = 3.1e-5 ** 2
 class ImuModels:
     """The IMU models' state over one run of a filter of step ``dt`` (see
     the module docstring): the strapdown frame and its low-pass filter, the
-    rest detector, the magnetometer's trust, and the times of the last
-    readings (the models' densities are per unit of time)."""
+    rest detector, the magnetometer's trust and its hard iron's fit
+    (``hard_iron_fit``), and the times of the last readings (the models'
+    densities are per unit of time)."""
 
-    def __init__(self, dt: float):
+    def __init__(self, dt: float, hard_iron_fit: bool = False):
         self.dt = dt
+        self.hard_iron_fit = hard_iron_fit
         self.reset(np.array([1.0, 0.0, 0.0, 0.0]))
 
     def reset(self, q0: np.ndarray) -> None:
@@ -63,6 +67,7 @@ class ImuModels:
         self.trust = heading.new_state()
         #: The field's low-pass filter in the strapdown frame (heading.steady_step).
         self.field_filter = lowpass.new_state(3)
+        self.iron = hard_iron.new_state()
         self.rate_lp = np.zeros(3)
         self.at_rest = False
         #: Steps since the last accelerometer and magnetometer readings (0: none yet).
@@ -105,6 +110,16 @@ class ImuModels:
                                gravity.LOWPASS_TIME_CONSTANT_S, interval, self.rotation_filter,
                                np.empty(9), self.drift)
         return interval
+
+    def calibrated_field(self, field: np.ndarray) -> np.ndarray:
+        """A magnetometer reading less the hard iron fitted so far, the fit
+        taking the reading in (:func:`hard_iron.step`); the reading itself
+        where no hard iron is fitted. Before :meth:`field_reading`."""
+        if not self.hard_iron_fit:
+            return field
+        out = np.empty(3)
+        hard_iron.step(field, self.interval(self.since_mag), self.iron, out)
+        return out
 
     def field_reading(self, q: np.ndarray, field: np.ndarray, reference: np.ndarray,
                       reference_known: bool = False) -> tuple[float, float, float, bool, bool]:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from dynamics.quaternion import skew, to_body_frame
-from dynamics.validation import boolean, finite_number, one_of
+from dynamics.validation import InvalidParameterError, boolean, finite_number, one_of
 from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels, heading
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -44,20 +44,28 @@ class ImuUpdates:
     gravity_model = "reading"
     magnetometer_model = "vector"
     rest_updates = False
+    hard_iron_fit = False
 
     def _configure_imu(self, *, gravity_model, magnetometer_model, rest_updates,
-                       gravity_density, heading_density, rest_density) -> None:
+                       gravity_density, heading_density, rest_density,
+                       hard_iron_fit=False) -> None:
         """Validate and keep the IMU models' settings; the models' state
         (:attr:`imu`) where any is on."""
         self.gravity_model = one_of("gravity_model", gravity_model, GRAVITY_MODELS)
         self.magnetometer_model = one_of("magnetometer_model", magnetometer_model,
                                          MAGNETOMETER_MODELS)
         self.rest_updates = boolean("rest_updates", rest_updates)
+        self.hard_iron_fit = boolean("hard_iron_fit", hard_iron_fit)
+        if self.hard_iron_fit and self.magnetometer_model != "heading":
+            raise InvalidParameterError(
+                "hard_iron_fit", True, "needs magnetometer_model = 'heading' (the fit corrects "
+                f"the heading model's field): with '{self.magnetometer_model}', set it false")
         for name, value in (("gravity_density", gravity_density),
                             ("heading_density", heading_density),
                             ("rest_density", rest_density)):
             setattr(self, name, finite_number(name, value, strictly_positive=True))
-        self.imu = ImuModels(self.dt) if imu_models_on(vars(self)) else None
+        self.imu = (ImuModels(self.dt, hard_iron_fit=self.hard_iron_fit) if imu_models_on(vars(self))
+                    else None)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()):
         if self.imu is not None:
@@ -95,7 +103,7 @@ class ImuUpdates:
 
     def _heading(self, observation) -> None:
         """The heading-only update, as far as the field is trusted."""
-        field = np.asarray(observation.body, dtype=float)
+        field = self.imu.calibrated_field(np.asarray(observation.body, dtype=float))
         reference = np.asarray(observation.reference, dtype=float)
         psi, interval, trust, validated, forget = self.imu.field_reading(
             self.estimate, field, reference, getattr(observation, "reference_known", True))

@@ -17,7 +17,7 @@ from numba import njit
 
 from benchmarks.engine.kernels.algebra import (joseph_covariance, quat_exp, quat_times_normalized,
                                                to_body_frame)
-from estimators.imu import gravity, heading, lowpass, rest
+from estimators.imu import gravity, hard_iron, heading, lowpass, rest
 
 
 def _compiled(func, **globals_):
@@ -58,6 +58,10 @@ validated = _compiled(heading.validated)
 _forget = _compiled(heading.forget_heading)
 _widen = _compiled(heading.widen_heading)
 new_trust = _compiled(heading.new_state)
+hard_iron_step = _compiled(hard_iron.step, _take=_compiled(
+    hard_iron._take, _gone_step=_compiled(hard_iron._gone_step),
+    _refit=_compiled(hard_iron._refit, _solve_symmetric=_compiled(hard_iron._solve_symmetric),
+                     smallest_eigenvalue=_compiled(hard_iron.smallest_eigenvalue))))
 first_trust = _compiled(heading.first_state, new_state=new_trust)
 
 #: Entries of :attr:`ImuState.counts`: steps since the last accelerometer and
@@ -78,7 +82,8 @@ def imu_state(estimators) -> dict:
                 "imu_gravity": np.zeros((count, 4, 3)), "imu_detector": np.zeros((count, 9, 3)),
                 "imu_trust": np.zeros((count, heading.STATE_SIZE)), "imu_rate_lp": np.zeros((count, 3)),
                 "imu_counts": np.zeros((count, 3), dtype=np.int64),
-                "imu_rotation": np.zeros((count, 5, 9)), "imu_field": np.zeros((count, 4, 3))}
+                "imu_rotation": np.zeros((count, 5, 9)), "imu_field": np.zeros((count, 4, 3)),
+                "imu_iron_fit": False, "imu_iron": np.zeros((count, hard_iron.STATE_SIZE))}
     return {"imu_on": True, "imu_lowpass": first.gravity_model == "lowpass",
             "imu_heading": first.magnetometer_model == "heading",
             "imu_rest": bool(first.rest_updates),
@@ -93,13 +98,15 @@ def imu_state(estimators) -> dict:
                                    dtype=np.int64),
             "imu_rotation": np.array([np.vstack([m.rotation_integral[None], m.rotation_filter])
                                       for m in models]),
-            "imu_field": np.array([m.field_filter for m in models])}
+            "imu_field": np.array([m.field_filter for m in models]),
+            "imu_iron_fit": bool(first.hard_iron_fit),
+            "imu_iron": np.array([m.iron for m in models])}
 
 
 #: The ``imu_*`` fields of a kernel's state, in order (see :func:`imu_state`).
 IMU_FIELDS = ("imu_on", "imu_lowpass", "imu_heading", "imu_rest", "imu_densities",
               "imu_strapdown", "imu_gravity", "imu_detector", "imu_trust", "imu_rate_lp",
-              "imu_counts", "imu_rotation", "imu_field")
+              "imu_counts", "imu_rotation", "imu_field", "imu_iron_fit", "imu_iron")
 
 
 @njit(cache=True, error_model="numpy")
@@ -132,6 +139,18 @@ def accelerometer_reading(state, run, specific_force, dt):
                    gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:], np.empty(9),
                    drift)
     return up, drift, interval, at_rest
+
+
+@njit(cache=True, error_model="numpy")
+def calibrated_field(counts, iron, run, field, dt, fit):
+    """:meth:`estimators.imu.ImuModels.calibrated_field`, into a new array."""
+    out = np.empty(3)
+    if fit:
+        hard_iron_step(field, max(counts[run, SINCE_MAG], 1) * dt, iron[run], out)
+    else:
+        for i in range(3):
+            out[i] = field[i]
+    return out
 
 
 @njit(cache=True, error_model="numpy")

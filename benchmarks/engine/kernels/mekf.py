@@ -76,6 +76,8 @@ class State(NamedTuple):
     imu_counts: np.ndarray       # (B, 3) int64
     imu_rotation: np.ndarray     # (B, 5, 9) the strapdown's rotation integrated, its LP state
     imu_field: np.ndarray        # (B, 4, 3) the field's low-pass filter in the strapdown frame
+    imu_iron_fit: bool           # the hard iron fitted online (estimators.imu.hard_iron)
+    imu_iron: np.ndarray         # (B, hard_iron.STATE_SIZE) its fit
 
 
 def initial_state(estimators) -> State:
@@ -195,9 +197,11 @@ def _imu_vector(q, beta, P, run, s, dt, body, reference, gravity, magnetic, know
         return state.imu_lowpass
     if not (magnetic and state.imu_heading):
         return False
+    field = imu.calibrated_field(state.imu_counts, state.imu_iron, run, body, dt,
+                                 state.imu_iron_fit)
     psi, interval, trust, validated, forget = imu.field_reading(
         state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
-        state.imu_field, run, q, body, reference, known, dt, np.empty(3))
+        state.imu_field, run, q, field, reference, known, dt, np.empty(3))
     if forget:
         imu.forget_heading(q, P)
     if trust == 0.0:

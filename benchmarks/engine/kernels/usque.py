@@ -91,6 +91,8 @@ class State(NamedTuple):
     imu_counts: np.ndarray
     imu_rotation: np.ndarray
     imu_field: np.ndarray
+    imu_iron_fit: bool
+    imu_iron: np.ndarray
 
 
 @njit(cache=True, inline="always", error_model="numpy")

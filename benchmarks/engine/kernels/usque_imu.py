@@ -181,6 +181,8 @@ def _field_reading(q, x, P, sigmas, run, field, reference, known, dt, gating, ga
     ``(factored, updated)`` as :func:`reading` returns them."""
     estimate = np.empty(4)
     output(q, x, estimate)
+    field = imu.calibrated_field(state.imu_counts, state.imu_iron, run, field, dt,
+                                 state.imu_iron_fit)
     psi, interval, trust, validated, forget = imu.field_reading(
         state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
         state.imu_field, run, estimate, field, reference, known, dt, np.empty(3))
