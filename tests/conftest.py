@@ -1,3 +1,4 @@
+import math
 import warnings
 
 import numpy as np
@@ -81,3 +82,13 @@ def turning_imu(rate, dt, rng):
         q[k] = quat_multiply(q[k - 1], quat_from_rotvec(rate[k] * dt))
     acc = np.array([to_body_frame(qk, np.array([0.0, 0.0, 9.81])) for qk in q])
     return gyro, q, acc
+
+
+def imu_filter_settings(dt: float, **extra) -> dict:
+    """The MEKF's or USQUE's keywords for the simulated IMUs of the tests
+    (:func:`turning_imu`): its IMU models on, as ``broad`` sets them, and a
+    prior on the bias of 0.5 °/s; ``extra`` over them."""
+    return dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
+                initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
+                magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
+                **extra)

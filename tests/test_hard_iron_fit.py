@@ -19,7 +19,7 @@ from estimators import USQUE, MultiplicativeEKF
 from estimators.imu import hard_iron
 from estimators.smoother import MekfSmoother
 from sensors.vector import VectorReadings
-from tests.conftest import turning_imu
+from tests.conftest import imu_filter_settings, turning_imu
 
 
 EARTH = np.array([0.0, 20.0, -40.0])              # µT, ENU: 44.7 µT, dip 63°
@@ -150,10 +150,7 @@ def _tumbling(dt: float, n: int, magnet_until: int):
 
 
 def _settings(dt: float, fit: bool) -> dict:
-    return dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
-                initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
-                magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
-                hard_iron_fit=fit)
+    return imu_filter_settings(dt, hard_iron_fit=fit)
 
 
 def _heading_rms_deg(filter_class, fit, gyro, truth, vectors, after):

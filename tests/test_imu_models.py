@@ -20,7 +20,7 @@ from estimators import USQUE, MekfSmoother, MultiplicativeEKF
 from estimators.imu import ImuModels, heading, lowpass, rest
 from estimators.smoother import fuse, reversed_rates
 from sensors.vector import VectorReadings
-from tests.conftest import turning_imu
+from tests.conftest import imu_filter_settings, turning_imu
 
 
 # --- the low-pass filter ---------------------------------------------------------
@@ -332,10 +332,7 @@ def _tumbling_imu(dt: float, n: int, magnet_at_start: bool = False):
 
 
 def _imu_settings(dt: float, gate=None) -> dict:
-    return dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
-                initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
-                magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
-                gate_probability=gate)
+    return imu_filter_settings(dt, gate_probability=gate)
 
 
 @pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])

@@ -46,13 +46,12 @@ REST_DENSITY = 3.1e-5 ** 2
 class ImuModels:
     """The IMU models' state over one run of a filter of step ``dt`` (see
     the module docstring): the strapdown frame and its low-pass filter, the
-    rest detector, the magnetometer's trust and its hard iron's fit
-    (``hard_iron_fit``), and the times of the last readings (the models'
-    densities are per unit of time)."""
+    rest detector, the magnetometer's trust and its hard iron's fit, and
+    the times of the last readings (the models' densities are per unit of
+    time)."""
 
-    def __init__(self, dt: float, hard_iron_fit: bool = False):
+    def __init__(self, dt: float):
         self.dt = dt
-        self.hard_iron_fit = hard_iron_fit
         self.reset(np.array([1.0, 0.0, 0.0, 0.0]))
 
     def reset(self, q0: np.ndarray) -> None:
@@ -113,10 +112,8 @@ class ImuModels:
 
     def calibrated_field(self, field: np.ndarray) -> np.ndarray:
         """A magnetometer reading less the hard iron fitted so far, the fit
-        taking the reading in (:func:`hard_iron.step`); the reading itself
-        where no hard iron is fitted. Before :meth:`field_reading`."""
-        if not self.hard_iron_fit:
-            return field
+        taking the reading in (:func:`hard_iron.step`). Before
+        :meth:`field_reading`, where the filter fits it (``hard_iron_fit``)."""
         out = np.empty(3)
         hard_iron.step(field, self.interval(self.since_mag), self.iron, out)
         return out

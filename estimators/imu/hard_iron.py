@@ -171,10 +171,9 @@ def _refit(state) -> None:
     spread = math.sqrt(max(smallest_eigenvalue(c), 0.0))
     if spread < MIN_SPREAD * radius:
         return
-    significant = math.sqrt(squared_norm) * spread > residual * radius
-    state[APPLIED] = h0 if significant else 0.0
-    state[APPLIED + 1] = h1 if significant else 0.0
-    state[APPLIED + 2] = h2 if significant else 0.0
+    if not math.sqrt(squared_norm) * spread > residual * radius:
+        h0 = h1 = h2 = 0.0                         # none worth removing
+    state[APPLIED], state[APPLIED + 1], state[APPLIED + 2] = h0, h1, h2
     state[RADIUS] = radius
 
 

@@ -64,8 +64,7 @@ class ImuUpdates:
                             ("heading_density", heading_density),
                             ("rest_density", rest_density)):
             setattr(self, name, finite_number(name, value, strictly_positive=True))
-        self.imu = (ImuModels(self.dt, hard_iron_fit=self.hard_iron_fit) if imu_models_on(vars(self))
-                    else None)
+        self.imu = ImuModels(self.dt) if imu_models_on(vars(self)) else None
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()):
         if self.imu is not None:
@@ -103,7 +102,9 @@ class ImuUpdates:
 
     def _heading(self, observation) -> None:
         """The heading-only update, as far as the field is trusted."""
-        field = self.imu.calibrated_field(np.asarray(observation.body, dtype=float))
+        field = np.asarray(observation.body, dtype=float)
+        if self.hard_iron_fit:
+            field = self.imu.calibrated_field(field)
         reference = np.asarray(observation.reference, dtype=float)
         psi, interval, trust, validated, forget = self.imu.field_reading(
             self.estimate, field, reference, getattr(observation, "reference_known", True))
