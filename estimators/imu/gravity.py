@@ -65,8 +65,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from estimators.imu import lowpass
 
 #: The low-pass filter's time constant, s: VQF's ``tauAcc``, taken as published.
@@ -87,13 +85,15 @@ def rotate(q, v, out) -> None:
 
 def rotate_back(q, v, out) -> None:
     """``out = A(q)ᵀ v``: ``v`` from the reference to the body frame."""
+    out[0], out[1], out[2] = rotated_back(q, v[0], v[1], v[2])
+
+
+def rotated_back(q, a: float, b: float, c: float) -> tuple:
+    """``A(q)ᵀ (a, b, c)`` as a tuple (:func:`rotate_back` with no array)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
-    out[0] = (1 - 2 * (y * y + z * z)) * v[0] + 2 * (x * y + w * z) * v[1] \
-        + 2 * (x * z - w * y) * v[2]
-    out[1] = 2 * (x * y - w * z) * v[0] + (1 - 2 * (x * x + z * z)) * v[1] \
-        + 2 * (y * z + w * x) * v[2]
-    out[2] = 2 * (x * z + w * y) * v[0] + 2 * (y * z - w * x) * v[1] \
-        + (1 - 2 * (x * x + y * y)) * v[2]
+    return ((1 - 2 * (y * y + z * z)) * a + 2 * (x * y + w * z) * b + 2 * (x * z - w * y) * c,
+            2 * (x * y - w * z) * a + (1 - 2 * (x * x + z * z)) * b + 2 * (y * z + w * x) * c,
+            2 * (x * z + w * y) * a + 2 * (y * z - w * x) * b + (1 - 2 * (x * x + y * y)) * c)
 
 
 def strapdown_step(q, rotation, out) -> None:
@@ -138,15 +138,12 @@ def drift_jacobian(q_strapdown, gravity_lp, integral, coeffs, tau_s: float, dt: 
     lowpass.step(integral, coeffs, tau_s, dt, state, scratch)
     norm = math.sqrt(gravity_lp[0] ** 2 + gravity_lp[1] ** 2 + gravity_lp[2] ** 2)
     g0, g1, g2 = gravity_lp[0] / norm, gravity_lp[1] / norm, gravity_lp[2] / norm
-    column = np.empty(3)
-    turned = np.empty(3)
     for j in range(3):
         k0 = integral[j] - scratch[j]
         k1 = integral[3 + j] - scratch[3 + j]
         k2 = integral[6 + j] - scratch[6 + j]
-        column[0], column[1], column[2] = g1 * k2 - g2 * k1, g2 * k0 - g0 * k2, g0 * k1 - g1 * k0
-        rotate_back(q_strapdown, column, turned)
-        out[0, j], out[1, j], out[2, j] = turned[0], turned[1], turned[2]
+        out[0, j], out[1, j], out[2, j] = rotated_back(
+            q_strapdown, g1 * k2 - g2 * k1, g2 * k0 - g0 * k2, g0 * k1 - g1 * k0)
 
 
 def gravity_direction(q_strapdown, specific_force, coeffs, tau_s: float, dt: float,

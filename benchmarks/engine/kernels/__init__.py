@@ -53,7 +53,10 @@ USQUE's ``_correct``, called every step, takes the vector sensors' arrays
 as their tuple at the cost it had taking them one by one, but the MEKF's
 ``_vector_reading``, called with the whole block and state, took a third
 longer on a recording (readings at every sample); inlined, it reads the
-arrays it needs off them where a reading comes.
+arrays it needs off them where a reading comes. The IMU models' readings,
+called, take the dozen arrays each reads as a plain tuple made before the
+loop (``imu.gravity_models``): with the whole state, passed on to three
+called helpers, they cost the MEKF 0.67 µs a sample of 3.73 on a BROAD trial.
 
 Its run index is made ``run = np.int64(index)`` first: numba types the
 ``prange`` index as a signed integer where it types the kernel and as an

@@ -361,7 +361,7 @@ def rate_arrays(state):
     it, the inlined gyro reading's writes to the IMU models' counts were lost)."""
     return (state.trapezoid, state.rate_prev, state.has_rate, state.end, state.imu_on,
             state.imu_counts, state.imu_detector, state.imu_rate_lp, state.imu_strapdown,
-            state.imu_rotation)
+            state.imu_rotation, state.imu_table, state.imu_table_dt, state.imu_work)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -39,14 +39,15 @@ def _compiled(func, **globals_):
 
 coefficients = _compiled(lowpass.coefficients)
 _rotate = _compiled(gravity.rotate)
+_rotated_back = _compiled(gravity.rotated_back)
 _LOWPASS = {"step": _compiled(lowpass.step)}
 strapdown_step = _compiled(gravity.strapdown_step)
 integrate_rotation = _compiled(gravity.integrate_rotation)
-drift_jacobian = _compiled(gravity.drift_jacobian, lowpass=_LOWPASS,
-                           rotate_back=_compiled(gravity.rotate_back))
+drift_jacobian = _compiled(gravity.drift_jacobian, lowpass=_LOWPASS, rotated_back=_rotated_back)
 gravity_direction = _compiled(gravity.gravity_direction, lowpass=_LOWPASS,
                               rotate=_rotate,
-                              rotate_back=_compiled(gravity.rotate_back))
+                              rotate_back=_compiled(gravity.rotate_back,
+                                                    rotated_back=_rotated_back))
 rest_gyro_step = _compiled(rest.gyro_step, lowpass=_LOWPASS)
 rest_acc_step = _compiled(rest.acc_step, lowpass=_LOWPASS)
 field_in_reference = _compiled(heading.field_in_reference, rotate=_rotate)
@@ -67,6 +68,31 @@ first_trust = _compiled(heading.first_state, new_state=new_trust)
 #: Entries of :attr:`ImuState.counts`: steps since the last accelerometer and
 #: magnetometer readings, magnetometer readings so far.
 SINCE_ACC, SINCE_MAG, FIELDS = 0, 1, 2
+#: Rows of ``imu_table``: the low-pass filters of the rest detector, of
+#: gravity and of the field's steadiness, and their time constants.
+REST_FILTER, GRAVITY_FILTER, STEADY_FILTER = 0, 1, 2
+TIME_CONSTANTS = (rest.FILTER_TIME_CONSTANT_S, gravity.LOWPASS_TIME_CONSTANT_S,
+                  heading.STEADY_TIME_CONSTANT_S)
+#: Rows of a run's ``imu_work``, the models' working vectors (each reading
+#: wrote into new arrays: 23 ns an array, a dozen a sample).
+UP, GRAVITY_SCRATCH, FIELD, FIELD_E, STEADY_SCRATCH, TURN = 0, 1, 3, 4, 5, 7
+
+
+def coefficient_table(dt: float) -> np.ndarray:
+    """``(3, 5)``: each filter's coefficients (:data:`REST_FILTER`, …) at
+    readings ``dt`` apart, the interval of nearly every reading: computed
+    once, where :func:`coefficients` at each reading cost a tangent and a
+    new array (36 ns, four times a sample)."""
+    return np.array([lowpass.coefficients(tau, dt) for tau in TIME_CONSTANTS])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _coefficients(table, table_dt, row, interval):
+    """:func:`coefficients` of filter ``row`` at ``interval``: the table's
+    where the interval is its own (the same numbers), else computed."""
+    if interval == table_dt:
+        return table[row]
+    return coefficients(TIME_CONSTANTS[row], interval)
 
 
 def imu_state(estimators) -> dict:
@@ -76,15 +102,19 @@ def imu_state(estimators) -> dict:
     parallel loops take no tuple nested in a tuple)."""
     first, count = estimators[0], len(estimators)
     models = [getattr(e, "imu", None) for e in estimators]
+    work = {"imu_work": np.zeros((count, 8, 3)), "imu_drift": np.zeros((count, 3, 3)),
+            "imu_nine": np.zeros((count, 9))}
     if models[0] is None:
-        return {"imu_on": False, "imu_lowpass": False, "imu_heading": False, "imu_rest": False,
+        return {**work, "imu_table": np.zeros((3, 5)), "imu_table_dt": 0.0,
+                "imu_on": False, "imu_lowpass": False, "imu_heading": False, "imu_rest": False,
                 "imu_densities": np.zeros((count, 3)), "imu_strapdown": np.zeros((count, 4)),
                 "imu_gravity": np.zeros((count, 4, 3)), "imu_detector": np.zeros((count, 9, 3)),
                 "imu_trust": np.zeros((count, heading.STATE_SIZE)), "imu_rate_lp": np.zeros((count, 3)),
                 "imu_counts": np.zeros((count, 3), dtype=np.int64),
                 "imu_rotation": np.zeros((count, 5, 9)), "imu_field": np.zeros((count, 4, 3)),
                 "imu_iron_fit": False, "imu_iron": np.zeros((count, hard_iron.STATE_SIZE))}
-    return {"imu_on": True, "imu_lowpass": first.gravity_model == "lowpass",
+    return {**work, "imu_table": coefficient_table(models[0].dt), "imu_table_dt": models[0].dt,
+            "imu_on": True, "imu_lowpass": first.gravity_model == "lowpass",
             "imu_heading": first.magnetometer_model == "heading",
             "imu_rest": bool(first.rest_updates),
             "imu_densities": np.array([[e.gravity_density, e.heading_density, e.rest_density]
@@ -106,58 +136,96 @@ def imu_state(estimators) -> dict:
 #: The ``imu_*`` fields of a kernel's state, in order (see :func:`imu_state`).
 IMU_FIELDS = ("imu_on", "imu_lowpass", "imu_heading", "imu_rest", "imu_densities",
               "imu_strapdown", "imu_gravity", "imu_detector", "imu_trust", "imu_rate_lp",
-              "imu_counts", "imu_rotation", "imu_field", "imu_iron_fit", "imu_iron")
+              "imu_counts", "imu_rotation", "imu_field", "imu_iron_fit", "imu_iron",
+              "imu_table", "imu_table_dt", "imu_work", "imu_drift", "imu_nine")
 
 
 @njit(cache=True, error_model="numpy")
-def gyro_reading(counts, detector, rate_lp, run, rate, dt):
+def gyro_reading(counts, detector, rate_lp, run, rate, dt, table, table_dt):
     """:meth:`estimators.imu.ImuModels.gyro_reading`."""
     counts[run, SINCE_ACC] += 1
     counts[run, SINCE_MAG] += 1
-    rest_gyro_step(rate, coefficients(rest.FILTER_TIME_CONSTANT_S, dt), dt, detector[run],
+    rest_gyro_step(rate, _coefficients(table, table_dt, REST_FILTER, dt), dt, detector[run],
                    rate_lp[run])
 
 
+#: The models' arrays an accelerometer reading reads (:func:`gravity_models`),
+#: and a magnetometer reading (:func:`field_models`): their places in the tuple.
+(G_COUNTS, G_DETECTOR, G_STRAPDOWN, G_GRAVITY, G_ROTATION, G_WORK, G_DRIFT, G_NINE, G_TABLE,
+ G_TABLE_DT, G_RATE_LP, G_DENSITIES) = range(12)
+(F_COUNTS, F_IRON, F_IRON_FIT, F_WORK, F_TRUST, F_RATE_LP, F_STRAPDOWN, F_FIELD, F_TABLE,
+ F_TABLE_DT, F_DENSITIES) = range(11)
+
+
 @njit(cache=True, error_model="numpy")
-def accelerometer_reading(state, run, specific_force, dt):
-    """:meth:`estimators.imu.ImuModels.gravity_reading` on the ``imu_*``
-    arrays of a kernel's ``state``: ``(up, drift, interval, at_rest)`` —
+def gravity_models(state) -> tuple:
+    """The ``imu_*`` arrays of a kernel's ``state`` that an accelerometer
+    reading reads, as a plain tuple (``G_*`` their places). Handed to a
+    called function in place of the whole state: it counts a reference of
+    every array it takes (the kernels package's docstring), and a state
+    holds some forty. Not a named tuple: a parallel loop cannot take one
+    made in the kernel."""
+    return (state.imu_counts, state.imu_detector, state.imu_strapdown, state.imu_gravity,
+            state.imu_rotation, state.imu_work, state.imu_drift, state.imu_nine, state.imu_table,
+            state.imu_table_dt, state.imu_rate_lp, state.imu_densities)
+
+
+@njit(cache=True, error_model="numpy")
+def field_models(state) -> tuple:
+    """The ``imu_*`` arrays that a magnetometer reading reads, as
+    :func:`gravity_models` (``F_*`` their places)."""
+    return (state.imu_counts, state.imu_iron, state.imu_iron_fit, state.imu_work,
+            state.imu_trust, state.imu_rate_lp, state.imu_strapdown, state.imu_field,
+            state.imu_table, state.imu_table_dt, state.imu_densities)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def accelerometer_reading(models, run, specific_force, dt):
+    """:meth:`estimators.imu.ImuModels.gravity_reading` on the arrays
+    :func:`gravity_models` gives: ``(up, drift, interval, at_rest)`` —
     gravity's direction, the bias columns of its H, the interval and whether
     the body is at rest."""
-    counts, detector, strapdown = state.imu_counts, state.imu_detector, state.imu_strapdown
-    gravity_state, rotation = state.imu_gravity, state.imu_rotation
-    up, scratch, drift = np.empty(3), np.empty((2, 3)), np.empty((3, 3))
+    counts, detector, strapdown = models[G_COUNTS], models[G_DETECTOR], models[G_STRAPDOWN]
+    gravity_state, rotation = models[G_GRAVITY], models[G_ROTATION]
+    work, drift = models[G_WORK][run], models[G_DRIFT][run]
+    up, scratch = work[UP], work[GRAVITY_SCRATCH:GRAVITY_SCRATCH + 2]
     interval = max(counts[run, SINCE_ACC], 1) * dt
     counts[run, SINCE_ACC] = 0
+    table, table_dt = models[G_TABLE], models[G_TABLE_DT]
     at_rest = rest_acc_step(specific_force,
-                            coefficients(rest.FILTER_TIME_CONSTANT_S, interval), interval,
+                            _coefficients(table, table_dt, REST_FILTER, interval), interval,
                             detector[run], scratch[0])
-    coeffs = coefficients(gravity.LOWPASS_TIME_CONSTANT_S, interval)
+    coeffs = _coefficients(table, table_dt, GRAVITY_FILTER, interval)
     gravity_direction(strapdown[run], specific_force, coeffs, gravity.LOWPASS_TIME_CONSTANT_S,
                       interval, gravity_state[run], scratch, up)
     drift_jacobian(strapdown[run], scratch[1], rotation[run, 0], coeffs,
-                   gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:], np.empty(9),
-                   drift)
+                   gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:],
+                   models[G_NINE][run], drift)
     return up, drift, interval, at_rest
 
 
-@njit(cache=True, error_model="numpy")
-def calibrated_field(counts, iron, run, field, dt, fit):
-    """:meth:`estimators.imu.ImuModels.calibrated_field`, into a new array."""
-    out = np.empty(3)
-    if fit:
-        hard_iron_step(field, max(counts[run, SINCE_MAG], 1) * dt, iron[run], out)
+@njit(cache=True, inline="always", error_model="numpy")
+def calibrated_field(models, run, field, dt):
+    """:meth:`estimators.imu.ImuModels.calibrated_field` on the arrays
+    :func:`field_models` gives, into the run's working vector :data:`FIELD`."""
+    out = models[F_WORK][run, FIELD]
+    if models[F_IRON_FIT]:
+        hard_iron_step(field, max(models[F_COUNTS][run, SINCE_MAG], 1) * dt,
+                       models[F_IRON][run], out)
     else:
         for i in range(3):
             out[i] = field[i]
     return out
 
 
-@njit(cache=True, error_model="numpy")
-def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field, reference,
-                  known, dt, scratch):
-    """:meth:`estimators.imu.ImuModels.field_reading`: ψ, the interval, the
-    trust, whether the field is validated and whether to forget the heading."""
+@njit(cache=True, inline="always", error_model="numpy")
+def field_reading(models, run, q, field, reference, known, dt):
+    """:meth:`estimators.imu.ImuModels.field_reading` on the arrays
+    :func:`field_models` gives: ψ, the interval, the trust, whether the field
+    is validated and whether to forget the heading."""
+    counts, trust, rate_lp = models[F_COUNTS], models[F_TRUST], models[F_RATE_LP]
+    strapdown, field_state, work = models[F_STRAPDOWN], models[F_FIELD], models[F_WORK][run]
+    scratch = work[FIELD_E]
     interval = max(counts[run, SINCE_MAG], 1) * dt
     counts[run, SINCE_MAG] = 0
     if known and counts[run, FIELDS] == 0:
@@ -172,8 +240,9 @@ def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field,
             trust[run, i] = fresh[i]
     counts[run, FIELDS] += 1
     steady = steady_step(strapdown[run], field,
-                         coefficients(heading.STEADY_TIME_CONSTANT_S, interval), interval,
-                         field_state[run], np.empty((2, 3)))
+                         _coefficients(models[F_TABLE], models[F_TABLE_DT], STEADY_FILTER,
+                                       interval), interval, field_state[run],
+                         work[STEADY_SCRATCH:STEADY_SCRATCH + 2])
     rate = rate_lp[run]
     trusted = trust_step(norm, dip, math.sqrt(rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2),
                          interval, trust[run], steady)
@@ -186,7 +255,7 @@ def field_reading(counts, trust, rate_lp, strapdown, field_state, run, q, field,
 def forget_heading(q, P):
     """``ErrorStateUpdates._forget_heading``: :func:`estimators.imu.heading.widen_heading`
     along the vertical in the body frame of ``q``."""
-    _widen(to_body_frame(q, np.array([0.0, 0.0, 1.0])), P)
+    _widen(to_body_frame(q, (0.0, 0.0, 1.0)), P)
 
 
 @njit(cache=True, error_model="numpy")
@@ -230,7 +299,7 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     ``H = [vᵀ 0]``, the attitude gain projected on ``v``, the bias rows
     zeroed unless ``bias``; Joseph's form, then the reset. Returns the NIS
     and det S."""
-    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    v = to_body_frame(q, (0.0, 0.0, 1.0))
     IK, T = scratch[3], scratch[4]
     K = scratch[2, 0]
     s = variance
@@ -250,7 +319,8 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     for i in range(6):
         for j in range(6):
             scratch[1, i, j] = K[i] * K[j] * variance
-    joseph_covariance(P, IK, scratch[1], T)
+    # H is zero in the bias columns: I − KH's are the identity's, their products skipped.
+    joseph_covariance(P, IK, scratch[1], T, 6, True)
     dx = scratch[5, 0]
     for i in range(6):
         dx[i] = K[i] * psi

@@ -78,6 +78,11 @@ class State(NamedTuple):
     imu_field: np.ndarray        # (B, 4, 3) the field's low-pass filter in the strapdown frame
     imu_iron_fit: bool           # the hard iron fitted online (estimators.imu.hard_iron)
     imu_iron: np.ndarray         # (B, hard_iron.STATE_SIZE) its fit
+    imu_table: np.ndarray        # (3, 5) the low-pass filters' coefficients at imu_table_dt
+    imu_table_dt: float
+    imu_work: np.ndarray         # (B, 8, 3) the models' working vectors, per run
+    imu_drift: np.ndarray        # (B, 3, 3) gravity's bias columns, per run
+    imu_nine: np.ndarray         # (B, 9) the rotation integral's low-passed value, per run
 
 
 def initial_state(estimators) -> State:
@@ -140,11 +145,11 @@ def _run_scratch():
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapdown, rotation):
+def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapdown, rotation,
+               turn):
     """:func:`propagate_covariance`, and the IMU models' strapdown by the same
-    bias-corrected rotation (MultiplicativeEKF.propagate)."""
+    bias-corrected rotation (MultiplicativeEKF.propagate); ``turn`` (3,) scratch."""
     if imu_on:
-        turn = np.empty(3)
         for i in range(3):
             turn[i] = (rate[i] - beta[i]) * dt
         imu.strapdown_step(strapdown, turn, strapdown)
@@ -171,71 +176,85 @@ def _star_reading(q, beta, P, z, run, R, gating, gate, scratch, dq, mag_bias, ch
 
 
 @njit(cache=True, error_model="numpy")
-def _imu_vector(q, beta, P, run, s, dt, body, reference, gravity, magnetic, known, dof, state,
-                rejected, streaming, likelihood, scratch, dq):
-    """Vector reading ``s``, ``body`` (of ``reference``), through the IMU
-    models where the settings ask (estimators.imu.updates.ImuUpdates._imu_reading):
-    True if they took it."""
-    densities, gating, gate = state.imu_densities[run], state.gating, state.gate
-    if gravity:
-        up, drift, interval, at_rest = imu.accelerometer_reading(state, run, body, dt)
-        last, kept = (0.0, 0.0), True
-        if state.imu_lowpass:
-            nis, applied, determinant = gravity_update(
-                q, beta, P, up, densities[0] / interval, drift, gating[run], gate[run, dof],
-                scratch, dq, state.mag_bias[run])
-            if applied:
-                last = (nis, determinant)
-            else:
-                rejected[run, s] += 1
-                kept = False
-        if state.imu_rest and at_rest:
-            last = imu.rest_update(q, beta, P, state.imu_rate_lp[run], densities[2] / interval,
-                                   scratch, dq)
-        if streaming and kept and state.imu_lowpass:
-            fold_innovation(run, last[0], last[1], likelihood)
-        return state.imu_lowpass
-    if not (magnetic and state.imu_heading):
-        return False
-    field = imu.calibrated_field(state.imu_counts, state.imu_iron, run, body, dt,
-                                 state.imu_iron_fit)
-    psi, interval, trust, validated, forget = imu.field_reading(
-        state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
-        state.imu_field, run, q, field, reference, known, dt, np.empty(3))
+def _gravity_reading(q, beta, P, run, s, dt, body, models, gating, threshold, mag_bias, rejected,
+                     streaming, likelihood, scratch, dq, lowpass, rest_updates):
+    """An accelerometer reading through the IMU models
+    (estimators.imu.updates.ImuUpdates._imu_reading), ``models`` their
+    :func:`~benchmarks.engine.kernels.imu.gravity_models`: True if they took
+    it (the low-passed gravity's update), False where the reading goes on to
+    the vector update, the rest detector having read it."""
+    densities = models[imu.G_DENSITIES][run]
+    up, drift, interval, at_rest = imu.accelerometer_reading(models, run, body, dt)
+    last, kept = (0.0, 0.0), True
+    if lowpass:
+        nis, applied, determinant = gravity_update(q, beta, P, up, densities[0] / interval, drift,
+                                                   gating, threshold, scratch, dq, mag_bias)
+        if applied:
+            last = (nis, determinant)
+        else:
+            rejected[run, s] += 1
+            kept = False
+    if rest_updates and at_rest:
+        last = imu.rest_update(q, beta, P, models[imu.G_RATE_LP][run], densities[2] / interval,
+                               scratch, dq)
+    if streaming and kept and lowpass:
+        fold_innovation(run, last[0], last[1], likelihood)
+    return lowpass
+
+
+@njit(cache=True, error_model="numpy")
+def _heading_reading(q, beta, P, run, s, dt, body, reference, known, models, gating, threshold,
+                     rejected, streaming, likelihood, scratch, dq):
+    """A magnetometer reading through the heading model
+    (estimators.imu.updates.ImuUpdates._heading), ``models`` its arrays
+    (:func:`~benchmarks.engine.kernels.imu.field_models`)."""
+    field = imu.calibrated_field(models, run, body, dt)
+    psi, interval, trust, validated, forget = imu.field_reading(models, run, q, field, reference,
+                                                                known, dt)
     if forget:
         imu.forget_heading(q, P)
     if trust == 0.0:
         rejected[run, s] += 1
-        return True
-    variance = trust * trust * densities[1] / interval
+        return
+    variance = trust * trust * models[imu.F_DENSITIES][run, 1] / interval
     s_value = variance
-    v = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    v = to_body_frame(q, (0.0, 0.0, 1.0))
     for a in range(3):
         for b in range(3):
             s_value += v[a] * P[a, b] * v[b]
-    if gating[run] and not psi * psi / s_value <= gate[run, 1]:
+    if gating and not psi * psi / s_value <= threshold:
         rejected[run, s] += 1
-        return True
+        return
     nis, determinant = imu.heading_update(q, beta, P, psi, variance, validated, scratch, dq)
     if streaming:
         fold_innovation(run, nis, determinant, likelihood)
-    return True
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected, streaming, likelihood,
-                    scratch, dq, mag_bias, check, health, factor):
+                    scratch, dq, mag_bias, check, health, factor, gravity_models,
+                    field_models):
     """Vector reading ``s`` of step ``j``: through the IMU models where they
-    take it (:func:`_imu_vector`), else the magnetic norm test and the gated
-    update with its reset (MultiplicativeEKF.correct_vector); the health check
-    after it where the filter's state was touched (not after a field the norm
-    test refused). Inlined, as what runs every step on a recording is; the
-    updates it makes are called (the kernels package's docstring)."""
+    take it (:func:`_gravity_reading`, :func:`_heading_reading`; ``*_models``
+    their arrays, :func:`~benchmarks.engine.kernels.imu.gravity_models`), else the
+    magnetic norm test and the gated update with its reset
+    (MultiplicativeEKF.correct_vector); the health check after it where the
+    filter's state was touched (not after a field the norm test refused).
+    Inlined, as what runs every step on a recording is; the updates it makes
+    are called (the kernels package's docstring)."""
     body, reference = block.vector_body[run, j, s], block.vector_reference[j, s]
-    if not (state.imu_on and _imu_vector(
-            q, beta, P, run, s, dt, body, reference, block.vector_gravity[s],
-            block.vector_magnetic[s], block.vector_known[s], block.vector_dof[s], state,
-            rejected, streaming, likelihood, scratch, dq)):
+    taken = False
+    if state.imu_on and block.vector_gravity[s]:
+        taken = _gravity_reading(q, beta, P, run, s, dt, body, gravity_models, state.gating[run],
+                                 state.gate[run, block.vector_dof[s]], mag_bias, rejected,
+                                 streaming, likelihood, scratch, dq, state.imu_lowpass,
+                                 state.imu_rest)
+    elif state.imu_on and block.vector_magnetic[s] and state.imu_heading:
+        _heading_reading(q, beta, P, run, s, dt, body, reference, block.vector_known[s],
+                         field_models, state.gating[run], state.gate[run, 1], rejected, streaming,
+                         likelihood, scratch, dq)
+        taken = True
+    if not taken:
         reads_hard_iron = state.hard_iron and block.vector_magnetic[s]
         if block.vector_magnetic[s] and not field_passes(
                 body, reference, state.magnetic_tolerance[run], mag_bias, reads_hard_iron):
@@ -280,7 +299,8 @@ def advance(block, sensors, state, record, row):
     noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
     beta_last, P_last, rejected = state.beta_last, state.P_last, record.rejected[row]
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
-     rotation) = rate_arrays(state)
+     rotation, imu_table, imu_table_dt, imu_work) = rate_arrays(state)
+    gravity_models, field_models = imu.gravity_models(state), imu.field_models(state)
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
         w, z, dq, out, mean, scratch6, bits, bits_int, factor = _run_scratch()
@@ -293,10 +313,10 @@ def advance(block, sensors, state, record, row):
             available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
                                                       star)
             if imu_on:
-                imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
+                imu.gyro_reading(counts, detector, rate_lp, run, w, dt, imu_table, imu_table_dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
                 _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
-                           imu_on, strapdown[run], rotation[run, 0])
+                           imu_on, strapdown[run], rotation[run, 0], imu_work[run, imu.TURN])
             if not posterior:
                 _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
                         variances, keep_traces, streaming, nees_every, settle, nees_samples,
@@ -309,7 +329,8 @@ def advance(block, sensors, state, record, row):
                 if vector_available[run, j, s]:
                     _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected,
                                     streaming, likelihood, scratch6, dq, mag_bias, check,
-                                    health[run], factor)
+                                    health[run], factor, gravity_models,
+                                    field_models)
             if posterior:
                 _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
                         variances, keep_traces, streaming, nees_every, settle, nees_samples,
@@ -318,7 +339,7 @@ def advance(block, sensors, state, record, row):
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
                 _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
-                           strapdown[run], rotation[run, 0])
+                           strapdown[run], rotation[run, 0], imu_work[run, imu.TURN])
             if not (finite_state(q, 4, P, P.shape[0]) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:

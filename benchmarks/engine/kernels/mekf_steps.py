@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels.algebra import (gauss_jordan, joseph_covariance, log_error,
@@ -218,7 +217,7 @@ def field_passes(body, reference, tolerance, mag_bias, hard_iron):
 def gravity_update(q, beta, P, up, variance, drift, gating, threshold, scratch, dq, mag_bias):
     """The low-passed gravity direction (estimators.imu.updates): the vector
     update of e_z with the strapdown's drift in H's bias columns."""
-    p0, p1, p2 = to_body_frame(q, np.array([0.0, 0.0, 1.0]))
+    p0, p1, p2 = to_body_frame(q, (0.0, 0.0, 1.0))
     H = scratch[8]
     R = scratch[9]
     for i in range(3):

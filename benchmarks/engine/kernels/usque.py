@@ -93,6 +93,11 @@ class State(NamedTuple):
     imu_field: np.ndarray
     imu_iron_fit: bool
     imu_iron: np.ndarray
+    imu_table: np.ndarray        # (3, 5) the low-pass filters' coefficients at imu_table_dt
+    imu_table_dt: float
+    imu_work: np.ndarray         # (B, 8, 3) the models' working vectors, per run
+    imu_drift: np.ndarray        # (B, 3, 3) gravity's bias columns, per run
+    imu_nine: np.ndarray         # (B, 9) the rotation integral's low-passed value, per run
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -313,14 +318,14 @@ def _run_scratch():
 
 @njit(cache=True, error_model="numpy")
 def _propagated(q, x, P, sigmas, rate, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
-                propagated, imu_on, strapdown, rotation):
+                propagated, imu_on, strapdown, rotation, turns):
     """:func:`_predict` with ``rate`` (and the IMU models' strapdown before it):
     True if its Cholesky factors existed and the state is finite after it.
     Called, though it runs every step: inlined at the loop's two places, it
     took 9 s more to compile, and beside the sigma points' propagation its
     call costs nothing measurable."""
     if imu_on:
-        usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], rate, x, dt)
+        usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], rate, x, dt, turns[run])
     factored = _predict(q, x, P, sigmas, rate, dt, noise[run], bias_rw[run], spread[run], Wm,
                         Wc, scratch[0], scratch[1], propagated)
     return factored and _finite(q, x, P)
@@ -359,7 +364,8 @@ def advance(block, sensors, state, record, row):
     (q_all, x_all, P_all, sigmas_all, noise, bias_rw, spread, Wm_all, Wc_all, beta_last,
      P_last, posterior) = _filter_arrays(state)
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
-     rotation) = rate_arrays(state)
+     rotation, imu_table, imu_table_dt, imu_work) = rate_arrays(state)
+    imu_turns = imu_work[:, imu.TURN]         # (B, 3): each run's strapdown turn
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
         w, z, dq, out, mean, scratch, propagated, R_vector, bits, bits_int = _run_scratch()
@@ -375,10 +381,10 @@ def advance(block, sensors, state, record, row):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
             if imu_on:
-                imu.gyro_reading(counts, detector, rate_lp, run, w, dt)
+                imu.gyro_reading(counts, detector, rate_lp, run, w, dt, imu_table, imu_table_dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end) and not \
                     _propagated(q, x, P, sigmas, mean, dt, run, noise, bias_rw, spread, Wm, Wc,
-                                scratch, propagated, imu_on, strapdown, rotation):
+                                scratch, propagated, imu_on, strapdown, rotation, imu_turns):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
             if not posterior:
@@ -396,7 +402,7 @@ def advance(block, sensors, state, record, row):
                          error_every, samples, diverged, bits, bits_int)
             if not (_finite(q, x, P) if trapezoid[run] else _propagated(
                     q, x, P, sigmas, w, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
-                    propagated, imu_on, strapdown, rotation)):
+                    propagated, imu_on, strapdown, rotation, imu_turns)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
                 check_health(q, True, P, 6, health[run], scratch[0])

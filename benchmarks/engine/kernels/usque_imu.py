@@ -31,10 +31,9 @@ from estimators.usque import STATE_SIZE
 
 
 @njit(cache=True, error_model="numpy")
-def propagate_strapdown(strapdown, rotation, rate, x, dt):
+def propagate_strapdown(strapdown, rotation, rate, x, dt, turn):
     """The IMU models' strapdown by the mean's bias-corrected rotation
-    (``USQUE.propagate``), before the sigma points move."""
-    turn = np.empty(3)
+    (``USQUE.propagate``), before the sigma points move; ``turn`` (3,) scratch."""
     for i in range(3):
         turn[i] = (rate[i] - x[3 + i]) * dt
     imu.strapdown_step(strapdown, turn, strapdown)
@@ -60,7 +59,7 @@ def gravity_update(q, x, P, sigmas, up, variance, drift, Wm, Wc, gating, thresho
     """``USQUE._gravity_update`` (the update only: the caller resets)."""
     for i in range(N_SIGMAS):
         a = np.array(_sigma_attitude(q, sigmas[i]))
-        p0, p1, p2 = to_body_frame(a, np.array([0.0, 0.0, 1.0]))
+        p0, p1, p2 = to_body_frame(a, (0.0, 0.0, 1.0))
         d0, d1, d2 = sigmas[i, 3] - x[3], sigmas[i, 4] - x[4], sigmas[i, 5] - x[5]
         predicted[i, 0] = p0 + (drift[0, 0] * d0 + drift[0, 1] * d1 + drift[0, 2] * d2)
         predicted[i, 1] = p1 + (drift[1, 0] * d0 + drift[1, 1] * d1 + drift[1, 2] * d2)
@@ -116,7 +115,7 @@ def heading_update(q, x, P, sigmas, field, psi, variance, validated, Wm, Wc, gat
             total += Wc[i] * (sigmas[i, a] - x[a]) * (h[i] - zp)
         Pxz[a] = total
         K[a] = total / S
-    v = to_body_frame(estimate, np.array([0.0, 0.0, 1.0]))
+    v = to_body_frame(estimate, (0.0, 0.0, 1.0))
     along = v[0] * K[0] + v[1] * K[1] + v[2] * K[2]
     for a in range(3):
         K[a] = v[a] * along
@@ -142,7 +141,8 @@ def reading(q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, 
     densities = state.imu_densities[run]
     if gravity[s]:
         force = body[run, j, s]
-        up, drift, interval, at_rest = imu.accelerometer_reading(state, run, force, dt)
+        up, drift, interval, at_rest = imu.accelerometer_reading(imu.gravity_models(state), run, force,
+                                                                 dt)
         last_nis, last_det, kept = 0.0, 1.0, True
         if state.imu_lowpass:
             if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
@@ -181,11 +181,10 @@ def _field_reading(q, x, P, sigmas, run, field, reference, known, dt, gating, ga
     ``(factored, updated)`` as :func:`reading` returns them."""
     estimate = np.empty(4)
     output(q, x, estimate)
-    field = imu.calibrated_field(state.imu_counts, state.imu_iron, run, field, dt,
-                                 state.imu_iron_fit)
-    psi, interval, trust, validated, forget = imu.field_reading(
-        state.imu_counts, state.imu_trust, state.imu_rate_lp, state.imu_strapdown,
-        state.imu_field, run, estimate, field, reference, known, dt, np.empty(3))
+    models = imu.field_models(state)
+    field = imu.calibrated_field(models, run, field, dt)
+    psi, interval, trust, validated, forget = imu.field_reading(models, run, estimate, field,
+                                                                reference, known, dt)
     if forget:
         imu.forget_heading(estimate, P)
         updated = True
