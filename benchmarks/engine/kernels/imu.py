@@ -294,11 +294,12 @@ def rest_update(q, beta, P, rate_lp, variance, scratch, dq):
 
 
 @njit(cache=True, error_model="numpy")
-def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
+def heading_update(q, beta, P, psi, variance, bias, gating, threshold, scratch, dq):
     """The heading-only update (:mod:`estimators.imu.heading`): ``y = ψ``,
     ``H = [vᵀ 0]``, the attitude gain projected on ``v``, the bias rows
-    zeroed unless ``bias``; Joseph's form, then the reset. Returns the NIS
-    and det S."""
+    zeroed unless ``bias``; Joseph's form, then the reset; not applied if
+    gating rejects it. Returns the NIS, whether it was applied and det S
+    (as :func:`~benchmarks.engine.kernels.mekf_steps.joseph_update`)."""
     v = to_body_frame(q, (0.0, 0.0, 1.0))
     IK, T = scratch[3], scratch[4]
     K = scratch[2, 0]
@@ -306,6 +307,9 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     for i in range(3):
         for j in range(3):
             s += v[i] * P[i, j] * v[j]
+    nis = psi * psi / s
+    if gating and not nis <= threshold:
+        return nis, False, s
     for i in range(6):
         K[i] = (P[i, 0] * v[0] + P[i, 1] * v[1] + P[i, 2] * v[2]) / s
     along = v[0] * K[0] + v[1] * K[1] + v[2] * K[2]
@@ -325,7 +329,7 @@ def heading_update(q, beta, P, psi, variance, bias, scratch, dq):
     for i in range(6):
         dx[i] = K[i] * psi
     _apply(q, beta, dx, dq)
-    return psi * psi / s, s
+    return nis, True, s
 
 
 @njit(cache=True, error_model="numpy")

@@ -20,7 +20,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from benchmarks.engine.kernels.algebra import to_body_frame
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
                                               mark_diverged, nees_arrays, norm_tolerances,
@@ -217,16 +216,11 @@ def _heading_reading(q, beta, P, run, s, dt, body, reference, known, models, gat
         rejected[run, s] += 1
         return
     variance = trust * trust * models[imu.F_DENSITIES][run, 1] / interval
-    s_value = variance
-    v = to_body_frame(q, (0.0, 0.0, 1.0))
-    for a in range(3):
-        for b in range(3):
-            s_value += v[a] * P[a, b] * v[b]
-    if gating and not psi * psi / s_value <= threshold:
+    nis, applied, determinant = imu.heading_update(q, beta, P, psi, variance, validated, gating,
+                                                   threshold, scratch, dq)
+    if not applied:
         rejected[run, s] += 1
-        return
-    nis, determinant = imu.heading_update(q, beta, P, psi, variance, validated, scratch, dq)
-    if streaming:
+    elif streaming:
         fold_innovation(run, nis, determinant, likelihood)
 
 

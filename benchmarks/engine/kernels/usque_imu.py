@@ -141,8 +141,8 @@ def reading(q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, 
     densities = state.imu_densities[run]
     if gravity[s]:
         force = body[run, j, s]
-        up, drift, interval, at_rest = imu.accelerometer_reading(imu.gravity_models(state), run, force,
-                                                                 dt)
+        models = imu.gravity_models(state)
+        up, drift, interval, at_rest = imu.accelerometer_reading(models, run, force, dt)
         last_nis, last_det, kept = 0.0, 1.0, True
         if state.imu_lowpass:
             if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
