@@ -26,6 +26,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               rate_arrays, rate_states, record_error,
                                               trapezoid_rate)
 from benchmarks.engine.kernels import imu
+from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_passes,
                                                   gravity_update, propagate_covariance,
                                                   star_update, vector_update)
@@ -134,13 +135,30 @@ def final(state, estimators) -> dict:
     return report
 
 
+#: A run's scratch matrices: a constant shape, room for nine states (the
+#: module's docstring), allocated for the batch and borrowed by each run.
+SCRATCH_SHAPE = (10, 9, 9)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _run_scratch():
-    """One run's working arrays (allocated once per run, in its thread): the
-    scratch matrices of a constant shape (the module's docstring)."""
+    """One run's working vectors (allocated once per run, in its thread; the
+    scratch matrices, which every update slices, are the batch's, borrowed:
+    borrowing these too gained nothing measurable)."""
     bits = np.empty(1)
-    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
-            np.empty((10, 9, 9)), bits, bits.view(np.int64), np.empty((9, 9)))
+    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3), bits,
+            bits.view(np.int64), np.empty((9, 9)))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _filter_arrays(state, record, row):
+    """The filters' arrays of the state, its rejections' counts in the record
+    and the IMU models' arrays (:func:`~benchmarks.engine.kernels.imu.gravity_models`),
+    taken out of their tuples before the parallel loop, to be borrowed
+    (the package's docstring)."""
+    return (state.q, state.beta, state.P, state.mag_bias, state.noise, state.bias_rw,
+            state.beta_last, state.P_last, state.posterior, record.rejected[row],
+            imu.gravity_models(state), imu.field_models(state))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -280,24 +298,24 @@ def _output(q, out, run, k, last_step, q_true_k, beta, P, beta_last, P_last, var
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
-    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
-        block.q_true
+    k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
+    q_true, vector_available = borrowed((block.q_true, block.vector_available))
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
-     bias_last) = gyro_arrays(block, sensors)
-    star, vector_available = star_arrays(block), block.vector_available     # (B, steps, S)
+     bias_last) = borrowed(gyro_arrays(block, sensors))
+    star = borrowed(star_arrays(block))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
-     health) = error_arrays(record, row)
+     health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances, likelihood) = nees_arrays(record, row)
-    q_all, beta_all, P_all, mag_bias_all = state.q, state.beta, state.P, state.mag_bias
-    noise, bias_rw, posterior = state.noise, state.bias_rw, state.posterior
-    beta_last, P_last, rejected = state.beta_last, state.P_last, record.rejected[row]
+     variances, likelihood) = borrowed(nees_arrays(record, row))
+    (q_all, beta_all, P_all, mag_bias_all, noise, bias_rw, beta_last, P_last, posterior,
+     rejected, gravity_models, field_models) = borrowed(_filter_arrays(state, record, row))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
-     rotation, imu_table, imu_table_dt, imu_work) = rate_arrays(state)
-    gravity_models, field_models = imu.gravity_models(state), imu.field_models(state)
+     rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
+    work = np.empty((q_all.shape[0],) + SCRATCH_SHAPE)      # each run's scratch matrices
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
-        w, z, dq, out, mean, scratch6, bits, bits_int, factor = _run_scratch()
+        run_block, run_state, scratch6 = borrowed((block, state, work[run]))
+        w, z, dq, out, mean, bits, bits_int, factor = _run_scratch()
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
@@ -316,12 +334,12 @@ def advance(block, sensors, state, record, row):
                         variances, keep_traces, streaming, nees_every, settle, nees_samples,
                         nees_sum, scratch6)
             if available:
-                _star_reading(q, beta, P, z, run, state.R[run], state.gating[run],
-                              state.gate[run, 3], scratch6, dq, mag_bias, check, health[run],
+                _star_reading(q, beta, P, z, run, run_state.R[run], run_state.gating[run],
+                              run_state.gate[run, 3], scratch6, dq, mag_bias, check, health[run],
                               factor, streaming, nis_sum, nis_count, likelihood)
             for s in range(vector_available.shape[2]):
                 if vector_available[run, j, s]:
-                    _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected,
+                    _vector_reading(q, beta, P, run, j, s, dt, run_block, run_state, rejected,
                                     streaming, likelihood, scratch6, dq, mag_bias, check,
                                     health[run], factor, gravity_models,
                                     field_models)

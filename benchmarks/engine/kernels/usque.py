@@ -34,6 +34,7 @@ from numba import njit, prange
 
 from benchmarks.engine.kernels import imu, usque_imu
 from benchmarks.engine.kernels.algebra import quat_exp, to_body_frame
+from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
                                               norm_tolerances, passes_norm, mark_diverged,
@@ -309,11 +310,15 @@ def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _run_scratch():
-    """One run's working arrays (allocated once per run, in its thread)."""
+    """One run's working vectors and sigma points (allocated once per run, in
+    its thread)."""
     bits = np.empty(1)
     return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
-            np.empty((6, 6, 6)), np.empty((N_SIGMAS, STATE_SIZE)), np.empty((3, 3)), bits,
-            bits.view(np.int64))
+            np.empty((N_SIGMAS, STATE_SIZE)), np.empty((3, 3)), bits, bits.view(np.int64))
+
+
+#: A run's scratch matrices, allocated for the batch and borrowed by each run.
+SCRATCH_SHAPE = (6, 6, 6)
 
 
 @njit(cache=True, error_model="numpy")
@@ -352,23 +357,26 @@ def _output(q, x, out, run, k, last_step, q_true_k, P, beta_last, P_last, varian
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset (or reset alone), output,
     then propagate (see :mod:`benchmarks.engine.kernels`)."""
-    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
-        block.q_true
+    k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
+    q_true = borrowed(block.q_true)
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
-     bias_last) = gyro_arrays(block, sensors)
-    star, vectors, rejected = star_arrays(block), vector_arrays(block), record.rejected[row]
+     bias_last) = borrowed(gyro_arrays(block, sensors))
+    star, vectors, rejected = borrowed((star_arrays(block), vector_arrays(block),
+                                        record.rejected[row]))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
-     health) = error_arrays(record, row)
+     health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances, likelihood) = nees_arrays(record, row)
+     variances, likelihood) = borrowed(nees_arrays(record, row))
     (q_all, x_all, P_all, sigmas_all, noise, bias_rw, spread, Wm_all, Wc_all, beta_last,
-     P_last, posterior) = _filter_arrays(state)
+     P_last, posterior) = borrowed(_filter_arrays(state))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
-     rotation, imu_table, imu_table_dt, imu_work) = rate_arrays(state)
+     rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
     imu_turns = imu_work[:, imu.TURN]         # (B, 3): each run's strapdown turn
+    work = np.empty((q_all.shape[0],) + SCRATCH_SHAPE)      # each run's scratch matrices
     for index in prange(q_all.shape[0]):
         run = np.int64(index)
-        w, z, dq, out, mean, scratch, propagated, R_vector, bits, bits_int = _run_scratch()
+        run_state, scratch = borrowed((state, work[run]))
+        w, z, dq, out, mean, propagated, R_vector, bits, bits_int = _run_scratch()
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
         Wm, Wc, countdown, reading = Wm_all[run], Wc_all[run], first_countdown(k0, star, run), 0
         for j in range(steps):
@@ -390,7 +398,7 @@ def advance(block, sensors, state, record, row):
             if not posterior:
                 _output(q, x, out, run, k, last_step, q_true[j], P, beta_last, P_last, variances,
                         keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
-            if not _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state,
+            if not _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, run_state,
                             rejected, streaming, nis_sum, nis_count, likelihood, check,
                             health[run], scratch, propagated, R_vector):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
