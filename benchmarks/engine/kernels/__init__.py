@@ -58,20 +58,19 @@ called, take the dozen arrays each reads as a plain tuple made before the
 loop (``imu.gravity_models``): with the whole state, passed on to three
 called helpers, they cost the MEKF 0.67 µs a sample of 3.73 on a BROAD trial.
 
-Those counts are atomic operations on the array's counter, and where the
-two threads count the same array (the batch's state, block and record) its
-cache line goes back and forth between the cores: in a profile of the
-CubeSat's MEKF campaign a fifth of all the time went to them. So the MEKF's
-and USQUE's kernels take every array their loop reads borrowed
+Those counts are atomic operations on the array's counter, each a barrier
+to the processor's reordering, and where the two threads count the same
+array (the batch's state, block and record) its cache line goes back and
+forth between the cores: in a profile of 128 CubeSat MEKF runs a fifth of
+all the process's samples fell on them. So the MEKF's and USQUE's kernels
+take every array their loop reads borrowed
 (:mod:`~benchmarks.engine.kernels.borrowed`: the same array without its
 counter, whose views and calls count nothing), the block and the state
 borrowed again inside each run's iteration (a named tuple made before the
-loop cannot enter it), and their scratch matrices, which every update
-slices, as borrowed rows of one array for the batch. Their numbers are the
-same to the bit; 1024 CubeSat runs of the MEKF take 0.7 times the kernel
-time they took, USQUE's about 0.95 (its sigma points' helpers still make
-arrays of their own); the other kernels' loops showed no count in their
-profiles.
+loop cannot enter it), and each run's working arrays as borrowed rows of
+arrays made once for the batch. In the same profile the counts then took
+about 1 % of the samples; the numbers are the same to the bit. The other
+kernels' profiles showed no counts worth it.
 
 Its run index is made ``run = np.int64(index)`` first: numba types the
 ``prange`` index as a signed integer where it types the kernel and as an

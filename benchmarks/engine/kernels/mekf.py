@@ -135,19 +135,21 @@ def final(state, estimators) -> dict:
     return report
 
 
-#: A run's scratch matrices: a constant shape, room for nine states (the
-#: module's docstring), allocated for the batch and borrowed by each run.
-SCRATCH_SHAPE = (10, 9, 9)
+@njit(cache=True, inline="always", error_model="numpy")
+def _batch_scratch(n_runs):
+    """Every run's working arrays, made once for the batch: vectors, and the
+    scratch matrices of a constant shape (the module's docstring)."""
+    return (np.empty((n_runs, 3)), np.empty((n_runs, 4)), np.empty((n_runs, 4)),
+            np.empty((n_runs, 4)), np.empty((n_runs, 3)), np.empty((n_runs, 10, 9, 9)),
+            np.empty((n_runs, 1)), np.empty((n_runs, 9, 9)))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _run_scratch():
-    """One run's working vectors (allocated once per run, in its thread; the
-    scratch matrices, which every update slices, are the batch's, borrowed:
-    borrowing these too gained nothing measurable)."""
-    bits = np.empty(1)
-    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3), bits,
-            bits.view(np.int64), np.empty((9, 9)))
+def _run_scratch(batch, run):
+    """Run ``run``'s rows of :func:`_batch_scratch`'s arrays, borrowed."""
+    w, z, dq, out, mean, scratch, bits, factor = batch
+    return borrowed((w[run], z[run], dq[run], out[run], mean[run], scratch[run], bits[run],
+                     factor[run]))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -299,10 +301,10 @@ def _output(q, out, run, k, last_step, q_true_k, beta, P, beta_last, P_last, var
 def advance(block, sensors, state, record, row):
     """Every run through ``block``: update and reset with each reading, then propagate."""
     k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
-    q_true, vector_available = borrowed((block.q_true, block.vector_available))
+    q_true, vector_available, star = borrowed((block.q_true, block.vector_available,
+                                               star_arrays(block)))
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
      bias_last) = borrowed(gyro_arrays(block, sensors))
-    star = borrowed(star_arrays(block))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
@@ -311,11 +313,11 @@ def advance(block, sensors, state, record, row):
      rejected, gravity_models, field_models) = borrowed(_filter_arrays(state, record, row))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
-    work = np.empty((q_all.shape[0],) + SCRATCH_SHAPE)      # each run's scratch matrices
+    batch = _batch_scratch(q_all.shape[0])
     for index in prange(q_all.shape[0]):
-        run = np.int64(index)
-        run_block, run_state, scratch6 = borrowed((block, state, work[run]))
-        w, z, dq, out, mean, bits, bits_int, factor = _run_scratch()
+        run, run_block, run_state = np.int64(index), borrowed(block), borrowed(state)
+        w, z, dq, out, mean, scratch6, bits, factor = _run_scratch(batch, run)
+        bits_int = bits.view(np.int64)
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):

@@ -309,16 +309,20 @@ def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _run_scratch():
-    """One run's working vectors and sigma points (allocated once per run, in
-    its thread)."""
-    bits = np.empty(1)
-    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(3),
-            np.empty((N_SIGMAS, STATE_SIZE)), np.empty((3, 3)), bits, bits.view(np.int64))
+def _batch_scratch(n_runs):
+    """Every run's working arrays, made once for the batch."""
+    return (np.empty((n_runs, 3)), np.empty((n_runs, 4)), np.empty((n_runs, 4)),
+            np.empty((n_runs, 4)), np.empty((n_runs, 3)), np.empty((n_runs, 6, 6, 6)),
+            np.empty((n_runs, N_SIGMAS, STATE_SIZE)), np.empty((n_runs, 3, 3)),
+            np.empty((n_runs, 1)))
 
 
-#: A run's scratch matrices, allocated for the batch and borrowed by each run.
-SCRATCH_SHAPE = (6, 6, 6)
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch(batch, run):
+    """Run ``run``'s rows of :func:`_batch_scratch`'s arrays, borrowed."""
+    w, z, dq, out, mean, scratch, propagated, R_vector, bits = batch
+    return borrowed((w[run], z[run], dq[run], out[run], mean[run], scratch[run],
+                     propagated[run], R_vector[run], bits[run]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -372,11 +376,11 @@ def advance(block, sensors, state, record, row):
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
     imu_turns = imu_work[:, imu.TURN]         # (B, 3): each run's strapdown turn
-    work = np.empty((q_all.shape[0],) + SCRATCH_SHAPE)      # each run's scratch matrices
+    batch = _batch_scratch(q_all.shape[0])
     for index in prange(q_all.shape[0]):
-        run = np.int64(index)
-        run_state, scratch = borrowed((state, work[run]))
-        w, z, dq, out, mean, propagated, R_vector, bits, bits_int = _run_scratch()
+        run, run_state = np.int64(index), borrowed(state)
+        w, z, dq, out, mean, scratch, propagated, R_vector, bits = _run_scratch(batch, run)
+        bits_int = bits.view(np.int64)
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
         Wm, Wc, countdown, reading = Wm_all[run], Wc_all[run], first_countdown(k0, star, run), 0
         for j in range(steps):
