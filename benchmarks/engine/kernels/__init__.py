@@ -69,7 +69,7 @@ counter, whose views and calls count nothing), the block and the state
 borrowed again inside each run's iteration (a named tuple made before the
 loop cannot enter it), and each run's working arrays as borrowed rows of
 arrays made once for the batch. In the same profile the counts then took
-about 1 % of the samples; the numbers are the same to the bit. The other
+under 3 % of the samples; the numbers are the same to the bit. The other
 kernels' profiles showed no counts worth it.
 
 Its run index is made ``run = np.int64(index)`` first: numba types the
