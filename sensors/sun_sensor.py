@@ -69,18 +69,15 @@ CUBE_FACES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.
 def _rotated(vectors: np.ndarray, rotvecs: np.ndarray) -> np.ndarray:
     r"""Each of ``vectors`` ``(..., 3)`` rotated by its rotation vector θ
     (Rodrigues: :math:`v\cos\theta + (\hat k\times v)\sin\theta + \hat k(\hat k\cdot
-    v)(1-\cos\theta)`), element by element. scipy's ``Rotation.apply`` gives
-    a row a last-bit result that depends on its place in the stack, and a
-    reading must not depend on how a run is cut into blocks."""
-    angle = np.sqrt(np.sum(rotvecs * rotvecs, axis=-1, keepdims=True))
-    safe = np.where(angle > 0.0, angle, 1.0)
-    axis = rotvecs / safe
-    x, y, z = axis[..., 0:1], axis[..., 1:2], axis[..., 2:3]
-    a, b, c = vectors[..., 0:1], vectors[..., 1:2], vectors[..., 2:3]
-    cross = np.concatenate([y * c - z * b, z * a - x * c, x * b - y * a], axis=-1)
-    along = x * a + y * b + z * c
-    cos, sin = np.cos(angle), np.sin(angle)
-    return vectors * cos + cross * sin + axis * (along * (1.0 - cos))
+    v)(1-\cos\theta)`), element by element (compiled:
+    :func:`sensors.vector_arithmetic.rotated_rows`). scipy's ``Rotation.apply``
+    gives a row a last-bit result that depends on its place in the stack, and
+    a reading must not depend on how a run is cut into blocks."""
+    from sensors.vector_arithmetic import rotated_rows        # compiled: loaded where used
+    shape = np.broadcast_shapes(np.shape(vectors), np.shape(rotvecs))
+    stack = (-1,) + shape[-2:] if len(shape) > 1 else (1, 1, 3)
+    return rotated_rows(np.broadcast_to(vectors, shape).reshape(stack),
+                        np.broadcast_to(rotvecs, shape).reshape(stack)).reshape(shape)
 
 
 def _distinct_rows(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

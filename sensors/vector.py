@@ -110,10 +110,14 @@ def to_body(q_true: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 def times_matrix(vectors: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """``vectors @ matrix.T`` for ``(..., 3)`` vectors, written element by
-    element: a row's result is then the same bits wherever it sits in the
-    stack (a block of a run, or the whole run), which BLAS does not promise."""
-    return (vectors[..., 0:1] * matrix[:, 0] + vectors[..., 1:2] * matrix[:, 1]
-            + vectors[..., 2:3] * matrix[:, 2])
+    element (compiled: :func:`sensors.vector_arithmetic.times_matrix_rows`):
+    a row's result is then the same bits wherever it sits in the stack (a
+    block of a run, or the whole run), which BLAS does not promise."""
+    from sensors.vector_arithmetic import times_matrix_rows   # compiled: loaded where used
+    vectors = np.asarray(vectors, dtype=float)
+    matrix = np.ascontiguousarray(matrix, dtype=float)
+    rows = np.ascontiguousarray(vectors.reshape(-1, 3))
+    return times_matrix_rows(rows, matrix).reshape(vectors.shape[:-1] + (len(matrix),))
 
 
 def normals(rngs, shape: tuple) -> np.ndarray:

@@ -18,9 +18,10 @@ from concurrent.futures import ProcessPoolExecutor
 #: The kernels compiled together, one group per process: about equal compile
 #: times, the longest first (measured here on a cold cache, two processes at
 #: a time: the MEKF and USQUE about 55 s each, the EKF 17 s, dead reckoning
-#: with resets 6 s, without 5 s). The coarse sun sensors' compiled readings
-#: (:mod:`sensors.sun_faces`, a few seconds) go with the first group.
-GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "coarse-sun-sensors"),
+#: with resets 6 s, without 5 s). The vector sensors' compiled readings
+#: (:mod:`sensors.sun_faces`, :mod:`sensors.vector_arithmetic`, a few
+#: seconds) go with the first group.
+GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "vector-sensors"),
           ("mekf", "ekf"))
 
 
@@ -30,13 +31,28 @@ def compile_kernels(names) -> tuple:
     from benchmarks.engine.batch import make_runs, run_batch
     from benchmarks.scenario import Scenario
     scenario = Scenario(tstop=0.2)
-    kernels = tuple(name for name in names if name != "coarse-sun-sensors")
+    kernels = tuple(name for name in names if name != "vector-sensors")
     run_batch(scenario, make_runs(scenario, [0, 1]), estimators=kernels, consistency=True)
-    if "coarse-sun-sensors" in names:
-        import numpy as np
-        from sensors.sun_sensor import CoarseSunSensors
-        CoarseSunSensors(0.01, 1.0, 1.0)._sun_vectors(np.eye(6))
+    if "vector-sensors" in names:
+        _compile_vector_sensors()
     return tuple(names)
+
+
+def _compile_vector_sensors() -> None:
+    """The vector sensors' compiled readings, through the sensors' own calls
+    for two runs (the array types the engine hands them)."""
+    import numpy as np
+    from dynamics.environment import References
+    from sensors.magnetometer import Magnetometer
+    from sensors.sun_sensor import CoarseSunSensors, FineSunSensor
+    steps = 3
+    references = References(magnetic_field_nT=np.tile([2e4, 0.0, 4e4], (steps, 1)),
+                            sun_unit=np.tile([0.0, 0.0, 1.0], (steps, 1)),
+                            illumination=np.ones(steps), position_km=None)
+    attitudes = np.tile([1.0, 0.0, 0.0, 0.0], (steps, 1))
+    for sensor in (FineSunSensor(0.1, 1.0, 1.0), CoarseSunSensors(0.01, 1.0, 1.0),
+                   Magnetometer(100.0, 1.0, 1.0)):
+        sensor.measure_runs(attitudes, references, [np.random.default_rng(run) for run in (0, 1)])
 
 
 def warm_up(processes: int = len(GROUPS)) -> None:
