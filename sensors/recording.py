@@ -138,8 +138,10 @@ def load_recording(path, name: str | None = None) -> Recording:
     ``dataset``) naming what is wrong: a missing file or key, a wrong shape,
     channels that are not real numbers (true/false, complex, text, objects),
     non-finite gyro readings, a reference that is not unit quaternions, a
-    movement mask that is not true/false or does not begin at rest, a rate
-    that is not positive.
+    movement mask that is not true/false, a rate that is not positive. A
+    recording may move from its first sample: no estimator needs a rest
+    (where one is, ``replay`` takes the gyro's noise and its switch-on bias
+    from it).
     """
     path = Path(path)
 
@@ -175,9 +177,6 @@ def checked_recording(data: dict, name: str, refuse) -> Recording:
                                    or not np.isin(movement, (0, 1)).all()):
         refuse(f"movement must be true/false (or the integers 0/1) per sample; it holds "
                f"{kind_in_words(movement)}")
-    if movement[0]:
-        refuse("movement is true from the first sample on; a recording must begin at rest "
-               "(false), since the gyro's bias at switch-on is its mean over the initial rest")
     if rate.shape != () or not np.isfinite(rate) or rate <= 0:
         shown = rate.tolist() if rate.size < 5 else f"an array of shape {rate.shape}"
         refuse(f"sampling_rate_hz = {shown!r} must be one positive number (Hz)")

@@ -199,6 +199,28 @@ def test_the_rest_gives_the_references_and_a_start_near_the_reference():
     assert errors_deg(inputs.scenario.initial_state[None], first[None])["total"][0] < 6.0
 
 
+def test_vqf_is_told_its_magnetometers_rate_where_it_reads_slower():
+    """VQF's magTs sets its magnetometer filters' coefficients: a logger's
+    magnetometer at a quarter of the gyro's rate (with a dropout that
+    lengthens one interval, which the median ignores) is told to it, else its
+    heading correction is four times too slow; one read with every sample is
+    told nothing (BROAD's trials, whose VQF numbers then stay as published)."""
+    from dataclasses import replace
+    from benchmarks.broad.inputs import magnetometer_interval_s
+    dataset = open_broad(SHIPPED)
+    recording = dataset.load(dataset.trial_name("02"))
+    assert "vqf" not in imu_inputs(recording).scenario.estimator_options
+    field = recording.magnetometer_uT.copy()
+    read = np.arange(len(field)) % 4 == 0
+    read[400] = False
+    field[~read] = 0.0                         # the dataset's mark of no reading
+    slower = imu_inputs(replace(recording, magnetometer_uT=field))
+    options = slower.scenario.estimator_options["vqf"]
+    assert options["magnetometer_interval_s"] == pytest.approx(4 * recording.dt, rel=1e-12)
+    assert "vqf" not in slower.scenario.estimator_options.get("vqf-offline", {})
+    assert magnetometer_interval_s(np.array([True, False, False]), 0.01) == 0.01
+
+
 @pytest.mark.parametrize("name", ["vqf", "fusion"])
 def test_the_peers_run_as_registry_estimators(name, tmp_path):
     pytest.importorskip({"vqf": "vqf", "fusion": "imufusion"}[name])
@@ -404,3 +426,15 @@ def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_p
     assert (trials["movement_samples"] == np.count_nonzero(second)).all()
     mekf = trials[trials["estimator"] == "mekf"].iloc[0]
     assert mekf["total_rmse_deg"] == pytest.approx(row["held_out_rmse_deg"], rel=1e-9)
+
+
+def test_a_folder_given_as_dot_is_named_in_the_attribution(tmp_path, monkeypatch):
+    """A user's recordings in the current folder (``--broad phone.toml``): the
+    credit names that folder, not an empty name ("the recordings in ;")."""
+    from benchmarks.broad.dataset import dataset_attribution
+    monkeypatch.chdir(tmp_path)
+    said = dataset_attribution(Path("."))
+    assert f"the recordings in {tmp_path.name};" in said
+    (tmp_path / "README.md").write_text("# Phone walks, 2026\n")
+    assert f"the recordings in {tmp_path.name} (README.md: Phone walks, 2026)" in \
+        dataset_attribution(Path("."))

@@ -137,6 +137,26 @@ def test_replay_writes_figure_and_summary_for_a_users_recording(tmp_path, capsys
     assert "every 0.5005 s" in capsys.readouterr().out           # rounded to 143 samples
 
 
+def test_a_recording_that_moves_from_its_first_sample_replays(tmp_path, capsys):
+    """No initial rest: the gyro's noise is the IMU filters' default, not the
+    variance of no samples (0, a filter sure of its gyro), the bias panels
+    have no rest mean to draw (it is NaN: the figure's range must not be),
+    and the summary's bias error is NaN, not a number against nothing."""
+    from estimators.imu import GYRO_NOISE_DENSITY
+    moving = np.ones(8000, dtype=bool)
+    path = _user_recording(tmp_path, movement=moving)
+    recording, _ = open_dataset(str(path))
+    assert recording.rest_samples == slice(0, 0)
+    scenario = replay_scenario(recording, 0.5)
+    assert scenario.gyro_noise == GYRO_NOISE_DENSITY ** 2
+    assert main(["replay", "--dataset", str(path), "--estimators", "dead-reckoning,mekf",
+                 "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    summary = pd.read_csv(tmp_path / "o" / "summary.csv").set_index("estimator")
+    assert np.isnan(summary.loc["mekf", "final_bias_error_degps"])
+    assert summary.loc["mekf", "rms_movement_deg"] < 2.0
+    assert (tmp_path / "o" / "replay.png").stat().st_size > 10_000
+
+
 def test_a_shipped_replay_carries_the_attribution(tmp_path):
     assert main(["replay", "--dataset", "broad-07", "--estimators", "dead-reckoning",
                  "--out", str(tmp_path), "--quiet"]) == 0

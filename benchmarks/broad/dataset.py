@@ -236,10 +236,12 @@ def dataset_attribution(folder: Path) -> str:
     firsts = [(name, next((line.strip("# ").strip() for line in text(name).splitlines()
                            if line.strip()), "")) for name in found]
     said = "; ".join(f"{name}: {first}" for name, first in firsts if first)
+    # A relative "." has no name: the folder's own, resolved, is what the reader knows.
+    shown = folder.name or folder.resolve().name or str(folder.resolve())
     if not said:
-        return (f"Data: the recordings in {folder.name}; the folder has no README or LICENSE "
+        return (f"Data: the recordings in {shown}; the folder has no README or LICENSE "
                 "saying whose they are or on what terms (its owner's).")
-    return f"Data: the recordings in {folder.name} ({said}); see those files for their terms."
+    return f"Data: the recordings in {shown} ({said}); see those files for their terms."
 
 
 def _holds_broad_trials(folder: Path) -> bool:

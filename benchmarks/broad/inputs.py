@@ -48,15 +48,12 @@ from benchmarks.simulation import SensorData
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import InvalidParameterError, standard_deviation
 from estimators import wahba
+from estimators.imu import GYRO_NOISE_DENSITY
 from sensors.recording import Recording
 from sensors.vector import VectorReadings
 
 #: The smallest σ per axis the filters that read the vectors take: m/s², µT.
 MOTION_SIGMAS = {"accelerometer": 0.3, "magnetometer": 4.0}
-#: The gyro's angle random walk the filters take, rad/√s: a MEMS gyro's noise
-#: (1e-4 to 3e-4) with room for what no filter models (scale factor,
-#: misalignment, the sensor's internal filtering), a few times over.
-GYRO_NOISE_DENSITY = 1e-3
 #: The bias's rate random walk they take, rad/s^1.5: a MEMS gyro's bias
 #: drifts by about 0.01 °/s over a minute.
 GYRO_BIAS_RANDOM_WALK = 1e-5
@@ -121,6 +118,24 @@ def usable_readings(recording: Recording) -> dict:
     """``sensor → (N,)`` bool: the readings that are not exactly zero (a
     dropout, module docstring)."""
     return {name: np.any(channel != 0.0, axis=1) for name, channel in channels(recording).items()}
+
+
+def magnetometer_interval_s(usable: np.ndarray, dt: float) -> float:
+    """The magnetometer's time between readings: the median spacing of its
+    ``usable`` readings (a logger's on its own clock, put on the gyro's
+    grid), in whole gyro steps; ``dt`` where it reads with every sample or
+    reads fewer than twice."""
+    spacing = np.diff(np.flatnonzero(usable))
+    return float(np.median(spacing)) * dt if len(spacing) else dt
+
+
+def _vqf_options(usable: np.ndarray, dt: float) -> dict:
+    """VQF's ``magTs`` (``magnetometer_interval_s``) where the magnetometer
+    reads slower than the gyro: its coefficients are set for it, and at the
+    gyro's step (its default) its heading correction would be that many
+    times too slow. The MEKF reads each reading's interval as it comes."""
+    interval = magnetometer_interval_s(usable, dt)
+    return {"vqf": {"magnetometer_interval_s": interval}} if interval > dt else {}
 
 
 def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -243,7 +258,8 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         # sensors are simulated ones, and these readings are recorded.
         star_tracker_model="rotation", star_tracker_outages_s=((0.0, n * dt),),
         estimator_options={"mekf": {**priors, **IMU_MODELS}, "usque": {**priors, **IMU_MODELS},
-                           "ekf": {"gate_probability": GATE_PROBABILITY}})
+                           "ekf": {"gate_probability": GATE_PROBABILITY},
+                           **_vqf_options(usable["magnetometer"], dt)})
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
                          available=np.zeros(n, dtype=bool), vectors=vectors)

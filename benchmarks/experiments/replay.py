@@ -42,6 +42,7 @@ from benchmarks.sensor_use import refuse_unreadable
 from benchmarks.simulation import RunResult, SensorData, build_estimator, sensor_generators
 from dynamics.rigid_body import RigidBodyTruth
 from dynamics.validation import InvalidParameterError, finite_number
+from estimators.imu import GYRO_NOISE_DENSITY
 from sensors.recording import Recording, load_recording
 
 #: ``--dataset`` name → the shipped file.
@@ -134,7 +135,9 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
     Its grid is the recording's (``dt`` = 1 / rate), its star tracker the
     pseudo star tracker (``interval_s`` rounded to whole samples, ``noise_deg``
     per axis, the reference's gaps as outages), its gyro noise power the
-    variance of the gyro over the initial rest times ``dt``, and every filter
+    variance of the gyro over the initial rest times ``dt`` (without a rest,
+    the MEMS gyro's density the IMU filters take,
+    :data:`estimators.imu.GYRO_NOISE_DENSITY`, squared), and every filter
     starts on the first reference attitude: the additive EKF with
     R = (σ/2)² I₄ and a Q that covers the gyro's noise and the drift the rest
     bias, which it cannot estimate, causes over a reading interval (derived
@@ -150,7 +153,8 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
                                     "says nothing of the attitude")
     dt = recording.dt
     rest = recording.gyro_radps[recording.rest_samples]
-    noise_power = float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1 else 0.0
+    noise_power = (float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1
+                   else GYRO_NOISE_DENSITY ** 2)
     bias = recording.rest_gyro_mean_radps() if len(rest) else np.zeros(3)
     sigma_rad = math.radians(noise_deg)
     # The EKF's Q per step on each quaternion component: the gyro noise,
@@ -206,7 +210,7 @@ class Replay:
         """Per estimator: RMS error over the movement phase (the dataset authors'
         scoring), mean, max and final error over the samples with a reference,
         and the final bias estimate's largest axis error against the rest
-        mean (°/s; NaN without a bias estimate)."""
+        mean (°/s; NaN without a bias estimate, or without a rest)."""
         scored = self.recording.has_reference
         movement = scored & self.recording.movement
         rows = []

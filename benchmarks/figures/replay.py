@@ -99,14 +99,17 @@ def _error_panel(ax, result, styles: dict) -> None:
 
 def _bias_panels(axes, result, styles: dict) -> None:
     """On each body axis, the bias estimates (±3σ, deg/s) of the estimators
-    that estimate one against the gyro's mean over the initial rest; the y
-    range holding that mean and where the estimates spend 98 % of the time."""
+    that estimate one against the gyro's mean over the initial rest (none
+    where the recording moves from its first sample); the y range holding
+    that mean and where the estimates spend 98 % of the time."""
     run, time_s = result.run, result.time_s
     with_bias = [name for name in run.error_deg if run.traces[name].bias_radps is not None]
     rest = np.degrees(result.rest_bias_radps)
+    has_rest = bool(np.all(np.isfinite(rest)))
     for axis, ax in enumerate(axes):
-        ax.axhline(rest[axis], color="black", linestyle="--", linewidth=1.5,
-                   label="Gyro mean over the initial rest")
+        if has_rest:
+            ax.axhline(rest[axis], color="black", linestyle="--", linewidth=1.5,
+                       label="Gyro mean over the initial rest")
         for name in with_bias:
             trace = run.traces[name]
             every = max(1, len(time_s) // (4 * REPLAY_BINS))     # a bias moves slowly
@@ -117,11 +120,20 @@ def _bias_panels(axes, result, styles: dict) -> None:
                     label=f"{run.labels[name]} bias")
             ax.fill_between(time_s[::every], estimate - 3 * sigma, estimate + 3 * sigma,
                             color=styles[name]["color"], alpha=0.15, linewidth=0)
-        values = [rest[axis]] + [np.degrees(run.traces[n].bias_radps[:, axis]) for n in with_bias]
-        low, high = np.percentile(np.hstack(values), [1, 99])
-        low, high = min(low, rest[axis]), max(high, rest[axis])
-        margin = max(0.2 * (high - low), 0.05)
-        ax.set_ylim(low - margin, high + margin)
+        _bias_limits(ax, [rest[axis]] if has_rest else [],
+                     [np.degrees(run.traces[n].bias_radps[:, axis]) for n in with_bias])
         ax.set_ylabel(f"{AXIS_NAMES[axis]} bias (deg/s)")
-    axes[0].set_title("Gyro bias estimates (±3σ) against the rest-phase mean")
+    axes[0].set_title("Gyro bias estimates (±3σ) against the rest-phase mean" if has_rest else
+                      "Gyro bias estimates (±3σ); the recording has no initial rest")
     axes[-1].set_xlabel(X_LABEL)
+
+
+def _bias_limits(ax, marks: list, estimates: list) -> None:
+    """The y range holding ``marks`` and where the finite ``estimates`` spend
+    98 % of the time (about zero where there is neither)."""
+    values = np.hstack([np.asarray(marks, dtype=float)] + estimates)
+    values = values[np.isfinite(values)]
+    low, high = np.percentile(values, [1, 99]) if values.size else (0.0, 0.0)
+    low, high = min([low, *marks]), max([high, *marks])
+    margin = max(0.2 * (high - low), 0.05)
+    ax.set_ylim(low - margin, high + margin)

@@ -41,6 +41,11 @@ MAGNETOMETER_MODELS = ("vector", "heading")
 GRAVITY_DENSITY = 1.5e-3 ** 2
 HEADING_DENSITY = 0.015 ** 2
 REST_DENSITY = 3.1e-5 ** 2
+#: The gyro's angle random walk the filters take on a recording, rad/√s: a
+#: MEMS gyro's noise (1e-4 to 3e-4) with room for what no filter models
+#: (scale factor, misalignment, the sensor's internal filtering), a few
+#: times over (``broad``'s inputs; ``replay`` where a recording has no rest).
+GYRO_NOISE_DENSITY = 1e-3
 
 
 class ImuModels:
