@@ -17,7 +17,7 @@ from scipy.signal import lfilter, lfilter_zi
 from benchmarks.broad.metric import errors_deg
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_body_frame
 from estimators import USQUE, MekfSmoother, MultiplicativeEKF
-from estimators.imu import ImuModels, heading, lowpass, rest
+from estimators.imu import ImuModels, gravity, heading, lowpass, rest
 from estimators.smoother import fuse, reversed_rates
 from sensors.vector import VectorReadings
 from tests.conftest import imu_filter_settings, turning_imu
@@ -135,6 +135,62 @@ def _readings(acc, mag, n, every=1, known=False):
             VectorReadings(sensor="magnetometer", body=mag,
                            reference=np.tile([0.0, 20.0, -40.0], (n, 1)), available=available,
                            variance=np.full(n, 1.0), unit="uT", reference_known=known))
+
+
+# --- gravity while the low-pass filter still averages ---------------------------------
+
+def test_the_gravity_readings_variance_is_the_running_means_until_tau():
+    """(τ/t)² times the density's while the filter averages its first t < τ
+    seconds (the mean of a linear acceleration over t is Δv/t), the
+    density's own once it filters."""
+    dt, tau, density = 0.01, gravity.LOWPASS_TIME_CONSTANT_S, 2e-6
+    state = lowpass.new_state(3)
+    coeffs, out = lowpass.coefficients(tau, dt), np.empty(3)
+    variances = []
+    for _ in range(round(tau / dt) + 5):
+        lowpass.step(np.array([0.0, 0.0, 9.81]), coeffs, tau, dt, state, out)
+        variances.append(gravity.reading_variance(density, dt, state, tau))
+    t = dt * np.arange(1, len(variances) + 1)
+    expected = np.where(t < tau - dt / 2, density / dt * (tau / t) ** 2, density / dt)
+    np.testing.assert_allclose(variances, expected, rtol=1e-12)
+
+
+def _accelerating_from_the_start(dt: float, n: int):
+    """A body turning on three axes and accelerating by up to 5 m/s² on
+    each from its first sample (no rest), its gyro biased as
+    :func:`turning_imu`'s, its field at a quarter rate."""
+    rng = np.random.default_rng(5)
+    t = np.arange(n) * dt
+    rate = np.stack([1.5 * np.sin(2 * t), np.cos(3 * t), 0.8 * np.sin(t)], axis=1)
+    gyro, q, acc = turning_imu(rate, dt, rng)
+    acc += 5.0 * np.stack([np.sin(9 * t), np.cos(7 * t), np.sin(11 * t + 1)], axis=1)
+    mag = np.array([to_body_frame(qk, np.array([0.0, 20.0, -40.0])) for qk in q])
+    return gyro, q, _readings(acc, mag, n, every=4)
+
+
+@pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])
+def test_a_start_in_motion_neither_tilts_nor_learns_a_false_bias(filter_class, monkeypatch):
+    # Accelerating from its first sample, the low-pass's first mean is mostly
+    # the acceleration's; read at the density's confidence it tilts the
+    # filter and, as that mean drifts, teaches it a bias of 15 °/s (the
+    # truth's is 0.3 °/s at most): the end still 16° off. Read as the running
+    # mean it is, the bias stays within 2.1 °/s and the end within 1.5°.
+    dt, n = 1 / 200, 1600
+    gyro, truth, vectors = _accelerating_from_the_start(dt, n)
+    bias = np.radians([0.3, -0.2, 0.1])
+
+    def errors():
+        trace = filter_class(**imu_filter_settings(dt)).track(
+            gyro, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool), vectors=vectors)
+        return (np.degrees(np.abs(trace.bias_radps - bias).max()),
+                errors_deg(trace.quat, truth)["inclination"][-200:].mean())
+
+    bias_error, end = errors()
+    assert bias_error < 2.5 and end < 1.5
+    monkeypatch.setattr(gravity, "reading_variance", lambda density, interval, *_: density /
+                        interval)
+    bias_error, end = errors()
+    assert bias_error > 8.0 and end > 8.0
 
 
 # --- the heading-only magnetometer ---------------------------------------------------
@@ -341,8 +397,9 @@ def test_a_first_field_from_a_magnet_costs_the_heading_two_seconds(filter_class,
     # reference, and the heading follows it for the magnet's 0.5 s. The
     # Earth's field replaces it once seen for longer (the magnet's 0.5 s and
     # the hold time, after the hold time the magnet's candidate outlives it):
-    # 2 s in. The heading learnt from the magnet is then forgotten: within 2°
-    # at 2.5 s. Kept (FORGOTTEN_HEADING_SIGMA_RAD ~ 0), it is still past 10°.
+    # 2 s in. The heading learnt from the magnet is then forgotten: within 3°
+    # at 2.5 s (MEKF 2.5°, USQUE 1.2°). Kept (FORGOTTEN_HEADING_SIGMA_RAD ~ 0),
+    # it is still past 8° (12°, 9.3°).
     dt, n = 1 / 200, 600
     gyro, truth, vectors = _tumbling_imu(dt, n, magnet_at_start=True)
 
@@ -353,14 +410,14 @@ def test_a_first_field_from_a_magnet_costs_the_heading_two_seconds(filter_class,
 
     forgotten = heading_errors_deg()
     assert forgotten[99] > 20.0                         # the magnet's heading, at first
-    assert forgotten[500] < 2.0
+    assert forgotten[500] < 3.0
     monkeypatch.setattr(heading, "FORGOTTEN_HEADING_SIGMA_RAD", 1e-6)
-    assert heading_errors_deg()[500] > 10.0
+    assert heading_errors_deg()[500] > 8.0
 
 
 @pytest.mark.parametrize("filter_class, gate, magnet_at_start", [
-    (MultiplicativeEKF, None, False), (USQUE, None, False), (USQUE, 0.5, False),
-    (MultiplicativeEKF, None, True), (USQUE, None, True), (USQUE, 0.5, True)])
+    (MultiplicativeEKF, None, False), (USQUE, None, False), (USQUE, 0.3, False),
+    (MultiplicativeEKF, None, True), (USQUE, None, True), (USQUE, 0.3, True)])
 def test_the_kernel_runs_the_imu_models_as_the_per_run_filter_does(filter_class, gate,
                                                                    magnet_at_start):
     from benchmarks.engine.recorded import run_recorded

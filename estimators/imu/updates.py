@@ -27,7 +27,7 @@ import numpy as np
 
 from dynamics.quaternion import skew, to_body_frame
 from dynamics.validation import InvalidParameterError, boolean, finite_number, one_of
-from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels, heading
+from estimators.imu import GRAVITY_MODELS, MAGNETOMETER_MODELS, ImuModels, gravity, heading
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -95,7 +95,9 @@ class ImuUpdates:
         interval = self.imu.gravity_reading(np.asarray(observation.body, dtype=float), up)
         used = self.gravity_model == "lowpass"
         if used:
-            self._gravity_update(up, self.gravity_density / interval, observation.dof)
+            self._gravity_update(up, gravity.reading_variance(
+                self.gravity_density, interval, self.imu.gravity_filter,
+                gravity.LOWPASS_TIME_CONSTANT_S), observation.dof)
         if self.rest_updates and self.imu.at_rest:
             self._rest_update(self.imu.rate_lp, self.rest_density / interval)
         return used

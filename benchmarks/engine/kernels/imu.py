@@ -48,6 +48,7 @@ gravity_direction = _compiled(gravity.gravity_direction, lowpass=_LOWPASS,
                               rotate=_rotate,
                               rotate_back=_compiled(gravity.rotate_back,
                                                     rotated_back=_rotated_back))
+_reading_variance = _compiled(gravity.reading_variance)
 rest_gyro_step = _compiled(rest.gyro_step, lowpass=_LOWPASS)
 rest_acc_step = _compiled(rest.acc_step, lowpass=_LOWPASS)
 field_in_reference = _compiled(heading.field_in_reference, rotate=_rotate)
@@ -202,6 +203,14 @@ def accelerometer_reading(models, run, specific_force, dt):
                    gravity.LOWPASS_TIME_CONSTANT_S, interval, rotation[run, 1:],
                    models[G_NINE][run], drift)
     return up, drift, interval, at_rest
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def gravity_variance(models, run, density, interval):
+    """The variance of the run's reading :func:`accelerometer_reading` has just
+    given (:func:`estimators.imu.gravity.reading_variance`)."""
+    return _reading_variance(density, interval, models[G_GRAVITY][run],
+                             gravity.LOWPASS_TIME_CONSTANT_S)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

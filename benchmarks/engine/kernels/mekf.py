@@ -206,8 +206,9 @@ def _gravity_reading(q, beta, P, run, s, dt, body, models, gating, threshold, ma
     up, drift, interval, at_rest = imu.accelerometer_reading(models, run, body, dt)
     last, kept = (0.0, 0.0), True
     if lowpass:
-        nis, applied, determinant = gravity_update(q, beta, P, up, densities[0] / interval, drift,
-                                                   gating, threshold, scratch, dq, mag_bias)
+        variance = imu.gravity_variance(models, run, densities[0], interval)
+        nis, applied, determinant = gravity_update(q, beta, P, up, variance, drift, gating,
+                                                   threshold, scratch, dq, mag_bias)
         if applied:
             last = (nis, determinant)
         else:

@@ -147,9 +147,10 @@ def reading(q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, 
         if state.imu_lowpass:
             if updated and not sigma_points(x, P, spread, sigmas, scratch[0]):
                 return True, False, updated
+            variance = imu.gravity_variance(models, run, densities[0], interval)
             last_nis, kept, last_det = gravity_update(
-                q, x, P, sigmas, up, densities[0] / interval, drift, Wm, Wc, gating,
-                gate[dof[s]], scratch, predicted, R)
+                q, x, P, sigmas, up, variance, drift, Wm, Wc, gating, gate[dof[s]], scratch,
+                predicted, R)
             if not kept:
                 rejected[run, s] += 1
             fold_reference(q, x)
