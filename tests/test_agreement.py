@@ -109,8 +109,8 @@ def test_a_recording_without_a_reference_is_ranked_by_agreement_and_says_so(
     assert np.array_equal(trials["total_rmse_deg"], trials["agreement_total_deg"])
     # Agreement tells the tiers apart as the reference does on these 70 s
     # (measured, against the others' median / against the reference, °):
-    # USQUE 1.60 / 0.96, the MEKF 1.59 / 0.97, Madgwick 1.34 / 1.31, Mahony
-    # 2.89 / 3.11, TRIAD 4.60 / 4.83, dead reckoning 10.2 / 10.8. Within
+    # USQUE 1.58 / 0.98, the MEKF 1.59 / 0.97, Madgwick 1.33 / 1.31, Mahony
+    # 2.87 / 3.11, TRIAD 4.60 / 4.83, dead reckoning 10.2 / 10.8. Within
     # the first tier it cannot order them (the MEKF and USQUE share their
     # models, and each is scored against a median that holds the other).
     agreement = trials["agreement_total_deg"]
