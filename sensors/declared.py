@@ -54,9 +54,14 @@ from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, known_keys
+from sensors.tables import read_table
 
 #: Each time unit in seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: The gyro's plausible rates, Hz: from a logger's slowest (a phone saving
+#: power, 1 Hz) to the fastest MEMS output (tens of kHz). Beyond them the
+#: times' unit is wrong, not the IMU.
+PLAUSIBLE_RATE_HZ = (1.0, 1e5)
 #: Each sensor's units: name → factor to the toolkit's unit (rad/s, m/s², µT).
 UNITS = {
     "gyro": {"rad/s": 1.0, "deg/s": math.pi / 180.0},
@@ -146,6 +151,10 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
     """One unbroken stretch ``span`` of the gyro's clock as a recording."""
     gyro_time, gyro = read["gyro"][0][span], read["gyro"][1][span]
     rate = 1.0 / float(np.median(np.diff(gyro_time)))
+    _check_rate(path, rate, declaration.get("time_unit", "s"))
+    if not np.any(gyro != 0.0):
+        _refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
+                "the gyro recorded no rate (a channel not logged, or a dead sensor)")
     channels = {sensor: _on_clock(gyro_time, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
     for sensor, values in channels.items():
@@ -196,43 +205,6 @@ def data_file(path: Path, declaration: dict) -> Path:
     if not data.is_file():
         _refuse(path, "recording.file", given, f"is not a file (looked for {data})")
     return data
-
-
-def read_table(data: Path) -> dict:
-    """The file's columns, name → array (a CSV's or Parquet's columns, an
-    archive's arrays, a MATLAB file's variables, an HDF5 file's datasets)."""
-    suffix = data.suffix.lower()
-    try:
-        if suffix in (".csv", ".txt", ".parquet"):
-            import pandas as pd
-            frame = (pd.read_parquet if suffix == ".parquet" else pd.read_csv)(data)
-            return {str(name): frame[name].to_numpy() for name in frame.columns}
-        if suffix == ".npz":
-            with np.load(data, allow_pickle=False) as archive:
-                return {key: archive[key] for key in archive.files}
-        if suffix == ".mat":
-            from scipy.io import loadmat
-            return {key: value for key, value in loadmat(data).items()
-                    if not key.startswith("__")}
-        if suffix in (".h5", ".hdf5"):
-            return _read_hdf5(data)
-    except ImportError as err:
-        raise InvalidParameterError("recording.file", str(data), f"needs {err.name}, which is "
-                                    "not installed (pip install it)") from None
-    except Exception as err:     # a corrupt or foreign file: one line, whatever the reader
-        raise InvalidParameterError("recording.file", str(data), f"cannot be read "
-                                    f"({type(err).__name__}: {err})") from None
-    raise InvalidParameterError("recording.file", str(data), "must be .csv, .parquet, .npz, "
-                                ".mat, .h5 or .hdf5")
-
-
-def _read_hdf5(data: Path) -> dict:
-    import h5py
-    found = {}
-    with h5py.File(data, "r") as handle:
-        handle.visititems(lambda name, item: found.__setitem__(name, item[()])
-                          if isinstance(item, h5py.Dataset) else None)
-    return found
 
 
 def _choice(path: Path, key: str, value, choices) -> str:
@@ -397,6 +369,20 @@ def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> f
     if fit / math.sqrt(seen * predicted) < TURNING_CORRELATION:
         return None
     return fit / predicted
+
+
+def _check_rate(path: Path, rate: float, unit: str) -> None:
+    """Refuse a gyro rate outside :data:`PLAUSIBLE_RATE_HZ`, naming the
+    times' unit (with the one that would fit): a nanosecond clock declared
+    in seconds reads as a gyro a billion times too fast."""
+    low, high = PLAUSIBLE_RATE_HZ
+    if low <= rate <= high:
+        return
+    fitting = [other for other, seconds in TIME_UNITS.items()
+               if low <= rate * TIME_UNITS[unit] / seconds <= high]
+    hint = f"; time_unit = \"{fitting[0]}\" would fit" if fitting else ""
+    _refuse(path, "recording.time_unit", unit, f"makes the gyro read at {rate:.3g} Hz, where "
+            f"an IMU reads at {low:g} Hz to {high / 1e3:g} kHz{hint}")
 
 
 def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,

@@ -11,7 +11,8 @@ import pytest
 
 from benchmarks.cli import main
 from dynamics.validation import InvalidParameterError
-from sensors.declared import load_declared, read_table
+from sensors.declared import load_declared
+from sensors.tables import read_table
 from sensors.recording import load_recording
 
 TRIAL = Path(__file__).resolve().parents[1] / "datasets" / "broad" / \
@@ -215,6 +216,10 @@ def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_p
     (dict(back=True), "gyro.time = .*: goes back or repeats at reading 100"),
     (dict(partly=True), "accelerometer.columns = .*: row 7 is partly empty"),
     (dict(time_unit="minutes"), "time_unit = 'minutes': must be one of s, ms, us, ns"),
+    # Times in seconds declared in ms: the clock's unit is named, not the gyro's.
+    (dict(time_unit="ms"), 'time_unit = .ms.: makes the gyro read at 2.86e\\+05 Hz, where an '
+                           'IMU reads at 1 Hz to 100 kHz; time_unit = "s" would fit'),
+    (dict(scale_gyro=0.0), "gyro.columns = .*: hold only zeros: the gyro recorded no rate"),
 ])
 def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, capsys, change,
                                                                message):

@@ -30,7 +30,8 @@ def arguments(commands, defaults) -> None:
 
 def run(args, _scenario):
     from dynamics.validation import InvalidParameterError
-    from sensors.declared import data_file, declared_recordings, read_declaration, read_table
+    from sensors.declared import data_file, declared_recordings, read_declaration
+    from sensors.tables import read_table
     from benchmarks.experiments.inspection import declaration_toml, findings, guess_declaration
     if not args.file.is_file():
         raise UsageError(f"file = {str(args.file)!r}: is not a file")
