@@ -154,8 +154,8 @@ def test_flight_runs_are_bit_identical_whatever_their_batch(flight_batch):
         assert np.array_equal(alone.estimates[name][0], batch.estimates[name][1])
 
 
-@pytest.mark.parametrize("name", ["mekf", "usque"])
-def test_six_state_filters_on_workshop_sensors_equal_the_per_run_path(name):
+@pytest.mark.parametrize("name", ["mekf", pytest.param("usque", marks=pytest.mark.slow)])
+def test_six_state_filters_on_workshop_sensors_equal_the_per_run_path(name):    # USQUE: 4 s
     runs = make_runs(SCENARIO, seeds=[2, 3], star_tracker_noise=[1e-6, 4e-6])
     batch = run_batch(SCENARIO, runs, [name], keep_traces=True)
     for i in range(2):
