@@ -303,7 +303,10 @@ def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray
 
 
 def _listed(table: dict) -> str:
+    """The file's column names for a message (the first 20), or that it has none."""
     names = list(table)
+    if not names:
+        return "no column at all (an empty file)"
     return ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
 
 

@@ -397,3 +397,13 @@ def test_read_table_names_a_file_it_cannot_read(tmp_path):
     (tmp_path / "log.npz").write_text("not an archive")
     with pytest.raises(InvalidParameterError, match="cannot be read"):
         read_table(tmp_path / "log.npz")
+
+
+def test_an_empty_archive_is_said_to_have_no_column(tmp_path, capsys):
+    np.savez(tmp_path / "log.npz")                        # a logger that saved nothing
+    declared = _declare(tmp_path, "log.npz")
+    assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out",
+                 str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "it has no column at all (an empty file)" in err
+    assert not (tmp_path / "out").exists()
