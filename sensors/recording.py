@@ -123,6 +123,15 @@ class Recording:
                        magnetometer_uT=_rows_to(self.magnetometer_uT, stop))
 
 
+def reading_interval_s(read: np.ndarray, dt: float) -> float:
+    """The time between a channel's readings put on the gyro's grid (``read``:
+    ``(N,)`` bool, where it read; a logger's sensor on its own, slower clock):
+    the median spacing of its readings, in whole gyro steps of ``dt``; ``dt``
+    where it reads fewer than twice."""
+    spacing = np.diff(np.flatnonzero(read))
+    return float(np.median(spacing)) * dt if len(spacing) else dt
+
+
 def _rows_from(channel, start: int):
     return None if channel is None else channel[start:]
 

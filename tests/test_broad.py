@@ -206,7 +206,7 @@ def test_vqf_is_told_its_magnetometers_rate_where_it_reads_slower():
     heading correction is four times too slow; one read with every sample is
     told nothing (BROAD's trials, whose VQF numbers then stay as published)."""
     from dataclasses import replace
-    from benchmarks.broad.inputs import magnetometer_interval_s
+    from sensors.recording import reading_interval_s
     dataset = open_broad(SHIPPED)
     recording = dataset.load(dataset.trial_name("02"))
     assert "vqf" not in imu_inputs(recording).scenario.estimator_options
@@ -218,7 +218,7 @@ def test_vqf_is_told_its_magnetometers_rate_where_it_reads_slower():
     options = slower.scenario.estimator_options["vqf"]
     assert options["magnetometer_interval_s"] == pytest.approx(4 * recording.dt, rel=1e-12)
     assert "vqf" not in slower.scenario.estimator_options.get("vqf-offline", {})
-    assert magnetometer_interval_s(np.array([True, False, False]), 0.01) == 0.01
+    assert reading_interval_s(np.array([True, False, False]), 0.01) == 0.01
 
 
 @pytest.mark.parametrize("name", ["vqf", "fusion"])

@@ -49,7 +49,7 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import InvalidParameterError, standard_deviation
 from estimators import wahba
 from estimators.imu import GYRO_NOISE_DENSITY
-from sensors.recording import Recording
+from sensors.recording import Recording, reading_interval_s
 from sensors.vector import VectorReadings
 
 #: The smallest σ per axis the filters that read the vectors take: m/s², µT.
@@ -120,21 +120,12 @@ def usable_readings(recording: Recording) -> dict:
     return {name: np.any(channel != 0.0, axis=1) for name, channel in channels(recording).items()}
 
 
-def magnetometer_interval_s(usable: np.ndarray, dt: float) -> float:
-    """The magnetometer's time between readings: the median spacing of its
-    ``usable`` readings (a logger's on its own clock, put on the gyro's
-    grid), in whole gyro steps; ``dt`` where it reads with every sample or
-    reads fewer than twice."""
-    spacing = np.diff(np.flatnonzero(usable))
-    return float(np.median(spacing)) * dt if len(spacing) else dt
-
-
 def _vqf_options(usable: np.ndarray, dt: float) -> dict:
     """VQF's ``magTs`` (``magnetometer_interval_s``) where the magnetometer
     reads slower than the gyro: its coefficients are set for it, and at the
     gyro's step (its default) its heading correction would be that many
     times too slow. The MEKF reads each reading's interval as it comes."""
-    interval = magnetometer_interval_s(usable, dt)
+    interval = reading_interval_s(usable, dt)
     return {"vqf": {"magnetometer_interval_s": interval}} if interval > dt else {}
 
 

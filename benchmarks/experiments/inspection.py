@@ -21,6 +21,7 @@ import numpy as np
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
 from sensors.declared import (GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
                               turning_scale)
+from sensors.recording import reading_interval_s
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
@@ -329,8 +330,7 @@ def _motion(recording) -> list[str]:
     force = recording.accelerometer_mps2
     read = np.any(force != 0, axis=1)
     # The accelerometer may read at fewer samples than the gyro: its own step.
-    step = recording.dt * float(np.median(np.diff(np.flatnonzero(read)))) if read.sum() > 1 \
-        else recording.dt
+    step = reading_interval_s(read, recording.dt)
     periods = rest_periods(recording.gyro_radps[read], force[read], step)
     rest = (f"{len(periods)} period{'s' if len(periods) != 1 else ''} at rest, "
             f"{sum(b - a for a, b in periods):.1f} s in all (first {periods[0][0]:.1f} to "
