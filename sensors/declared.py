@@ -32,13 +32,15 @@ with no reading of a sensor holds none (a row of zeros: a dropout, which
 the filters skip). A row of empty cells (NaN) is no reading, as a table that
 merges sensors on their own clocks holds. The reference is interpolated on
 the gyro's times (spherical, between readings not further apart than
-:data:`REFERENCE_GAP_FACTOR` of its typical interval), NaN elsewhere.
+:data:`sensors.declared_reference.REFERENCE_GAP_FACTOR` of its typical interval), NaN elsewhere.
 
 What a logger gets wrong is one line each: an unknown column (the file's
 columns are listed), times that go back or a gap in the gyro's clock, a row
 that is partly empty, and a unit that cannot be right (rates beyond any
 gyro's range; gravity far from 9.8 m/s², or a field far from the Earth's, in
-the declared unit, with the unit that would fit).
+the declared unit, with the unit that would fit); and a vector sensor's
+axes or a reference's convention that turn unlike the gyro
+(:mod:`sensors.turning`), with the declaration that would fit.
 """
 from __future__ import annotations
 
@@ -51,9 +53,11 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
+from sensors.declared_reference import check_reference, declared_reference
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
-from sensors.recording_keys import axes_matrix, known_keys
+from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
+from sensors.turning import TURNING_FACTOR, axes_fit, turning_scale
 from sensors.tables import read_table
 
 #: Each time unit in seconds.
@@ -71,15 +75,10 @@ UNITS = {
 SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
 #: A gap in the gyro's clock: an interval this many times its median.
 GAP_FACTOR = 3.0
-#: The reference is interpolated between readings at most this many of its
-#: typical intervals apart (a longer one is a gap: the markers were not seen).
-REFERENCE_GAP_FACTOR = 1.5
 #: Plausible medians of each vector sensor's norm in its toolkit unit: in
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
-#: Frames of the reference's world frame, as rotations to East-North-Up.
-FRAMES = ("ENU", "NED")
 
 
 def load_declared(path) -> Recording:
@@ -89,7 +88,7 @@ def load_declared(path) -> Recording:
     parts = load_parts(path)
     if len(parts) > 1:
         second = parts[1]
-        _refuse(Path(path), "recording.gyro.time", None, f"has {len(parts) - 1} gap(s) "
+        refuse(Path(path), "recording.gyro.time", None, f"has {len(parts) - 1} gap(s) "
                 f"(the first after {parts[0].n_samples} readings, before part "
                 f"{second.name}); a recording is one unbroken gyro log: load_parts splits "
                 "it there")
@@ -109,11 +108,11 @@ def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Reco
     """The recordings ``declaration`` (a ``[recording]`` section) makes of
     ``table`` (:func:`read_table`), split at the gyro's gaps; errors name
     ``path``, the declaration."""
-    clock_unit = _choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
+    clock_unit = choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
                          TIME_UNITS)
     sections = {name: declaration[name] for name in SENSORS if name in declaration}
     if "gyro" not in sections:
-        _refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
+        refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
     origin = _time_origin(table, sections)
     read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit], origin)
@@ -125,7 +124,7 @@ def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Reco
         warnings.warn(f"{path.name}: {len(starts) - len(bounds)} gyro reading(s) alone between "
                       "gaps left out (a part needs two)", stacklevel=2)
     if not bounds:
-        _refuse(path, "recording.gyro.time", None, "has a gap after every reading: no two "
+        refuse(path, "recording.gyro.time", None, "has a gap after every reading: no two "
                 "readings make a part")
     names = [path.stem] if len(bounds) == 1 else \
         [f"{path.stem}_part{i + 1}" for i in range(len(bounds))]
@@ -153,7 +152,7 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
     rate = 1.0 / float(np.median(np.diff(gyro_time)))
     _check_rate(path, rate, declaration.get("time_unit", "s"))
     if not np.any(gyro != 0.0):
-        _refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
+        refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
                 "the gyro recorded no rate (a channel not logged, or a dead sensor)")
     channels = {sensor: _on_clock(gyro_time, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
@@ -162,18 +161,18 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
     if "accelerometer" in channels:
         _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
                        sections["gyro"]["unit"])
-    reference = (_reference(path, gyro_time, *read["reference"], sections["reference"])
-                 if "reference" in read else np.full((len(gyro_time), 4), np.nan))
+    for sensor, values in channels.items():
+        _check_axes(path, sensor, gyro, values, 1.0 / rate, sections[sensor])
+    reference = np.full((len(gyro_time), 4), np.nan)
+    if "reference" in read:
+        reference = declared_reference(path, gyro_time, *read["reference"], sections["reference"])
+        check_reference(path, gyro_time, gyro, read["reference"], sections["reference"],
+                         reference)
     return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
                      movement=~np.isnan(reference).any(axis=1), rate_hz=rate,
                      info=str(declaration.get("description", "")),
                      accelerometer_mps2=channels.get("accelerometer"),
                      magnetometer_uT=channels.get("magnetometer"))
-
-
-def _refuse(path: Path, key: str, value, rule: str):
-    where = f"{path.name}: {key}" if key else path.name
-    raise InvalidParameterError(where, value, rule)
 
 
 def read_declaration(path: Path) -> dict:
@@ -185,14 +184,14 @@ def read_declaration(path: Path) -> dict:
     try:
         declared = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        _refuse(path, "", str(path), f"is not TOML ({err})")
+        refuse(path, "", str(path), f"is not TOML ({err})")
     if not isinstance(declared.get("recording"), dict):
-        _refuse(path, "recording", None, "must be a [recording] section naming the file "
+        refuse(path, "recording", None, "must be a [recording] section naming the file "
                 "and its sensors' columns")
     known = known_keys("recording")
     unknown = sorted(set(declared["recording"]) - known)
     if unknown:
-        _refuse(path, f"recording.{unknown[0]}", declared["recording"][unknown[0]],
+        refuse(path, f"recording.{unknown[0]}", declared["recording"][unknown[0]],
                 f"is not a [recording] key; known: {', '.join(sorted(known))}")
     return declared["recording"]
 
@@ -200,17 +199,11 @@ def read_declaration(path: Path) -> dict:
 def data_file(path: Path, declaration: dict) -> Path:
     given = declaration.get("file")
     if not isinstance(given, str) or not given:
-        _refuse(path, "recording.file", given, "must name the logged file")
+        refuse(path, "recording.file", given, "must name the logged file")
     data = Path(given) if Path(given).is_absolute() else path.parent / given
     if not data.is_file():
-        _refuse(path, "recording.file", given, f"is not a file (looked for {data})")
+        refuse(path, "recording.file", given, f"is not a file (looked for {data})")
     return data
-
-
-def _choice(path: Path, key: str, value, choices) -> str:
-    if not isinstance(value, str) or value not in choices:
-        _refuse(path, key, value, f"must be one of {', '.join(choices)}")
-    return value
 
 
 def _sensor(path: Path, table: dict, name: str, section, time_scale: float, origin: int = 0):
@@ -218,28 +211,28 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     (a row of empty cells is none), converted to the toolkit's unit."""
     key = f"recording.{name}"
     if not isinstance(section, dict):
-        _refuse(path, key, section, "must be a section with time, columns and unit")
+        refuse(path, key, section, "must be a section with time, columns and unit")
     known = known_keys(key)
     unknown = sorted(set(section) - known)
     if unknown:
-        _refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
+        refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
                 f"is not a key of the {name}'s section; known: {', '.join(sorted(known))}")
     times = _column(path, table, f"{key}.time", section.get("time"), origin) * time_scale
     width = 4 if name == "reference" and "sequence" not in section else 3
     values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
     if len(values) != len(times):
-        _refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
+        refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
                 f"its time column {section.get('time')!r} holds {len(times)}")
     empty = np.isnan(values).all(axis=1) | np.isnan(times)
     partly = np.flatnonzero(np.isnan(values).any(axis=1) & ~empty)
     if len(partly):
-        _refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
+        refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
                 f"empty ({values[partly[0]].tolist()}); a row is a reading or empty")
     times, values = times[~empty], values[~empty]
     if not len(times):
-        _refuse(path, f"{key}.columns", section.get("columns"), "hold no reading")
+        refuse(path, f"{key}.columns", section.get("columns"), "hold no reading")
     if name != "reference":
-        unit = _choice(path, f"{key}.unit", section.get("unit"), UNITS[name])
+        unit = choice(path, f"{key}.unit", section.get("unit"), UNITS[name])
         values = values * UNITS[name][unit]
         if "axes" in section:
             values = values @ axes_matrix(section["axes"], f"{path.name}: {key}.axes").T
@@ -259,13 +252,13 @@ def _column(path: Path, table: dict, key: str, name, origin: int = 0) -> np.ndar
     nanoseconds are counted from a common origin before they become floats,
     which would keep only a quarter of a microsecond)."""
     if not isinstance(name, str) or name not in table:
-        _refuse(path, key, name, f"must name a column of the file; it has "
+        refuse(path, key, name, f"must name a column of the file; it has "
                 f"{_listed(table)}")
     column = np.asarray(table[name])
     if column.size == 0:
-        _refuse(path, key, name, "holds no rows")
+        refuse(path, key, name, "holds no rows")
     if column.dtype.kind not in "iuf" or sum(size > 1 for size in column.shape) > 1:
-        _refuse(path, key, name, f"must be one column of numbers; it holds {_held(column)} "
+        refuse(path, key, name, f"must be one column of numbers; it holds {_held(column)} "
                 f"of shape {column.shape}")
     column = column.reshape(-1)
     if column.dtype.kind in "iu":
@@ -284,20 +277,20 @@ def _columns(path: Path, table: dict, key: str, names, width: int) -> np.ndarray
     if isinstance(names, str) and names in table:
         array = np.asarray(table[names])
         if array.dtype.kind not in "iuf":
-            _refuse(path, key, names, f"must hold numbers; it holds {_held(array)}")
+            refuse(path, key, names, f"must hold numbers; it holds {_held(array)}")
         array = array.astype(float)
         if array.ndim == 2 and array.shape[0] == width and array.shape[1] != width:
             array = array.T               # stored one row per axis (MATLAB, HDF5)
         if array.ndim != 2 or array.shape[1] != width:
-            _refuse(path, key, names, f"must be an (N, {width}) array; it is {array.shape}")
+            refuse(path, key, names, f"must be an (N, {width}) array; it is {array.shape}")
         return array
     if not isinstance(names, list) or len(names) != width:
-        _refuse(path, key, names, f"must be a list of {width} columns, or the name of one "
+        refuse(path, key, names, f"must be a list of {width} columns, or the name of one "
                 f"(N, {width}) array; the file has {_listed(table)}")
     columns = [_column(path, table, key, name) for name in names]
     lengths = {name: len(column) for name, column in zip(names, columns)}
     if len(set(lengths.values())) > 1:
-        _refuse(path, key, names, f"must be columns of one length; they hold "
+        refuse(path, key, names, f"must be columns of one length; they hold "
                 f"{', '.join(f'{name} {n}' for name, n in lengths.items())} rows")
     return np.column_stack(columns)
 
@@ -314,7 +307,7 @@ def _check_increasing(path: Path, key: str, times: np.ndarray) -> None:
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         row = int(back[0]) + 1
-        _refuse(path, key, float(times[row]), f"goes back or repeats at reading {row} (after "
+        refuse(path, key, float(times[row]), f"goes back or repeats at reading {row} (after "
                 f"{times[row - 1]:.9g} s); times must increase")
 
 
@@ -322,7 +315,7 @@ def _check_clock(path: Path, times: np.ndarray) -> None:
     """The gyro's times: increasing, two at least."""
     _check_increasing(path, "recording.gyro.time", times)
     if len(times) < 2:
-        _refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
+        refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
                 "at least two")
 
 
@@ -338,40 +331,8 @@ def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
     if fastest > MAX_MEASURED_RATE_RADPS:
         hint = (" (were they deg/s? unit = \"deg/s\")" if unit == "rad/s" and
                 fastest * math.pi / 180 <= MAX_MEASURED_RATE_RADPS else "")
-        _refuse(path, "recording.gyro.unit", unit, f"gives rates up to {fastest:.4g} rad/s, "
+        refuse(path, "recording.gyro.unit", unit, f"gives rates up to {fastest:.4g} rad/s, "
                 f"beyond any gyro's range ({MAX_MEASURED_RATE_RADPS:g} rad/s){hint}")
-
-
-#: The gyro's unit is checked against the accelerometer's turning: gravity
-#: seen from the body turns as ``ȧ = -ω × a``. Both are averaged over blocks
-#: this long, s (the accelerometer's noise, differentiated, would drown the
-#: turning); where the two agree in shape (correlation above this; a turn
-#: about the vertical turns no gravity, and is no evidence), the scale that
-#: fits them must be within this factor of 1 (a unit's mistake is 57).
-TURNING_WINDOW_S, TURNING_CORRELATION, TURNING_FACTOR = 0.1, 0.3, 10.0
-
-
-def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
-    """The factor by which ``rates`` must be multiplied to turn gravity as
-    the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
-    None where the turning is not seen clearly enough to say."""
-    if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
-        return None                       # too few accelerometer readings on the clock
-    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
-    blocks = len(rates) // steps
-    if blocks < 3:
-        return None
-    force = specific_force[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
-    rate = rates[:blocks * steps].reshape(blocks, steps, 3).mean(axis=1)
-    change = np.diff(force, axis=0) / (steps * dt)
-    turning = -np.cross((rate[1:] + rate[:-1]) / 2, (force[1:] + force[:-1]) / 2)
-    seen, predicted = float(np.sum(change * change)), float(np.sum(turning * turning))
-    if seen == 0.0 or predicted == 0.0:
-        return None
-    fit = float(np.sum(change * turning))
-    if fit / math.sqrt(seen * predicted) < TURNING_CORRELATION:
-        return None
-    return fit / predicted
 
 
 def _check_rate(path: Path, rate: float, unit: str) -> None:
@@ -384,7 +345,7 @@ def _check_rate(path: Path, rate: float, unit: str) -> None:
     fitting = [other for other, seconds in TIME_UNITS.items()
                if low <= rate * TIME_UNITS[unit] / seconds <= high]
     hint = f"; time_unit = \"{fitting[0]}\" would fit" if fitting else ""
-    _refuse(path, "recording.time_unit", unit, f"makes the gyro read at {rate:.3g} Hz, where "
+    refuse(path, "recording.time_unit", unit, f"makes the gyro read at {rate:.3g} Hz, where "
             f"an IMU reads at {low:g} Hz to {high / 1e3:g} kHz{hint}")
 
 
@@ -398,15 +359,35 @@ def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt
     fitting = [other for other, factor in UNITS["gyro"].items()
                if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]
     hint = f" (were they {fitting[0]}? unit = \"{fitting[0]}\")" if fitting else ""
-    _refuse(path, "recording.gyro.unit", unit, f"turns gravity {1 / scale:.3g} times as fast "
+    refuse(path, "recording.gyro.unit", unit, f"turns gravity {1 / scale:.3g} times as fast "
             f"as the accelerometer sees it turn{hint}")
+
+
+def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, dt: float,
+                section: dict) -> None:
+    """Refuse a vector sensor's axes that turn unlike the gyro where
+    another order of them turns as it does (:func:`sensors.turning.axes_fit`)."""
+    fit = axes_fit(rates, values, dt)
+    if fit is None:
+        return
+    declared, better, correlation = fit
+    given = section.get("axes", ["x", "y", "z"])
+    fitting = axes_names(better @ axes_matrix(given, f"{path.name}: recording.{sensor}.axes"))
+    vector = "gravity" if sensor == "accelerometer" else "the field"
+    refuse(path, f"recording.{sensor}.axes", given, f"turn {vector} unlike the gyro (their "
+            f"turning correlates {declared:.2f}); axes = {_listed_axes(fitting)} turns it as "
+            f"the gyro does ({correlation:.2f})")
+
+
+def _listed_axes(names: list) -> str:
+    return "[" + ", ".join(f'"{name}"' for name in names) + "]"
 
 
 def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
     """A vector sensor's median norm, where it read, plausible in its unit."""
     norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
     if not len(norms):
-        _refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
+        refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
                 "the gyro's span: no reading at all")
     median = float(np.median(norms))
     low, high = PLAUSIBLE_NORMS[name]
@@ -416,7 +397,7 @@ def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
     fitting = [other for other, factor in UNITS[name].items() if other != unit and
                low <= median / UNITS[name][unit] * factor <= high]
     hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""
-    _refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
+    refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
             f"{shown}, not within {low:g} to {high:g} {shown} as "
             f"{'gravity' if name == 'accelerometer' else 'the Earth field'} would be{hint}")
 
@@ -432,57 +413,3 @@ def _on_clock(clock: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.nd
     placed = np.zeros((len(clock), 3))
     placed[index[last]] = values[last]
     return placed
-
-
-#: The rotation from a North-East-Down world frame to East-North-Up.
-NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-
-
-def _reference(path: Path, clock: np.ndarray, times: np.ndarray, values: np.ndarray,
-               section: dict) -> np.ndarray:
-    """The reference attitude (body → ENU, scalar first) at the gyro's
-    times: interpolated on the shortest arc between consecutive readings
-    not further apart than :data:`REFERENCE_GAP_FACTOR` of its typical
-    interval; NaN elsewhere (across a gap, and before or after it)."""
-    from scipy.spatial.transform import Rotation, Slerp
-    rotations = _reference_rotations(path, values, section)
-    frame = _choice(path, "recording.reference.frame", section.get("frame", "ENU"), FRAMES)
-    if frame == "NED":
-        rotations = Rotation.from_matrix(NED_TO_ENU) * rotations
-    if len(times) < 2:
-        _refuse(path, "recording.reference.columns", None, "hold one reading; the reference "
-                "needs two to be interpolated")
-    within = (clock >= times[0]) & (clock <= times[-1])
-    after = np.clip(np.searchsorted(times, clock, side="left"), 1, len(times) - 1)
-    exact = np.isin(clock, times)
-    typical = float(np.median(np.diff(times)))
-    close = (times[after] - times[after - 1]) <= REFERENCE_GAP_FACTOR * typical
-    valid = within & (close | exact)
-    quat = np.full((len(clock), 4), np.nan)
-    between = valid & ~exact
-    if between.any():
-        at = Slerp(times, rotations)(clock[between])
-        quat[between] = at.as_quat(canonical=True, scalar_first=True)
-    quat[exact] = rotations[np.searchsorted(times, clock[exact])].as_quat(canonical=True,
-                                                                          scalar_first=True)
-    return quat
-
-
-def _reference_rotations(path: Path, values: np.ndarray, section: dict):
-    from scipy.spatial.transform import Rotation
-    if "sequence" in section:
-        unit = _choice(path, "recording.reference.unit", section.get("unit", "deg"),
-                       ("deg", "rad"))
-        try:
-            return Rotation.from_euler(str(section["sequence"]), values, degrees=unit == "deg")
-        except ValueError as err:
-            _refuse(path, "recording.reference.sequence", section["sequence"],
-                    f"is not an Euler sequence ({err})")
-    order = _choice(path, "recording.reference.order", section.get("order", "wxyz"),
-                    ("wxyz", "xyzw"))
-    norms = np.linalg.norm(values, axis=1)
-    off = np.flatnonzero(np.abs(norms - 1.0) > 0.01)
-    if len(off):
-        _refuse(path, "recording.reference.columns", section.get("columns"), f"row "
-                f"{off[0]} has norm {norms[off[0]]:.4g}; a reference quaternion has norm 1")
-    return Rotation.from_quat(values, scalar_first=order == "wxyz")

@@ -59,6 +59,20 @@ KEYS = (
 )
 
 
+def refuse(path, key: str, value, rule: str):
+    """Raise the one-line error naming the declaration ``path``, its key
+    (``recording.gyro.unit``), the value and the rule."""
+    where = f"{path.name}: {key}" if key else path.name
+    raise InvalidParameterError(where, value, rule)
+
+
+def choice(path, key: str, value, choices) -> str:
+    """``value`` if it is one of ``choices``, else refused."""
+    if not isinstance(value, str) or value not in choices:
+        refuse(path, key, value, f"must be one of {', '.join(choices)}")
+    return value
+
+
 def known_keys(section: str) -> set:
     """The keys ``section`` (``"recording"``, ``"recording.gyro"``, …) may
     hold; a sensor's section in ``[recording]``."""
@@ -83,3 +97,12 @@ def axes_matrix(value, where: str) -> np.ndarray:
     for row, axis in enumerate(value):
         matrix[row, _AXES[axis.lstrip("-")]] = -1.0 if axis.startswith("-") else 1.0
     return matrix
+
+
+def axes_names(matrix: np.ndarray) -> list:
+    """The ``axes`` key of a signed permutation (:func:`axes_matrix`'s inverse)."""
+    names = []
+    for row in matrix:
+        column = int(np.flatnonzero(row)[0])
+        names.append(("-" if row[column] < 0 else "") + "xyz"[column])
+    return names

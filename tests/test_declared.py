@@ -184,7 +184,7 @@ def test_a_phone_log_on_its_own_clocks_and_units_reaches_the_scored_table(trial,
 
 def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_path):
     from scipy.spatial.transform import Rotation
-    from sensors.declared import NED_TO_ENU
+    from sensors.declared_reference import NED_TO_ENU
     recording, keep = trial
     table = _table(trial)
     quat = recording.reference_quat[:keep]
@@ -204,6 +204,33 @@ def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_p
     assert np.degrees((expected.inv() * got).magnitude()).max() < 1e-9
 
 
+def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tmp_path):
+    """The reference's axes turned 20° from the IMU's fit the gyro's turning
+    and are said to (every score includes them); Euler angles declared
+    extrinsic for intrinsic are refused, naming the sequence that fits."""
+    from scipy.spatial.transform import Rotation
+    recording, keep = trial
+    table = _table(trial, whole=True)
+    quat = recording.reference_quat
+    seen = ~np.isnan(quat).any(axis=1)
+    mounted = np.full_like(quat, np.nan)
+    mounted[seen] = (Rotation.from_quat(quat[seen], scalar_first=True) * Rotation.from_euler(
+        "x", 20.0, degrees=True)).as_quat(scalar_first=True)
+    table.update({f"q{part}": mounted[:, i] for i, part in enumerate("wxyz")})
+    angles = np.full((len(quat), 3), np.nan)
+    angles[seen] = Rotation.from_quat(quat[seen], scalar_first=True).as_euler("ZYX")
+    table.update({name: angles[:, i] for i, name in enumerate(("yaw", "pitch", "roll"))})
+    _csv(tmp_path, table)
+    # Real rates (noise, a bias) find the 20° within half a degree.
+    with pytest.warns(UserWarning, match=r"recording.reference: its axes are turned "
+                      r"(19\.[5-9]|20\.[0-4])° from the gyro's"):
+        load_declared(_declare(tmp_path, "log.csv"))
+    with pytest.raises(InvalidParameterError, match='reference.sequence = .zyx.: makes a '
+                       'reference that turns unlike the gyro .*; sequence = "ZYX" would fit'):
+        load_declared(_declare(tmp_path, "log.csv", reference='["yaw", "pitch", "roll"]',
+                               reference_keys='sequence = "zyx"\nunit = "rad"'))
+
+
 @pytest.mark.parametrize("change, message", [
     (dict(gyro_unit="rad/s", scale_gyro=180 / math.pi),
      'gyro.unit = .rad/s.: turns gravity 5.\\.. times as fast .*unit = "deg/s"'),
@@ -220,6 +247,14 @@ def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_p
     (dict(time_unit="ms"), 'time_unit = .ms.: makes the gyro read at 2.86e\\+05 Hz, where an '
                            'IMU reads at 1 Hz to 100 kHz; time_unit = "s" would fit'),
     (dict(scale_gyro=0.0), "gyro.columns = .*: hold only zeros: the gyro recorded no rate"),
+    # Declarations that pass every range check and turn unlike the gyro
+    # (sensors.turning): each names the key and the declaration that fits.
+    (dict(reference='["qx", "qy", "qz", "qw"]'),
+     'reference.order = .wxyz.: makes a reference that turns unlike the gyro .*; order = '
+     '"xyzw" would fit'),
+    (dict(inverse=True), 'reference.order = .wxyz.: .* its inverse .* would fit'),
+    (dict(mag_columns=[1, 2, 0]), 'magnetometer.axes = .*x.*y.*z.*: turn the field unlike the '
+                                  'gyro .*; axes = \\["z", "x", "y"\\] turns it as the gyro'),
 ])
 def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, capsys, change,
                                                                message):
@@ -235,6 +270,10 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
         table["t"][100] = table["t"][98]
     if change.pop("partly", False):
         table["ay"][7] = np.nan
+    if change.pop("inverse", False):
+        table["qx"], table["qy"], table["qz"] = -table["qx"], -table["qy"], -table["qz"]
+    columns = change.pop("mag_columns", [0, 1, 2])
+    table["mx"], table["my"], table["mz"] = (table[f"m{'xyz'[i]}"] for i in columns)
     declared = _declare(tmp_path, _csv(tmp_path, table), **change)
     out = tmp_path / "out"
     assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out", str(out),

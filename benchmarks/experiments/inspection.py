@@ -19,9 +19,9 @@ import re
 import numpy as np
 
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.declared import (GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
-                              turning_scale)
+from sensors.declared import GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS
 from sensors.recording import reading_interval_s
+from sensors.turning import turning_scale
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
@@ -129,7 +129,7 @@ def fitting_unit(sensor: str, values: np.ndarray) -> str | None:
 
 def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -> str:
     """rad/s or deg/s: the one that turns gravity as the accelerometer sees
-    it turn (:func:`sensors.declared.turning_scale`), else by the rates'
+    it turn (:func:`sensors.turning.turning_scale`), else by the rates'
     size (a hand-held or vehicle IMU's rates rarely pass 20 rad/s)."""
     if specific_force is not None:
         scale = turning_scale(rates, specific_force, dt)

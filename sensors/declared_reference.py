@@ -1,0 +1,133 @@
+"""A declared reference attitude (``[recording.reference]``, :mod:`sensors.
+declared`): quaternions in either order or Euler angles, into ENU or NED,
+interpolated on the gyro's clock, and checked to turn as the gyro turns
+(:mod:`sensors.turning`), naming the declaration that would fit where
+another does."""
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from dynamics.validation import InvalidParameterError
+from sensors.recording_keys import choice, refuse
+from sensors.turning import REFERENCE_UNEXPLAINED, first_fitting, reference_fit, reference_fits
+
+#: The reference is interpolated between readings at most this many of its
+#: typical intervals apart (a longer one is a gap: the markers were not seen).
+REFERENCE_GAP_FACTOR = 1.5
+#: Frames of the reference's world frame, as rotations to East-North-Up.
+FRAMES = ("ENU", "NED")
+#: The rotation from a North-East-Down world frame to East-North-Up.
+NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def declared_reference(path: Path, clock: np.ndarray, times: np.ndarray, values: np.ndarray,
+               section: dict) -> np.ndarray:
+    """The reference attitude (body → ENU, scalar first) at the gyro's
+    times: interpolated on the shortest arc between consecutive readings
+    not further apart than :data:`REFERENCE_GAP_FACTOR` of its typical
+    interval; NaN elsewhere (across a gap, and before or after it)."""
+    return _on_gyro_times(path, clock, times, _in_enu(path, _reference_rotations(
+        path, values, section), section))
+
+
+def _in_enu(path: Path, rotations, section: dict):
+    """``rotations`` (body → the declared frame) as body → ENU."""
+    from scipy.spatial.transform import Rotation
+    frame = choice(path, "recording.reference.frame", section.get("frame", "ENU"), FRAMES)
+    return Rotation.from_matrix(NED_TO_ENU) * rotations if frame == "NED" else rotations
+
+
+def _on_gyro_times(path: Path, clock: np.ndarray, times: np.ndarray, rotations) -> np.ndarray:
+    from scipy.spatial.transform import Slerp
+    if len(times) < 2:
+        refuse(path, "recording.reference.columns", None, "hold one reading; the reference "
+                "needs two to be interpolated")
+    within = (clock >= times[0]) & (clock <= times[-1])
+    after = np.clip(np.searchsorted(times, clock, side="left"), 1, len(times) - 1)
+    exact = np.isin(clock, times)
+    typical = float(np.median(np.diff(times)))
+    close = (times[after] - times[after - 1]) <= REFERENCE_GAP_FACTOR * typical
+    valid = within & (close | exact)
+    quat = np.full((len(clock), 4), np.nan)
+    between = valid & ~exact
+    if between.any():
+        at = Slerp(times, rotations)(clock[between])
+        quat[between] = at.as_quat(canonical=True, scalar_first=True)
+    quat[exact] = rotations[np.searchsorted(times, clock[exact])].as_quat(canonical=True,
+                                                                          scalar_first=True)
+    return quat
+
+
+def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tuple,
+                     section: dict, reference: np.ndarray) -> None:
+    """Refuse a reference that turns unlike the gyro (:func:`sensors.turning.
+    reference_fit`), with the declaration that would fit where one does;
+    warn where it fits only with its axes turned from the gyro's."""
+    dt = float(np.median(np.diff(clock)))
+    fit = reference_fit(rates, reference, dt)
+    if reference_fits(fit):
+        return
+    unexplained, rotation = fit
+    key = "sequence" if "sequence" in section else "order"
+    fitting = first_fitting(rates, ((text, _on_gyro_times(path, clock, read[0], rotations))
+                                    for text, rotations in _reference_candidates(
+                                        path, section, read[1])), dt)
+    hint = f"; {fitting} would fit" if fitting else ""
+    given = section.get(key, "wxyz")
+    if unexplained > REFERENCE_UNEXPLAINED:
+        refuse(path, f"recording.reference.{key}", given, "makes a reference that turns "
+                f"unlike the gyro ({unexplained * 100:.0f} % of its turning unexplained by any "
+                f"fixed rotation of the gyro's rates; about 1 % for the gyro's own body){hint}")
+    turned = math.degrees(rotation.magnitude())
+    if hint:
+        refuse(path, f"recording.reference.{key}", given, "makes a reference that turns as "
+                f"the gyro only with its axes turned {turned:.0f}° from the gyro's{hint}")
+    warnings.warn(f"{path.name}: recording.reference: its axes are turned {turned:.1f}° from "
+                  "the gyro's (fitted to their turning); every score includes that turn",
+                  stacklevel=2)
+
+
+def _reference_candidates(path: Path, section: dict, values: np.ndarray):
+    """``(what to declare, the rotations it makes)`` for the declarations a
+    logger most often gets wrong: the other quaternion order, or the Euler
+    sequence extrinsic for intrinsic, reversed, or in the other unit; and
+    an attitude world → body (its inverse)."""
+    if "sequence" in section:
+        sequence = section["sequence"]
+        changes = ({"sequence": sequence.swapcase()}, {"sequence": sequence[::-1]},
+                   {"unit": "rad" if section.get("unit", "deg") == "deg" else "deg"})
+    else:
+        changes = ({"order": "xyzw" if section.get("order", "wxyz") == "wxyz" else "wxyz"},)
+    for change in changes:
+        (key, value), = change.items()
+        try:
+            rotations = _reference_rotations(path, values, {**section, **change})
+        except InvalidParameterError:
+            continue
+        yield f'{key} = "{value}"', _in_enu(path, rotations, section)
+    yield ("its inverse (an attitude world → body, which must be inverted)",
+           _in_enu(path, _reference_rotations(path, values, section).inv(), section))
+
+
+def _reference_rotations(path: Path, values: np.ndarray, section: dict):
+    from scipy.spatial.transform import Rotation
+    if "sequence" in section:
+        unit = choice(path, "recording.reference.unit", section.get("unit", "deg"),
+                       ("deg", "rad"))
+        try:
+            return Rotation.from_euler(str(section["sequence"]), values, degrees=unit == "deg")
+        except ValueError as err:
+            refuse(path, "recording.reference.sequence", section["sequence"],
+                    f"is not an Euler sequence ({err})")
+    order = choice(path, "recording.reference.order", section.get("order", "wxyz"),
+                    ("wxyz", "xyzw"))
+    norms = np.linalg.norm(values, axis=1)
+    off = np.flatnonzero(np.abs(norms - 1.0) > 0.01)
+    if len(off):
+        refuse(path, "recording.reference.columns", section.get("columns"), f"row "
+                f"{off[0]} has norm {norms[off[0]]:.4g}; a reference quaternion has norm 1")
+    return Rotation.from_quat(values, scalar_first=order == "wxyz")

@@ -1,0 +1,187 @@
+"""Does every channel of a recording turn as its gyro says?
+
+A logger's declaration can be wrong in ways no range check sees: a
+magnetometer's axes in another order, a reference quaternion read scalar
+first when it was written scalar last. Each leaves the numbers plausible and
+the scores meaningless (150° and no message). The gyro is the one channel
+that says how the body turns, and every other channel must agree with it:
+
+- a vector fixed in the world (gravity, the Earth's field), seen from the
+  body, turns as :math:`\\dot v = -\\omega \\times v` (Markley & Crassidis
+  2014, §3.1, eq. 3.18's kinematics for a constant vector);
+- a reference attitude :math:`R_k` (body → world) turns by
+  :math:`R_k^\\top R_{k+n} = \\exp([\\bar\\omega \\times] n\\,\\Delta t)` over
+  ``n`` samples, :math:`\\bar\\omega` the gyro's mean rate in the body frame.
+
+Both are compared over blocks of :data:`TURNING_WINDOW_S` (the readings'
+noise, differentiated, would drown the turning). The vectors' agreement is a
+correlation, which a sensor's scale, its sign and a hard iron's offset barely
+move; the reference's is the share of its turning that one fixed rotation of
+the gyro's rates leaves unexplained (Wahba's problem, solved by scipy's
+``Rotation.align_vectors``), the rotation being the reference's axes against
+the IMU's.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+
+import numpy as np
+
+#: Both channels are averaged over blocks this long, s.
+TURNING_WINDOW_S = 0.1
+#: The unit check: where the accelerometer's turning and the gyro's agree
+#: in shape (correlation above this; a turn about the vertical turns no
+#: gravity, and is no evidence), the scale that fits them must be within
+#: this factor of 1 (a unit's mistake is 57).
+TURNING_CORRELATION, TURNING_FACTOR = 0.3, 10.0
+#: The axes check: declared axes whose turning correlates below the first
+#: with the gyro's, where another order of the axes correlates above the
+#: second, are wrong. A correct magnetometer on BROAD's 30 trials correlates
+#: 0.84–0.99 (0.42 with a magnet attached 1 cm from it: then no order
+#: fits, and none is proposed); an accelerometer in translation, 0.3 or
+#: less, and no other order above 0.6 (linear acceleration turns with no
+#: rate), so it is seldom judged. A wrong order that keeps one axis in place
+#: still correlates up to about 0.5.
+AXES_DECLARED_BELOW, AXES_OTHER_ABOVE = 0.6, 0.9
+#: The reference check: a reference whose turning is left unexplained by
+#: more than this share (by any fixed rotation of the gyro's rates) is not
+#: the attitude of that gyro's body as declared (0.1 % to 1.1 % on BROAD's
+#: 30 trials; 15 % to 120 % for the same trials read in the wrong order).
+REFERENCE_UNEXPLAINED = 0.1
+#: … and one whose axes are turned more than this from the gyro's, deg
+#: (0.2–1.6° on BROAD), is said to be: every score would include it.
+REFERENCE_TURNED_DEG = 5.0
+#: Evidence enough: this many blocks, turning this fast on average (rad/s).
+MIN_BLOCKS, MIN_RATE_RADPS = 20, 0.1
+
+
+def _block_means(values: np.ndarray, steps: int) -> np.ndarray:
+    blocks = len(values) // steps
+    return values[:blocks * steps].reshape(blocks, steps, -1).mean(axis=1)
+
+
+def _held(vectors: np.ndarray) -> np.ndarray:
+    """A vector channel read at some of the gyro's samples (zeros between
+    readings) held from each reading to the next."""
+    read = np.any(vectors != 0.0, axis=1)
+    last = np.maximum.accumulate(np.where(read, np.arange(len(vectors)), 0))
+    return vectors[last]
+
+
+def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float):
+    """The vectors' change per block, and the change the gyro predicts
+    (-ω × v at the blocks' mean); None where there are too few blocks."""
+    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+    if len(rates) // steps < 3:
+        return None
+    vector = _block_means(vectors, steps)
+    rate = _block_means(rates, steps)
+    change = np.diff(vector, axis=0) / (steps * dt)
+    predicted = -np.cross((rate[1:] + rate[:-1]) / 2, (vector[1:] + vector[:-1]) / 2)
+    return change, predicted
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> float | None:
+    scale = math.sqrt(float(np.sum(a * a)) * float(np.sum(b * b)))
+    return float(np.sum(a * b)) / scale if scale > 0.0 else None
+
+
+def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
+    """The factor by which ``rates`` must be multiplied to turn gravity as
+    the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
+    None where the turning is not seen clearly enough to say."""
+    if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
+        return None                       # too few accelerometer readings on the clock
+    turning = _turning(rates, specific_force, dt)
+    if turning is None:
+        return None
+    change, predicted = turning
+    correlation = _correlation(change, predicted)
+    if correlation is None or correlation < TURNING_CORRELATION:
+        return None
+    return float(np.sum(change * predicted)) / float(np.sum(predicted * predicted))
+
+
+def _orders() -> list[np.ndarray]:
+    """The right-handed reorderings of three axes (signed permutations of
+    determinant 1): a vector's correlation cannot tell ``v`` from ``-v``,
+    which turn alike, so of each such pair the proper one stands."""
+    orders = []
+    for columns in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            matrix = np.zeros((3, 3))
+            matrix[range(3), columns] = signs
+            if np.linalg.det(matrix) > 0:
+                orders.append(matrix)
+    return orders
+
+
+def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float):
+    """``(declared, better, its correlation)``: how the turning of
+    ``vectors`` (in the device's axes as declared) correlates with the
+    gyro's, and the reordering ``better`` (a matrix: device axes =
+    ``better`` @ declared) that fits far better, or None where the declared
+    axes fit, or where the turning is not seen clearly enough to say."""
+    turning = _turning(rates, _held(vectors), dt)
+    if turning is None:
+        return None
+    change, predicted = turning
+    if np.sqrt(np.mean(np.sum(predicted * predicted, axis=1))) == 0.0:
+        return None
+    declared = _correlation(change, predicted)
+    if declared is None or declared >= AXES_DECLARED_BELOW:
+        return None
+    held = _held(vectors)
+    fits = [(_correlation(*_turning(rates, held @ order.T, dt)) or -1.0, index)
+            for index, order in enumerate(_orders())]
+    best, index = max(fits)
+    return (declared, _orders()[index], best) if best >= AXES_OTHER_ABOVE else None
+
+
+def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
+    """``(unexplained, rotation)``: the share of the reference's turning
+    (scalar-first quaternions, body → world, NaN where none) that the
+    fixed rotation of the gyro's rates best fitting it leaves unexplained,
+    and that rotation (None where the rates turn about one axis only, which
+    leaves it undetermined); None where there is too little turning."""
+    from scipy.spatial.transform import Rotation
+    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+    starts = np.arange(len(rates) // steps) * steps
+    if len(starts) < 2:
+        return None
+    quat = reference_quat[starts]
+    paired = ~np.isnan(quat[:-1]).any(axis=1) & ~np.isnan(quat[1:]).any(axis=1)
+    if np.count_nonzero(paired) < MIN_BLOCKS:
+        return None
+    attitude = Rotation.from_quat(quat[:-1][paired], scalar_first=True)
+    after = Rotation.from_quat(quat[1:][paired], scalar_first=True)
+    turned = (attitude.inv() * after).as_rotvec() / (steps * dt)
+    rate = _block_means(rates, steps)[:len(starts) - 1][paired]
+    if np.sqrt(np.mean(np.sum(rate * rate, axis=1))) < MIN_RATE_RADPS:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)    # a poorly defined fit: see below
+        rotation, _ = Rotation.align_vectors(turned, rate)
+    unexplained = float(np.sum((turned - rotation.apply(rate)) ** 2) / np.sum(turned * turned))
+    spread = np.linalg.svd(rate, compute_uv=False)
+    return unexplained, (rotation if spread[1] >= 0.2 * spread[0] else None)
+
+
+def reference_fits(fit) -> bool:
+    """Whether a :func:`reference_fit` says the reference is the gyro's
+    body, in the gyro's axes (no fit, for too little turning, is no
+    evidence against it)."""
+    return fit is None or (fit[0] <= REFERENCE_UNEXPLAINED and (
+        fit[1] is None or math.degrees(fit[1].magnitude()) <= REFERENCE_TURNED_DEG))
+
+
+def first_fitting(rates: np.ndarray, candidates, dt: float) -> str | None:
+    """The first of the ``(what, quaternions)`` candidates whose turning
+    shows, clearly, the gyro's body in the gyro's axes."""
+    for text, quat in candidates:
+        fit = reference_fit(rates, quat, dt)
+        if fit is not None and reference_fits(fit):
+            return text
+    return None
