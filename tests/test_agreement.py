@@ -120,6 +120,9 @@ def test_a_recording_without_a_reference_is_ranked_by_agreement_and_says_so(
     assert first_tier.max() < 2.5
     groups = pd.read_csv(out / "broad_groups.csv")
     assert set(groups["estimator"]) == set(trials.index)
+    # Both files say what their RMSE columns were taken against.
+    assert (trials["scored_against"] == "others' median").all()
+    assert (groups["scored_against"] == "others' median").all()
 
 
 def test_without_a_reference_tuning_and_a_lone_heading_are_refused(unreferenced, tmp_path,

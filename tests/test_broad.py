@@ -377,6 +377,7 @@ def test_tuning_all_trials_scores_each_trial_with_the_other_trials_settings(tmp_
                     "--out", str(tmp_path / "default"), "--quiet"])
     assert default == 0
     untuned = pd.read_csv(tmp_path / "default" / "broad_trials.csv")
+    assert (untuned["scored_against"] == "reference").all()
     # Trial 07 is scored with the β tuned on 02, not with the default β.
     assert trials.loc[trials.estimator == "madgwick", "total_rmse_deg"].iloc[1] != \
         untuned.loc[untuned.estimator == "madgwick", "total_rmse_deg"].iloc[1]

@@ -446,3 +446,28 @@ def test_an_empty_archive_is_said_to_have_no_column(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "it has no column at all (an empty file)" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_sensor_mostly_rejected_is_noted_below_the_table(trial, tmp_path, capsys):
+    """A field whose norm swings ±50 % every 2 s (a magnet carried beside the
+    IMU) is rejected most of the time by the MEKF's norm test; the table's
+    share is easily missed, so a note says what it leaves to the gyro. A
+    field the filters take raises none."""
+    recording, keep = trial
+    table = _table(trial)
+    t = np.asarray(table["t"]) - table["t"][0]
+    swing = 1.0 + 0.5 * np.sin(2 * np.pi * t / 2.0)
+    for axis in "xyz":
+        table[f"m{axis}"] = np.asarray(table[f"m{axis}"]) * swing
+    declared = _declare(tmp_path, _csv(tmp_path, table))
+    args = ["broad", "--broad", str(declared), "--estimators", "mekf", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "swing")]) == 0
+    out = capsys.readouterr().out
+    rejected = pd.read_csv(tmp_path / "swing" / "broad_trials.csv")[
+        "rejected_magnetometer_share"].iloc[0]
+    assert rejected > 0.5
+    assert f"trial log: mekf rejected up to {100 * rejected:.3g} % of the magnetometer's " \
+        "readings: their heading there rests on the gyro alone" in out
+    _csv(tmp_path, _table(trial))
+    assert main([*args, "--out", str(tmp_path / "steady")]) == 0
+    assert "rests on the gyro alone" not in capsys.readouterr().out

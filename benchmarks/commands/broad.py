@@ -147,10 +147,14 @@ def _write(args, result, tunings, dataset, train) -> None:
     """The tables, the figures (drawn before the first write) and the
     attribution of the data and of the settings' training data."""
     from benchmarks.broad import figures
+    from benchmarks.broad.benchmark import with_scored_against
     drawn = {name: figure_bytes(args.out / name, figure(result)) for name, figure in
              (("broad.png", figures.groups_figure), ("broad_trial.png", figures.trial_figure))}
-    write_text(args.out / "broad_trials.csv", result.trials.to_csv(index=False))
-    write_text(args.out / "broad_groups.csv", result.groups.to_csv(index=False))
+    from benchmarks.broad.benchmark import with_scored_against
+    write_text(args.out / "broad_trials.csv",
+               with_scored_against(result.trials, result).to_csv(index=False))
+    write_text(args.out / "broad_groups.csv",
+               with_scored_against(result.groups, result).to_csv(index=False))
     for name, data in drawn.items():
         write_bytes(args.out / name, data)
     attribution = dataset.attribution
