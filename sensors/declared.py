@@ -101,7 +101,11 @@ def load_parts(path) -> list[Recording]:
     …), each with the readings of the other sensors in its span."""
     path = Path(path)
     declaration = read_declaration(path)
-    return declared_recordings(declaration, read_table(data_file(path, declaration)), path)
+    try:
+        table = read_table(data_file(path, declaration))
+    except InvalidParameterError as err:          # named by the declaration that gave it
+        refuse(path, "recording.file", declaration["file"], err.rule)
+    return declared_recordings(declaration, table, path)
 
 
 def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Recording]:
@@ -237,10 +241,10 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
         if "axes" in section:
             values = values @ axes_matrix(section["axes"], f"{path.name}: {key}.axes").T
     if name == "gyro":
-        _check_clock(path, times)
+        _check_clock(path, section.get("time"), times)
         _check_rates(path, values, section["unit"])
     else:
-        _check_increasing(path, f"{key}.time", times)
+        _check_increasing(path, f"{key}.time", section.get("time"), times)
     if name == "magnetometer":
         values = calibrated(values, section, UNITS[name][section["unit"]],
                             f"{path.name}: {key}")
@@ -303,17 +307,18 @@ def _listed(table: dict) -> str:
     return ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
 
 
-def _check_increasing(path: Path, key: str, times: np.ndarray) -> None:
+def _check_increasing(path: Path, key: str, column, times: np.ndarray) -> None:
+    """Times that increase; else the column and the first reading where not."""
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         row = int(back[0]) + 1
-        refuse(path, key, float(times[row]), f"goes back or repeats at reading {row} (after "
-                f"{times[row - 1]:.9g} s); times must increase")
+        refuse(path, key, column, f"goes back or repeats at reading {row} ({times[row]:.9g} s "
+               f"after {times[row - 1]:.9g} s); times must increase")
 
 
-def _check_clock(path: Path, times: np.ndarray) -> None:
+def _check_clock(path: Path, column, times: np.ndarray) -> None:
     """The gyro's times: increasing, two at least."""
-    _check_increasing(path, "recording.gyro.time", times)
+    _check_increasing(path, "recording.gyro.time", column, times)
     if len(times) < 2:
         refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
                 "at least two")

@@ -256,7 +256,11 @@ def calibrated(readings: np.ndarray, section: dict, unit: float, where: str) -> 
                                     "is declared beside calibrate = true, which fits it: "
                                     "give one or the other")
     if fit:
-        found = fit_ellipsoid(readings, name=f"{where}.calibrate")
+        try:
+            found = fit_ellipsoid(readings, name=f"{where}.calibrate")
+        except InvalidParameterError as err:      # the rule is the fit's, not the key's
+            raise InvalidParameterError(f"{where}.calibrate", True, f"cannot be done on these "
+                                        f"readings ({err.value}): {err.rule}") from None
         warnings.warn(f"{where}: calibrated by an ellipsoid fit: {found.describe('uT')}",
                       stacklevel=2)
         return found.apply(readings)

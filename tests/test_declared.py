@@ -3,6 +3,7 @@ gives the same numbers whatever its format, sensors on their own clocks
 and in their own units reach the scored table, and each mistake a logger
 makes is one line."""
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -240,7 +241,8 @@ def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tm
      'accelerometer.unit = .m/s\\^2.: makes the median .* unit = "g" would fit'),
     (dict(mag_unit="uT", scale_mag=1e3), 'magnetometer.unit = .uT.: .* unit = "nT" would fit'),
     (dict(reference='["qw", "qx", "qy", "nope"]'), "must name a column of the file; it has t, "),
-    (dict(back=True), "gyro.time = .*: goes back or repeats at reading 100"),
+    (dict(back=True), "gyro.time = 't': goes back or repeats at reading 100 \\([0-9.]+ s after "
+                      "[0-9.]+ s\\); times must increase"),
     (dict(partly=True), "accelerometer.columns = .*: row 7 is partly empty"),
     (dict(time_unit="minutes"), "time_unit = 'minutes': must be one of s, ms, us, ns"),
     # Times in seconds declared in ms: the clock's unit is named, not the gyro's.
@@ -284,7 +286,7 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
     assert not out.exists()
 
 
-def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path):
+def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, capsys):
     # The gyro's clock stops for 2 s: the file is two parts, each a trial of
     # its own, each scored exactly as the same samples in the toolkit's .npz.
     from sensors.declared import load_parts
@@ -320,6 +322,10 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path):
         assert main(["broad", "--broad", str(source), "--estimators", "mekf", "--out",
                      str(out), "--quiet"]) == 0
         scores[label] = pd.read_csv(out / "broad_trials.csv").set_index("trial")
+        if label == "declared":      # the split is said, with each part's length
+            assert re.search(r"note: log.toml: the gyro's clock stops 1 time\(s\) .* started "
+                             r"anew: log_part1 \([0-9.]+ s\), log_part2 \([0-9.]+ s\)",
+                             capsys.readouterr().err)
     total = [c for c in scores["npz"].columns if c.startswith("total")][0]
     assert len(scores["declared"]) == 2
     assert np.allclose(scores["declared"][total], scores["npz"][total], rtol=1e-6, atol=1e-9)
@@ -333,6 +339,11 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path):
     ("text cell", "gyro.columns = 'gx': must be one column of numbers; it holds text"),
     ("frame on gyro", "gyro.frame = 'NED': is not a key of the gyro's section"),
     ("lengths", "magnetometer.columns = .*: must be columns of one length"),
+    # The file's own error, named by the declaration that gave it.
+    ("empty file", "log.toml: recording.file = 'log.csv': cannot be read"),
+    # The fit's rule, not the key's: the trial's first 40 s turn too little.
+    ("calibrate", "magnetometer.calibrate = True: cannot be done on these readings \\(\\d+% "
+                  "of the directions\\): an ellipsoid fit needs readings in at least 70%"),
 ])
 def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, change, message):
     import re
@@ -351,8 +362,12 @@ def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, ch
         file = "log.npz"
     else:
         pd.DataFrame(table).to_csv(tmp_path / file, index=False)
+    if change == "empty file":
+        (tmp_path / file).write_bytes(b"")
     declared = _declare(tmp_path, file)
     text = declared.read_text()
+    if change == "calibrate":
+        text = text.replace('unit = "uT"', 'unit = "uT"\ncalibrate = true')
     if change == "no magnetometer":
         text = text.split("[recording.magnetometer]")[0] + "[recording.reference]" + \
             text.split("[recording.reference]")[1]
@@ -471,3 +486,24 @@ def test_a_sensor_mostly_rejected_is_noted_below_the_table(trial, tmp_path, caps
     _csv(tmp_path, _table(trial))
     assert main([*args, "--out", str(tmp_path / "steady")]) == 0
     assert "rests on the gyro alone" not in capsys.readouterr().out
+
+
+def test_a_clipped_accelerometer_is_noted(trial, tmp_path, capsys):
+    """An accelerometer clipped at its rail (here ±11 m/s², below the
+    trial's peaks) is said to be; the same log unclipped raises no note."""
+    table = _table(trial, whole=True)
+    _csv(tmp_path, table)
+    args = ["broad", "--broad", str(_declare(tmp_path, "log.csv")), "--estimators",
+            "dead-reckoning", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "whole")]) == 0
+    assert "its rail (clipped)" not in capsys.readouterr().err
+    rail = 11.0
+    for axis in "xyz":
+        table[f"a{axis}"] = np.clip(table[f"a{axis}"], -rail, rail)
+    count = int(np.count_nonzero(np.any(np.abs(np.column_stack(
+        [table[f"a{axis}"] for axis in "xyz"])) == rail, axis=1)))
+    assert count >= 20
+    _csv(tmp_path, table)
+    assert main([*args, "--out", str(tmp_path / "clipped")]) == 0
+    assert f"trial log: {count} accelerometer readings at ±11 m/s², its rail (clipped)" in \
+        capsys.readouterr().err

@@ -70,6 +70,30 @@ def test_inspect_reports_the_clocks_and_suggests_a_declaration_that_runs(phone_c
     assert (out_folder / "broad_trials.csv").exists()
 
 
+@pytest.mark.parametrize("order", ["wxyz", "xyzw"])
+def test_arrays_named_with_units_and_a_reference_in_either_order_are_told(order, tmp_path,
+                                                                          capsys):
+    """A logger's archive of (N, 3) arrays named with their units
+    (``acc_m_s2``: its ``m`` is no magnetometer) and the reference as one
+    (N, 4) array, whose order no name tells: its turning against the
+    gyro's tells it (sensors.turning), and the note says so."""
+    recording = load_recording(TRIAL)
+    keep = int(120 * recording.rate_hz)          # the rest and a turn
+    quat = recording.reference_quat[:keep]
+    np.savez(tmp_path / "log.npz", t_s=recording.time_s[:keep],
+             gyro_rad_s=recording.gyro_radps[:keep], acc_m_s2=recording.accelerometer_mps2[:keep],
+             mag_uT=recording.magnetometer_uT[:keep],
+             q_mocap=quat if order == "wxyz" else np.roll(quat, -1, axis=1))
+    assert main(["inspect", str(tmp_path / "log.npz")]) == 0
+    err = capsys.readouterr().err
+    assert f"is told by its turning against the gyro's: {order}" in err, err
+    text = (tmp_path / "log.toml").read_text()
+    assert 'columns = "acc_m_s2"' in text and f'order = "{order}"' in text
+    told = load_declared(tmp_path / "log.toml").reference_quat
+    seen = ~np.isnan(quat).any(axis=1)
+    assert np.allclose(np.abs(np.sum(told[seen] * quat[seen], axis=1)), 1.0)
+
+
 def test_inspect_never_overwrites_a_declaration(phone_csv, capsys, tmp_path):
     path, _ = phone_csv
     (tmp_path / "phone.toml").write_text("# mine\n")

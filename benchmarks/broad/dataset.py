@@ -31,7 +31,7 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
-from sensors.declared import data_file, load_parts, read_declaration
+from sensors.declared import GAP_FACTOR, data_file, load_parts, read_declaration
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -189,6 +189,7 @@ class BroadDataset:
             refuse(rule)
         if path.suffix != ".toml":       # there, a sensor on its own clock reads at some samples
             _note_dropouts(recording, path)
+        _note_clipping(recording, path)
         return recording
 
 
@@ -294,7 +295,14 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
     one group; a part too short to run is left out, and a note says so."""
     files = {}
     for path in paths:
-        for part in declared_parts(path):
+        parts = declared_parts(path)
+        if len(parts) > 1:
+            warnings.warn(f"{path.name}: the gyro's clock stops {len(parts) - 1} time(s) (an "
+                          f"interval over {GAP_FACTOR:g} times its median): each unbroken "
+                          "stretch is a trial of its own, started anew: " + ", ".join(
+                              f"{part.name} ({part.n_samples / part.rate_hz:.1f} s)"
+                              for part in parts), stacklevel=2)
+        for part in parts:
             if not part.has_vectors:
                 raise InvalidParameterError(
                     parameter, str(path), "declares no [recording.accelerometer] or no "
@@ -390,6 +398,29 @@ def _column(array: np.ndarray) -> np.ndarray:
 
 
 _NOTED = set()
+
+
+#: A gyro or accelerometer with at least this many readings at its rail is
+#: said to clip (BROAD's magnetometer, held between its own slower
+#: samples, sits three to nine readings at its extreme; no gyro or
+#: accelerometer of its 30 trials reaches one).
+CLIPPED_NOTE_READINGS = 20
+#: What a clipped channel does to the filters.
+CLIPPING_HARM = {"gyro": "every filter's turn there falls short of the body's",
+                 "accelerometer": "the filters read less acceleration than there was"}
+
+
+def _note_clipping(recording: Recording, path: Path) -> None:
+    """A note for a gyro or accelerometer that sits at its rail: clipped."""
+    from benchmarks.experiments.inspection import clipped
+    for name, values, unit in (("gyro", recording.gyro_radps, "rad/s"),
+                               ("accelerometer", recording.accelerometer_mps2, "m/s²")):
+        count, extreme = clipped(values) if values is not None else (0, 0.0)
+        note = (f"trial {recording.name}: {count} {name} readings at ±{extreme:.6g} {unit}, its "
+                f"rail (clipped): {CLIPPING_HARM[name]}")
+        if count >= CLIPPED_NOTE_READINGS and (path, note) not in _NOTED:
+            _NOTED.add((path, note))
+            warnings.warn(note, stacklevel=2)
 
 
 def _note_dropouts(recording: Recording, path: Path) -> None:

@@ -29,10 +29,10 @@ def arguments(commands, defaults) -> None:
 
 
 def run(args, _scenario):
-    from dynamics.validation import InvalidParameterError
     from sensors.declared import data_file, declared_recordings, read_declaration
     from sensors.tables import read_table
-    from benchmarks.experiments.inspection import declaration_toml, findings, guess_declaration
+    from benchmarks.experiments.inspection import (declaration_toml, findings,
+                                                   guess_declaration, loaded_guess)
     if not args.file.is_file():
         raise UsageError(f"file = {str(args.file)!r}: is not a file")
     declared = args.file.suffix.lower() == ".toml"
@@ -51,13 +51,9 @@ def run(args, _scenario):
         declaration, notes = guess_declaration(table, relative)
     print(f"{data.name}: {len(table)} columns ({', '.join(list(table)[:12])}"
           f"{', …' if len(table) > 12 else ''})")
-    try:
-        parts = declared_recordings(declaration, table, target or args.file)
-    except InvalidParameterError as err:
-        if declared:
-            raise                          # the user's own declaration: its error, exit 2
-        parts = None
-        notes.append(f"as suggested, it does not load: {err}")
+    # The user's own declaration: its error, exit 2; a guess: a note.
+    parts = declared_recordings(declaration, table, args.file) if declared else \
+        loaded_guess(declaration, table, target, notes)
     if parts is not None:
         for line in findings(parts, table, declaration):
             print(f"  {line}")

@@ -18,10 +18,11 @@ import re
 
 import numpy as np
 
+from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.declared import GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS
+from sensors.declared import GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS, declared_recordings
 from sensors.recording import reading_interval_s
-from sensors.turning import turning_scale
+from sensors.turning import reference_fit, turning_scale
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
@@ -40,11 +41,16 @@ def _tokens(name: str) -> set:
 
 
 def _sensor_of(prefix: str) -> str | None:
-    """The sensor a column prefix names, if exactly one."""
-    tokens = _tokens(prefix) | {prefix.lower()}
-    named = [sensor for sensor, words in SENSOR_TOKENS.items()
-             if tokens & set(words) or any(token.startswith(words[0]) for token in tokens)]
-    return named[0] if len(named) == 1 else None
+    """The sensor a column prefix names, if exactly one: by its first word
+    where that names one (``acc_m_s2``: the unit's ``m`` is no
+    magnetometer), else by all its words."""
+    words = [token for token in re.split(r"[^a-z]+", prefix.lower()) if token]
+    for tokens in ({words[0]} if words else set(), _tokens(prefix) | {prefix.lower()}):
+        named = [sensor for sensor, names in SENSOR_TOKENS.items()
+                 if tokens & set(names) or any(token.startswith(names[0]) for token in tokens)]
+        if len(named) == 1:
+            return named[0]
+    return None
 
 
 def sensor_columns(table: dict) -> dict:
@@ -226,8 +232,8 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
         if sensor == "reference":
             section["order"] = "wxyz"        # the columns are listed w, x, y, z
             if isinstance(chosen, str):
-                notes.append("reference: one array; its order (w, x, y, z or x, y, z, w) "
-                             "cannot be told from its name: wxyz assumed, check it")
+                notes.append(f"{ONE_ARRAY}cannot be told from its name: wxyz assumed, "
+                             "check it")
         declaration[sensor] = section
     if "gyro" in declaration:
         gyro = declaration["gyro"]
@@ -241,6 +247,39 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
         step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
         gyro["unit"] = gyro_unit(rates, force, step)
     return declaration, notes
+
+
+#: The note of a reference given as one array, whose order its name cannot tell.
+ONE_ARRAY = "reference: one array; its order (w, x, y, z or x, y, z, w) "
+
+
+def loaded_guess(declaration: dict, table: dict, path, notes: list):
+    """The recordings the guessed ``declaration`` makes of ``table``, or
+    None (with a note) where it does not load. A reference given as one
+    array is tried in either order: the one that turns as the gyro does
+    (:mod:`sensors.turning`) is kept, and the note says so."""
+    reference = declaration.get("reference", {})
+    orders = ("wxyz", "xyzw") if isinstance(reference.get("columns"), str) else (None,)
+    refused = None
+    for order in orders:
+        if order:
+            reference["order"] = order
+        try:
+            parts = declared_recordings(declaration, table, path)
+        except InvalidParameterError as err:
+            refused = refused or err
+            if err.name.endswith("recording.reference.order"):
+                continue
+            break
+        told = parts[0].reference_quat
+        if order and reference_fit(parts[0].gyro_radps, told, 1.0 / parts[0].rate_hz):
+            notes[:] = [note for note in notes if not note.startswith(ONE_ARRAY)]
+            notes.append(f"{ONE_ARRAY}is told by its turning against the gyro's: {order}")
+        return parts
+    if orders[0]:
+        reference["order"] = orders[0]
+    notes.append(f"as suggested, it does not load: {refused}")
+    return None
 
 
 def declaration_toml(declaration: dict, source: str) -> str:
