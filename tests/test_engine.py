@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from numba import njit
 
 from benchmarks import Scenario, error_statistics, simulate
 from benchmarks.engine import MEDIAN_RELATIVE_ERROR, make_runs, run_batch
@@ -76,6 +77,50 @@ def test_a_run_is_bit_identical_whatever_its_batch():
         for column, values in big.statistics[name].items():
             assert values[5] == alone.statistics[name][column][0]
             assert values[5] == other_blocks.statistics[name][column][2]
+
+
+def test_a_run_is_bit_identical_whatever_the_threads():
+    """The kernels' runs go one share per thread (benchmarks.engine.kernels.
+    cores): one thread or as many as numba has, every number the same."""
+    import numba
+    previous, most = numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS
+    runs = make_runs(SCENARIO, np.arange(7))
+    results = []
+    try:
+        for threads in sorted({1, most}):
+            numba.set_num_threads(threads)
+            results.append(run_batch(SCENARIO, runs, keep_traces=True))
+    finally:
+        numba.set_num_threads(previous)
+    for other in results[1:]:
+        for name in results[0].estimators:
+            assert np.array_equal(results[0].estimates[name], other.estimates[name])
+            for column, values in results[0].statistics[name].items():
+                assert np.array_equal(values, other.statistics[name][column], equal_nan=True)
+
+
+@njit(nogil=True)
+def _visit(first, last, visits):
+    """A kernel's loop that only counts the runs it is given."""
+    for run in range(first, last):
+        visits[run] += 1
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 4))
+def test_the_shares_cover_every_run_once(n_runs, threads):
+    """on_every_core splits the runs into contiguous shares: each run is
+    advanced exactly once, whatever the count of runs and of threads."""
+    import numba
+    from benchmarks.engine.kernels.cores import on_every_core
+    visits = np.zeros(n_runs, dtype=np.int64)
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        on_every_core(_visit, n_runs, visits)
+    finally:
+        numba.set_num_threads(previous)
+    assert (visits == 1).all()
 
 
 def test_only_requested_estimators_run():
@@ -290,7 +335,8 @@ def test_the_kernel_compiles_once_whatever_the_block_lengths():
         run_batch(SCENARIO, make_runs(SCENARIO, [0, 1]), list(KERNELS),
                   block_steps=block_steps)
     for name in KERNELS:
-        assert len(kernel(name).advance.signatures) == 1, (name, kernel(name).advance.signatures)
+        assert len(kernel(name).advance_runs.signatures) == 1, \
+            (name, kernel(name).advance_runs.signatures)
 
 
 def test_a_constant_bias_without_a_walk_reads_no_normals_past_its_row():

@@ -36,8 +36,7 @@ so its variance is :math:`(\tau / t)^2` times the density's
 measurable by it (BROAD's whole trials score the same to 0.01°); one that
 starts in motion is neither tilted by its first accelerations nor taught a
 false bias by their mean's drift (``tests/test_imu_models.py``: a bias
-error of 15 °/s without it, 2 °/s with it; a simulated drone's log cut in
-flight, 30.6° → 9.3° over its first 15 s). On BROAD's trials cut at their
+error of 15 °/s without it, 2 °/s with it). On BROAD's trials cut at their
 first movement, a hand's gentle accelerations, it changes little (the
 MEKF 2.93° → 2.94°).
 
@@ -164,7 +163,7 @@ def reading_variance(density: float, interval: float, filter_state, tau_s: float
     (``filter_state``, :mod:`estimators.imu.lowpass`) still averages its
     first ``t < tau_s`` seconds (module docstring)."""
     variance = density / interval
-    averaged = filter_state[3, 0]            # samples averaged so far; -1 once filtering
+    averaged = lowpass.samples_averaged(filter_state)
     if averaged >= 0.0:
         ratio = tau_s / (averaged * interval)
         variance *= ratio * ratio

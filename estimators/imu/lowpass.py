@@ -52,6 +52,12 @@ def new_state(channels: int) -> np.ndarray:
     return state
 
 
+def samples_averaged(state: np.ndarray) -> float:
+    """How many samples a filter still averaging has averaged (its output
+    their mean); -1 once it filters."""
+    return state[3, 0]
+
+
 def step(x: np.ndarray, coeffs: np.ndarray, tau_s: float, dt: float, state: np.ndarray,
          out: np.ndarray) -> None:
     """Filter one sample ``x`` of every channel into ``out`` (module docstring)."""

@@ -4,8 +4,9 @@ advancing every run of a batch through a block of steps.
 Why compiled: the estimators' arithmetic is tiny (4-vectors, 4x4 and 6x6
 covariances), so on the per-run path nearly all the time goes to Python and
 numpy's call overhead, not to arithmetic. numba compiles each kernel's loop
-to machine code; one run is one iteration of a ``prange`` loop (spread over
-the cores), its steps a plain loop with small scratch arrays.
+to machine code; one run is one iteration of a loop over a share of the
+batch's runs, one share per core (:mod:`~benchmarks.engine.kernels.cores`),
+its steps a plain loop with small scratch arrays.
 
 What a kernel module declares (``dead_reckoning.py`` is the shortest):
 
@@ -13,7 +14,10 @@ What a kernel module declares (``dead_reckoning.py`` is the shortest):
 * ``State``, its state as named arrays, and ``initial_state(estimators)``,
   which reads every setting off the per-run objects (one per run, built by
   ``from_scenario``), so the two paths can never disagree;
-* ``advance(block, sensors, state, record, row)``, compiled: every run
+* ``advance_runs(first, last, block, sensors, state, record, row)``,
+  compiled, serial and releasing the GIL, and ``advance(block, sensors,
+  state, record, row)``, which runs it on every core
+  (:func:`~benchmarks.engine.kernels.cores.on_every_core_of`): every run
   through a :class:`~benchmarks.engine.kernels.common.Block` (the truth and
   the noise of its sensors, whose readings
   :mod:`~benchmarks.engine.kernels.sensors` makes, advancing the
@@ -40,9 +44,10 @@ every step. Runs never interact (no reductions across the batch, no
 fast-math reassociation), so a run's numbers are bit-identical whatever
 batch it is computed in.
 
-Inside ``advance`` the loop touches plain arrays only: numba drops writes
-into a named tuple's arrays made inside a parallel loop, and every read of a
-field there costs a reference count (the loop took three times as long).
+Inside ``advance_runs`` the loop touches plain arrays only: every read of
+a named tuple's field there costs a reference count (inside the parallel
+loop the kernels had before, the loop took three times as long, and numba
+dropped writes into a named tuple's arrays made there).
 So each kernel unpacks its block, its record and its state before the loop
 (``gyro_arrays`` …). An array read every step is passed on by itself: a
 plain tuple's item read in the loop costs a reference count too (the EKF's
@@ -69,14 +74,17 @@ counter, whose views and calls count nothing), the block and the state
 borrowed again inside each run's iteration (a named tuple made before the
 loop cannot enter it), and each run's working arrays as borrowed rows of
 arrays made once for the batch. In the same profile the counts then took
-under 3 % of the samples; the numbers are the same to the bit. The other
-kernels' profiles showed no counts worth it.
+under 3 % of the samples; the numbers are the same to the bit. Since the
+runs' loops are serial (one share of the runs per thread, where numba's
+parallel loop once passed its arrays to each thread without a count per
+use), every kernel borrows so: with its arrays counted, the EKF's kernel
+took 4.5 times as long, dead reckoning's 6 times, with resets 3 times.
 
-Its run index is made ``run = np.int64(index)`` first: numba types the
-``prange`` index as a signed integer where it types the kernel and as an
-unsigned one inside the parallel loop, so every compiled helper taking
-``run`` would be compiled twice (the second copies of the MEKF's and
-USQUE's reading helpers, with their IMU models, took about 15 s).
+Its run index is made ``run = np.int64(index)`` first, one integer type
+for every compiled helper taking ``run`` (numba typed a parallel loop's
+index as unsigned inside it and signed outside, and compiled each such
+helper twice: the MEKF's and USQUE's reading helpers, with their IMU
+models, about 15 s).
 
 What a kernel inlines (``inline="always"``) and what it calls: a helper run
 at every step (the gyro's reading, the propagation, the output's

@@ -13,8 +13,8 @@ without its counter: numba skips the count of an array that has none, and of
 every view made from it. A borrowed array must not outlive the array it
 borrows, which alone keeps the memory: so borrow the kernel's arguments,
 which the caller holds until the kernel returns, or arrays the kernel makes
-before its parallel loop and hands to it (the loop holds them until its
-last run ends, as the MEKF's ``_batch_scratch``); never an array made
+before its loop over the runs and hands to it (the loop holds them until
+its last run ends, as the MEKF's ``_batch_scratch``); never an array made
 inside a run's iteration, which numba frees after its last use there.
 """
 from __future__ import annotations

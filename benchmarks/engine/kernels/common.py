@@ -56,7 +56,7 @@ class Block(NamedTuple):
     """A block of ``steps`` steps from step ``k0``, as every estimator kernel
     reads it: the truth, and the noise its sensors' readings are made of
     (:mod:`benchmarks.engine.kernels.sensors`), one row per run. Flat: numba's
-    parallel loops take no tuple nested in a tuple."""
+    parallel loops, which the kernels had, took no tuple nested in a tuple."""
 
     k0: int                      # the first step
     steps: int
@@ -150,7 +150,7 @@ def acos(x, bits, bits_int):
 def error_arrays(record, row):
     """Estimator ``row``'s slices of the record that :func:`record_error` and
     the health checks write, taken out of the tuple (before a kernel's
-    parallel loop: see the kernels package's docstring)."""
+    loop over its runs: see the kernels package's docstring)."""
     return (record.stats[row], record.hist[row], record.hist_first_bits, record.traces[row],
             record.keep_traces, record.error_every, record.error_samples[row],
             record.diverged[row], record.check_health, record.health[row])
@@ -357,8 +357,9 @@ def rate_arrays(state):
     """What a six-state kernel reads at every step besides its filter's
     arrays: its rate interpolation (:func:`rate_states`), and the IMU models'
     flag and arrays (``benchmarks.engine.kernels.imu.imu_state``), taken out
-    of its state's tuple before the parallel loop (read off the tuple inside
-    it, the inlined gyro reading's writes to the IMU models' counts were lost)."""
+    of its state's tuple before the loop over the runs (read off the tuple
+    inside the parallel loop the kernels had, the inlined gyro reading's
+    writes to the IMU models' counts were lost)."""
     return (state.trapezoid, state.rate_prev, state.has_rate, state.end, state.imu_on,
             state.imu_counts, state.imu_detector, state.imu_rate_lp, state.imu_strapdown,
             state.imu_rotation, state.imu_table, state.imu_table_dt, state.imu_work)

@@ -6,11 +6,13 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from benchmarks.engine.kernels.algebra import propagate
+from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import check_health, error_arrays
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
+from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import gyro_arrays, gyro_reading
 
 NAME = "dead-reckoning"
@@ -29,24 +31,33 @@ def initial_state(estimators) -> State:
                  step_average=estimators[0].rate_timing == "step-average")
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(block, sensors, state, record, row):
-    """Every run through ``block``: the gyro integrated (see :mod:`benchmarks.engine.kernels`)."""
-    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
-        block.q_true
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch(batch, run):
+    """Run ``run``'s rows of the share's working arrays, borrowed (no atomic
+    count at each call that takes them: the kernels package's docstring)."""
+    w, F, bits, factor = batch
+    return borrowed((w[run], F[run], bits[run], factor[run]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def advance_runs(first, last, block, sensors, state, record, row):
+    """Runs ``first`` to ``last - 1`` through ``block``: the gyro integrated
+    (see :mod:`benchmarks.engine.kernels`)."""
+    k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
+    q_true = borrowed(block.q_true)
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
-     bias_last) = gyro_arrays(block, sensors)
+     bias_last) = borrowed(gyro_arrays(block, sensors))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
-     health) = error_arrays(record, row)
-    q_all, previous_all, step_average = state.q, state.previous_rate, state.step_average
+     health) = borrowed(error_arrays(record, row))
+    q_all, previous_all = borrowed((state.q, state.previous_rate))
+    step_average = state.step_average
     half_dt = 0.5 * dt
-    for index in prange(q_all.shape[0]):
+    batch = (np.empty((last - first, 3)), np.empty((last - first, 4, 4)),
+             np.empty((last - first, 1)), np.empty((last - first, 6, 6)))
+    for index in range(first, last):
         run = np.int64(index)
-        w = np.empty(3)
-        F = np.empty((4, 4))
-        bits = np.empty(1)
+        w, F, bits, factor = _run_scratch(batch, run - first)
         bits_int = bits.view(np.int64)
-        factor = np.empty((6, 6))
         q, previous_rate = q_all[run], previous_all[run]
         for j in range(steps):
             k = k0 + j
@@ -64,3 +75,6 @@ def advance(block, sensors, state, record, row):
                 for i in range(3):
                     previous_rate[i] = w[i]
 
+
+#: Every run of the batch through a block, a share of the runs per core.
+advance = on_every_core_of(advance_runs)

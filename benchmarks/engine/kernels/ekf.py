@@ -7,15 +7,17 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from benchmarks.engine.kernels.algebra import (matmul4, projected_covariance, propagate,
                                                quadratic_form)
+from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, fold_nees, keep_variances,
                                               mark_diverged, nees, nees_arrays)
 from benchmarks.engine.kernels.common import gauss_jordan_inlined as gauss_jordan
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
+from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 
@@ -122,30 +124,43 @@ def _star_update(run, x, P, z, aligned, R, align_sign, scratch, check, health, f
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _run_scratch():
-    """One run's working arrays (allocated once per run, in its thread)."""
-    return (np.empty(3), np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty((4, 4)),
-            np.empty((5, 4, 4)), np.empty((7, 6, 6)), np.empty((3, 3)), np.empty(1),
-            np.empty((6, 6)))
+def _batch_scratch(n_runs):
+    """Every run's working arrays, made once for the runs of a share."""
+    return (np.empty((n_runs, 3)), np.empty((n_runs, 4)), np.empty((n_runs, 4)),
+            np.empty((n_runs, 4)), np.empty((n_runs, 4)), np.empty((n_runs, 4, 4)),
+            np.empty((n_runs, 5, 4, 4)), np.empty((n_runs, 7, 6, 6)), np.empty((n_runs, 3, 3)),
+            np.empty((n_runs, 1)), np.empty((n_runs, 6, 6)))
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(block, sensors, state, record, row):
-    """Every run through ``block``: update with each reading, then predict."""
-    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
-        block.q_true
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch(batch, run):
+    """Run ``run``'s rows of :func:`_batch_scratch`'s arrays, borrowed (no
+    atomic count at each call that takes them: the kernels package's
+    docstring)."""
+    w, z, dq, prior, aligned, F, scratch, scratch6, projected, bits, factor = batch
+    return borrowed((w[run], z[run], dq[run], prior[run], aligned[run], F[run], scratch[run],
+                     scratch6[run], projected[run], bits[run], factor[run]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def advance_runs(first, last, block, sensors, state, record, row):
+    """Runs ``first`` to ``last - 1`` through ``block``: update with each
+    reading, then predict."""
+    k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
+    q_true, star = borrowed((block.q_true, star_arrays(block)))
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
-     bias_last) = gyro_arrays(block, sensors)
-    star = star_arrays(block)
+     bias_last) = borrowed(gyro_arrays(block, sensors))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
-     health) = error_arrays(record, row)
+     health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
-     variances, likelihood) = nees_arrays(record, row)
-    x_all, P_all, q_variance, R_all = state.x, state.P, state.q_variance, state.R
+     variances, likelihood) = borrowed(nees_arrays(record, row))
+    x_all, P_all, q_variance, R_all = borrowed((state.x, state.P, state.q_variance, state.R))
     posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
-    for index in prange(x_all.shape[0]):
+    batch = _batch_scratch(last - first)
+    for index in range(first, last):
         run = np.int64(index)
-        w, z, dq, prior, aligned, F, scratch, scratch6, projected, bits, factor = _run_scratch()
+        w, z, dq, prior, aligned, F, scratch, scratch6, projected, bits, factor = \
+            _run_scratch(batch, run - first)
         bits_int = bits.view(np.int64)
         x, P = x_all[run], P_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
@@ -184,3 +199,6 @@ def advance(block, sensors, state, record, row):
             if check:
                 check_health(x, True, P, 4, health[run], factor)
 
+
+#: Every run of the batch through a block, a share of the runs per core.
+advance = on_every_core_of(advance_runs)

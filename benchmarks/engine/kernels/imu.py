@@ -40,7 +40,8 @@ def _compiled(func, **globals_):
 coefficients = _compiled(lowpass.coefficients)
 _rotate = _compiled(gravity.rotate)
 _rotated_back = _compiled(gravity.rotated_back)
-_LOWPASS = {"step": _compiled(lowpass.step)}
+_LOWPASS = {"step": _compiled(lowpass.step),
+            "samples_averaged": _compiled(lowpass.samples_averaged)}
 strapdown_step = _compiled(gravity.strapdown_step)
 integrate_rotation = _compiled(gravity.integrate_rotation)
 drift_jacobian = _compiled(gravity.drift_jacobian, lowpass=_LOWPASS, rotated_back=_rotated_back)
@@ -48,7 +49,7 @@ gravity_direction = _compiled(gravity.gravity_direction, lowpass=_LOWPASS,
                               rotate=_rotate,
                               rotate_back=_compiled(gravity.rotate_back,
                                                     rotated_back=_rotated_back))
-_reading_variance = _compiled(gravity.reading_variance)
+_reading_variance = _compiled(gravity.reading_variance, lowpass=_LOWPASS)
 rest_gyro_step = _compiled(rest.gyro_step, lowpass=_LOWPASS)
 rest_acc_step = _compiled(rest.acc_step, lowpass=_LOWPASS)
 field_in_reference = _compiled(heading.field_in_reference, rotate=_rotate)
@@ -100,7 +101,7 @@ def imu_state(estimators) -> dict:
     """Each run's IMU models (:class:`estimators.imu.ImuModels`) and the
     filter's settings of them, read off the per-run filters after their
     reset, as the ``imu_*`` fields of a kernel's state (flat: numba's
-    parallel loops take no tuple nested in a tuple)."""
+    parallel loops, which the kernels had, took no tuple nested in a tuple)."""
     first, count = estimators[0], len(estimators)
     models = [getattr(e, "imu", None) for e in estimators]
     work = {"imu_work": np.zeros((count, 8, 3)), "imu_drift": np.zeros((count, 3, 3)),
@@ -164,8 +165,8 @@ def gravity_models(state) -> tuple:
     reading reads, as a plain tuple (``G_*`` their places). Handed to a
     called function in place of the whole state: it counts a reference of
     every array it takes (the kernels package's docstring), and a state
-    holds some forty. Not a named tuple: a parallel loop cannot take one
-    made in the kernel."""
+    holds some forty. Not a named tuple: the parallel loop the kernels had
+    could not take one made in the kernel."""
     return (state.imu_counts, state.imu_detector, state.imu_strapdown, state.imu_gravity,
             state.imu_rotation, state.imu_work, state.imu_drift, state.imu_nine, state.imu_table,
             state.imu_table_dt, state.imu_rate_lp, state.imu_densities)

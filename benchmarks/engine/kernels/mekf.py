@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, keep_output,
@@ -27,6 +27,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               trapezoid_rate)
 from benchmarks.engine.kernels import imu
 from benchmarks.engine.kernels.borrowed import borrowed
+from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_passes,
                                                   gravity_update, propagate_covariance,
                                                   star_update, vector_update)
@@ -156,7 +157,7 @@ def _run_scratch(batch, run):
 def _filter_arrays(state, record, row):
     """The filters' arrays of the state, its rejections' counts in the record
     and the IMU models' arrays (:func:`~benchmarks.engine.kernels.imu.gravity_models`),
-    taken out of their tuples before the parallel loop, to be borrowed
+    taken out of their tuples before the loop over the runs, to be borrowed
     (the package's docstring)."""
     return (state.q, state.beta, state.P, state.mag_bias, state.noise, state.bias_rw,
             state.beta_last, state.P_last, state.posterior, record.rejected[row],
@@ -298,9 +299,9 @@ def _output(q, out, run, k, last_step, q_true_k, beta, P, beta_last, P_last, var
                 keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(block, sensors, state, record, row):
-    """Every run through ``block``: update and reset with each reading, then propagate."""
+@njit(cache=True, nogil=True, error_model="numpy")
+def advance_runs(first, last, block, sensors, state, record, row):
+    """Runs ``first`` to ``last - 1``: each reading's update and reset, then propagation."""
     k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
     q_true, vector_available, star = borrowed((block.q_true, block.vector_available,
                                                star_arrays(block)))
@@ -314,10 +315,10 @@ def advance(block, sensors, state, record, row):
      rejected, gravity_models, field_models) = borrowed(_filter_arrays(state, record, row))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
-    batch = _batch_scratch(q_all.shape[0])
-    for index in prange(q_all.shape[0]):
+    batch = _batch_scratch(last - first)
+    for index in range(first, last):
         run, run_block, run_state = np.int64(index), borrowed(block), borrowed(state)
-        w, z, dq, out, mean, scratch6, bits, factor = _run_scratch(batch, run)
+        w, z, dq, out, mean, scratch6, bits, factor = _run_scratch(batch, run - first)
         bits_int = bits.view(np.int64)
         q, beta, P, mag_bias = q_all[run], beta_all[run], P_all[run], mag_bias_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
@@ -359,3 +360,7 @@ def advance(block, sensors, state, record, row):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
                 check_health(q, True, P, P.shape[0], health[run], factor)
+
+
+#: Every run of the batch through a block, a share of the runs per core.
+advance = on_every_core_of(advance_runs)

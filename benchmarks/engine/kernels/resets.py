@@ -6,10 +6,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from benchmarks.engine.kernels.algebra import propagate
+from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import check_health, error_arrays, record_error
+from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 
@@ -40,25 +42,35 @@ def _predict(q, w, previous_rate, k, step_average, half_dt, out, F):
         propagate(q, previous_rate, half_dt, out, F, False)
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(block, sensors, state, record, row):
-    """Every run through ``block``: resets to each reading, integrated between."""
-    k0, steps, last_step, dt, q_true = block.k0, block.steps, block.last_step, block.dt, \
-        block.q_true
+@njit(cache=True, inline="always", error_model="numpy")
+def _run_scratch(batch, run):
+    """Run ``run``'s rows of the share's working arrays, borrowed (no atomic
+    count at each call that takes them: the kernels package's docstring)."""
+    w, z, dq, aligned, F, bits, factor = batch
+    return borrowed((w[run], z[run], dq[run], aligned[run], F[run], bits[run], factor[run]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def advance_runs(first, last, block, sensors, state, record, row):
+    """Runs ``first`` to ``last - 1`` through ``block``: resets to each
+    reading, integrated between."""
+    k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
+    q_true = borrowed(block.q_true)
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
-     bias_last) = gyro_arrays(block, sensors)
-    star = star_arrays(block)
+     bias_last) = borrowed(gyro_arrays(block, sensors))
+    star = borrowed(star_arrays(block))
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
-     health) = error_arrays(record, row)
-    q_all, previous_all, step_average = state.q, state.previous_rate, state.step_average
+     health) = borrowed(error_arrays(record, row))
+    q_all, previous_all = borrowed((state.q, state.previous_rate))
+    step_average = state.step_average
     align_sign, half_dt = state.align_sign, 0.5 * dt
-    for index in prange(q_all.shape[0]):
+    n = last - first
+    batch = (np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4)),
+             np.empty((n, 4, 4)), np.empty((n, 1)), np.empty((n, 6, 6)))
+    for index in range(first, last):
         run = np.int64(index)
-        w, z, dq, aligned = np.empty(3), np.empty(4), np.empty(4), np.empty(4)
-        F = np.empty((4, 4))
-        bits = np.empty(1)
+        w, z, dq, aligned, F, bits, factor = _run_scratch(batch, run - first)
         bits_int = bits.view(np.int64)
-        factor = np.empty((6, 6))
         q, previous_rate = q_all[run], previous_all[run]
         countdown, reading = first_countdown(k0, star, run), 0
         for j in range(steps):
@@ -88,3 +100,6 @@ def advance(block, sensors, state, record, row):
                 for i in range(3):
                     previous_rate[i] = w[i]
 
+
+#: Every run of the batch through a block, a share of the runs per core.
+advance = on_every_core_of(advance_runs)

@@ -13,10 +13,10 @@ stretches short enough to stay in the cache, made the workshop's three
 estimators 25 % slower). The readings are the same numbers in every kernel; each
 advances its own copy of the gyro's true bias.
 
-Their arguments are plain arrays, not the block's named tuple: numba drops
-writes into a named tuple's arrays made inside a parallel loop, and every
-read of a field there costs a reference count (measured: the loop took
-three times as long). The star tracker's arrays go as one plain tuple
+Their arguments are plain arrays, not the block's named tuple: numba
+dropped writes into a named tuple's arrays made inside the parallel loop
+the kernels had, and every read of a field in a loop costs a reference
+count (measured: the loop took three times as long). The star tracker's arrays go as one plain tuple
 (:func:`star_arrays`): read at its readings only, they cost nothing
 measurable so; the gyro's, read every step, go one by one.
 """
@@ -86,7 +86,7 @@ def _flight_gyro(w, omega, std, normals, scale_matrix, has_scale, has_bias, mode
 @njit(cache=True, inline="always", error_model="numpy")
 def gyro_arrays(block, sensors):
     """What :func:`gyro_reading` reads, taken out of the block's tuples (before
-    a kernel's parallel loop: see the module's docstring)."""
+    a kernel's loop over its runs: see the module's docstring)."""
     return (block.omega_true, block.gyro_std, block.gyro_normals, block.gyro_scale,
             block.has_scale, block.has_bias, block.bias_model, sensors.bias,
             sensors.bias_last)

@@ -30,7 +30,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from benchmarks.engine.kernels import imu, usque_imu
 from benchmarks.engine.kernels.algebra import quat_exp, to_body_frame
@@ -40,6 +40,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               norm_tolerances, passes_norm, mark_diverged,
                                               nees_arrays, rate_arrays, rate_states,
                                               record_error, trapezoid_rate)
+from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
 from benchmarks.engine.kernels.unscented import (N_SIGMAS, fold_reference, grp_from_quat,
@@ -104,7 +105,7 @@ class State(NamedTuple):
 @njit(cache=True, inline="always", error_model="numpy")
 def _filter_arrays(state):
     """The filters' arrays of the state, taken out of its tuple (before the
-    parallel loop: see the kernels package's docstring)."""
+    loop over the runs: see the kernels package's docstring)."""
     return (state.q, state.x, state.P, state.sigmas, state.noise, state.bias_rw, state.spread,
             state.Wm, state.Wc, state.beta_last, state.P_last, state.posterior)
 
@@ -357,9 +358,9 @@ def _output(q, x, out, run, k, last_step, q_true_k, P, beta_last, P_last, varian
                 keep_traces, streaming, nees_every, settle, nees_samples, nees_sum, scratch)
 
 
-@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def advance(block, sensors, state, record, row):
-    """Every run through ``block``: update and reset (or reset alone), output,
+@njit(cache=True, nogil=True, error_model="numpy")
+def advance_runs(first, last, block, sensors, state, record, row):
+    """Runs ``first`` to ``last - 1`` through ``block``: update and reset (or reset alone), output,
     then propagate (see :mod:`benchmarks.engine.kernels`)."""
     k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
     q_true = borrowed(block.q_true)
@@ -376,10 +377,10 @@ def advance(block, sensors, state, record, row):
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
     imu_turns = imu_work[:, imu.TURN]         # (B, 3): each run's strapdown turn
-    batch = _batch_scratch(q_all.shape[0])
-    for index in prange(q_all.shape[0]):
+    batch = _batch_scratch(last - first)
+    for index in range(first, last):
         run, run_state = np.int64(index), borrowed(state)
-        w, z, dq, out, mean, scratch, propagated, R_vector, bits = _run_scratch(batch, run)
+        w, z, dq, out, mean, scratch, propagated, R_vector, bits = _run_scratch(batch, run - first)
         bits_int = bits.view(np.int64)
         q, x, P, sigmas = q_all[run], x_all[run], P_all[run], sigmas_all[run]
         Wm, Wc, countdown, reading = Wm_all[run], Wc_all[run], first_countdown(k0, star, run), 0
@@ -418,3 +419,7 @@ def advance(block, sensors, state, record, row):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
                 check_health(q, True, P, 6, health[run], scratch[0])
+
+
+#: Every run of the batch through a block, a share of the runs per core.
+advance = on_every_core_of(advance_runs)
