@@ -16,11 +16,11 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 
 #: The kernels compiled together, one group per process: about equal compile
-#: times, the longest first (measured here on a cold cache, two processes at
-#: a time: the MEKF and USQUE about 55 s each, the EKF 17 s, dead reckoning
-#: with resets 6 s, without 5 s). The vector sensors' compiled readings
-#: (:mod:`sensors.sun_faces`, :mod:`sensors.vector_arithmetic`, a few
-#: seconds) go with the first group.
+#: times, the longest first (measured here on a cold cache, each alone, with
+#: the helpers they share: the MEKF 57 s, USQUE 53 s, the EKF 17 s, dead
+#: reckoning with and without resets 14 s; the two groups in parallel, 59 s).
+#: The vector sensors' compiled readings (:mod:`sensors.sun_faces`,
+#: :mod:`sensors.vector_arithmetic`, 2 s) go with the first group.
 GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "vector-sensors"),
           ("mekf", "ekf"))
 
