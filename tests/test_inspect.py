@@ -54,6 +54,12 @@ def test_inspect_reports_the_clocks_and_suggests_a_declaration_that_runs(phone_c
     # 40 s of rest and 20 s of a slow turn: too few of the field's directions
     # for the magnetometer's calibration, and inspect says so.
     assert "calibration: no ellipsoid fit" in out and "at least 70% of the directions" in out
+    # The reference checked against the gyro (sensors.turning): BROAD's is
+    # the IMU's own attitude, in its axes.
+    import re
+    found = re.search(r"reference: turns as the gyro does, ([0-9.]+) % of its turning "
+                      r"unexplained; its axes ([0-9.]+)° from the gyro's", out)
+    assert found and float(found[1]) < 2.0 and float(found[2]) < 2.0, out
     declared = path.with_suffix(".toml")
     text = declared.read_text()
     for expected in ('time_unit = "ms"', 'unit = "deg/s"', 'unit = "g"', 'unit = "nT"',

@@ -346,7 +346,22 @@ def _physics(recording, calibrated: bool = False) -> list[str]:
     if recording.magnetometer_uT is not None:
         lines.append("calibration: the declaration applies one (calibrate, hard_iron or "
                      "soft_iron)" if calibrated else _calibration(recording.magnetometer_uT))
+    if recording.has_reference.any():
+        lines.append(_reference_turning(recording))
     return lines
+
+
+def _reference_turning(recording) -> str:
+    """How the reference turns against the gyro (:mod:`sensors.turning`)."""
+    fit = reference_fit(recording.gyro_radps, recording.reference_quat, 1.0 / recording.rate_hz)
+    if fit is None:
+        return "reference: too little turning to check it against the gyro"
+    unexplained, rotation = fit
+    axes = ("its axes' turn from the gyro's undetermined (a turn about one axis)"
+            if rotation is None else
+            f"its axes {np.degrees(rotation.magnitude()):.1f}° from the gyro's")
+    return (f"reference: turns as the gyro does, {100 * unexplained:.1f} % of its turning "
+            f"unexplained; {axes}")
 
 
 def _calibration(field: np.ndarray) -> str:
