@@ -377,11 +377,14 @@ def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, 
         return
     declared, better, correlation = fit
     given = section.get("axes", ["x", "y", "z"])
-    fitting = axes_names(better @ axes_matrix(given, f"{path.name}: recording.{sensor}.axes"))
+    matrix = better @ axes_matrix(given, f"{path.name}: recording.{sensor}.axes")
+    if np.count_nonzero(matrix < 0) >= 2:
+        matrix = -matrix          # of the pair ±: the one with fewer axes negated
     vector = "gravity" if sensor == "accelerometer" else "the field"
     refuse(path, f"recording.{sensor}.axes", given, f"turn {vector} unlike the gyro (their "
-            f"turning correlates {declared:.2f}); axes = {_listed_axes(fitting)} turns it as "
-            f"the gyro does ({correlation:.2f})")
+           f"turning correlates {declared:.2f}); axes = {_listed_axes(axes_names(matrix))} "
+           f"turns it as the gyro does ({correlation:.2f}; turning cannot tell {vector} "
+           "from its opposite: check the signs)")
 
 
 def _listed_axes(names: list) -> str:

@@ -5,7 +5,6 @@ interpolated on the gyro's clock, and checked to turn as the gyro turns
 another does."""
 from __future__ import annotations
 
-import math
 import warnings
 from pathlib import Path
 
@@ -13,7 +12,8 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from sensors.recording_keys import choice, refuse
-from sensors.turning import REFERENCE_UNEXPLAINED, first_fitting, reference_fit, reference_fits
+from sensors.turning import (REFERENCE_ADVICE, first_fitting, reference_fit, reference_fits,
+                             reference_problem)
 
 #: The reference is interpolated between readings at most this many of its
 #: typical intervals apart (a longer one is a gap: the markers were not seen).
@@ -63,32 +63,24 @@ def _on_gyro_times(path: Path, clock: np.ndarray, times: np.ndarray, rotations) 
 
 
 def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tuple,
-                     section: dict, reference: np.ndarray) -> None:
+                    section: dict, reference: np.ndarray) -> None:
     """Refuse a reference that turns unlike the gyro (:func:`sensors.turning.
-    reference_fit`), with the declaration that would fit where one does;
-    warn where it fits only with its axes turned from the gyro's."""
+    reference_fit`) where another declaration of it fits, naming it; warn
+    where none does (the gyro's clock or the reference's axes may be the
+    cause, which no key declares)."""
     dt = float(np.median(np.diff(clock)))
     fit = reference_fit(rates, reference, dt)
     if reference_fits(fit):
         return
-    unexplained, rotation = fit
     key = "sequence" if "sequence" in section else "order"
     fitting = first_fitting(rates, ((text, _on_gyro_times(path, clock, read[0], rotations))
                                     for text, rotations in _reference_candidates(
                                         path, section, read[1])), dt)
-    hint = f"; {fitting} would fit" if fitting else ""
-    given = section.get(key, "wxyz")
-    if unexplained > REFERENCE_UNEXPLAINED:
-        refuse(path, f"recording.reference.{key}", given, "makes a reference that turns "
-                f"unlike the gyro ({unexplained * 100:.0f} % of its turning unexplained by any "
-                f"fixed rotation of the gyro's rates; about 1 % for the gyro's own body){hint}")
-    turned = math.degrees(rotation.magnitude())
-    if hint:
-        refuse(path, f"recording.reference.{key}", given, "makes a reference that turns as "
-                f"the gyro only with its axes turned {turned:.0f}° from the gyro's{hint}")
-    warnings.warn(f"{path.name}: recording.reference: its axes are turned {turned:.1f}° from "
-                  "the gyro's (fitted to their turning); every score includes that turn",
-                  stacklevel=2)
+    if fitting:
+        refuse(path, f"recording.reference.{key}", section.get(key, "wxyz"), "makes a "
+               f"reference that {reference_problem(fit)}; {fitting} would fit")
+    warnings.warn(f"{path.name}: recording.reference: it {reference_problem(fit)}: "
+                  f"{REFERENCE_ADVICE}", stacklevel=2)
 
 
 def _reference_candidates(path: Path, section: dict, values: np.ndarray):

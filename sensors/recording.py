@@ -13,7 +13,6 @@ malformed file is one clear error, not a traceback deep in a filter.
 """
 from __future__ import annotations
 
-import math
 import warnings
 import zipfile
 from dataclasses import dataclass, replace
@@ -22,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
-from sensors.turning import REFERENCE_UNEXPLAINED, first_fitting, reference_fit, reference_fits
+from sensors.turning import (REFERENCE_ADVICE, first_fitting, reference_fit, reference_fits,
+                             reference_problem)
 
 #: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
 #: movement flags (N,) and the sampling rate; ``info`` is optional.
@@ -229,26 +229,17 @@ def checked_recording(data: dict, name: str, refuse) -> Recording:
 def _check_reference_turning(gyro: np.ndarray, reference: np.ndarray, rate: float,
                              refuse) -> None:
     """Refuse a reference that turns unlike the gyro (:func:`sensors.turning.
-    reference_fit`), saying whether it would fit scalar last or inverted;
-    warn where it fits only with its axes turned from the gyro's."""
+    reference_fit`) where it would fit scalar last or inverted; warn where
+    neither fits."""
     fit = reference_fit(gyro, reference, 1.0 / rate)
     if reference_fits(fit):
         return
     candidates = {"read as [x, y, z, w]": np.roll(reference, 1, axis=1),
                   "inverted (an attitude world → body)": reference * [1.0, -1.0, -1.0, -1.0]}
     fitting = first_fitting(gyro, candidates.items(), 1.0 / rate)
-    hint = f"; {fitting} it would fit" if fitting else ""
-    unexplained, rotation = fit
-    if unexplained > REFERENCE_UNEXPLAINED:
-        refuse(f"opt_quat turns unlike imu_gyr_radps ({unexplained * 100:.0f} % of its turning "
-               "unexplained by any fixed rotation of the rates; about 1 % for the gyro's own "
-               f"body){hint}")
-    turned = math.degrees(rotation.magnitude())
-    if hint:
-        refuse(f"opt_quat turns as imu_gyr_radps only with its axes turned {turned:.0f}° from "
-               f"the gyro's{hint}")
-    warnings.warn(f"opt_quat's axes are turned {turned:.1f}° from the gyro's (fitted to their "
-                  "turning); every score includes that turn", stacklevel=3)
+    if fitting:
+        refuse(f"opt_quat {reference_problem(fit)}; {fitting} it would fit")
+    warnings.warn(f"opt_quat {reference_problem(fit)}: {REFERENCE_ADVICE}", stacklevel=3)
 
 
 def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:

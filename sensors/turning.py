@@ -14,12 +14,14 @@ that says how the body turns, and every other channel must agree with it:
   ``n`` samples, :math:`\\bar\\omega` the gyro's mean rate in the body frame.
 
 Both are compared over blocks of :data:`TURNING_WINDOW_S` (the readings'
-noise, differentiated, would drown the turning). The vectors' agreement is a
-correlation, which a sensor's scale, its sign and a hard iron's offset barely
-move; the reference's is the share of its turning that one fixed rotation of
-the gyro's rates leaves unexplained (Wahba's problem, solved by scipy's
-``Rotation.align_vectors``), the rotation being the reference's axes against
-the IMU's.
+noise, differentiated, would drown the turning), or, for a sensor that
+reads slower, between its readings. The vectors' agreement is a
+correlation, which a sensor's scale and sign do not move, with a hard
+iron's constant offset fitted (the change is linear in it); the
+reference's is the share of its turning that one fixed rotation of the
+gyro's rates, less a constant bias, leaves unexplained (Wahba's problem,
+solved by scipy's ``Rotation.align_vectors``, and the bias, in turn), the
+rotation being the reference's axes against the IMU's.
 """
 from __future__ import annotations
 
@@ -53,6 +55,12 @@ REFERENCE_UNEXPLAINED = 0.1
 #: … and one whose axes are turned more than this from the gyro's, deg
 #: (0.2–1.6° on BROAD), is said to be: every score would include it.
 REFERENCE_TURNED_DEG = 5.0
+#: The reference's fit takes the gyro's bias as unknown, fitted with the
+#: rotation in turn this many times (a MEMS gyro's bias of degrees a second
+#: would otherwise be read as turning the reference does not do).
+BIAS_ITERATIONS = 5
+#: What a reference that is the gyro's own body leaves unexplained (BROAD).
+OWN_BODY_UNEXPLAINED = 0.01
 #: Evidence enough: this many blocks, turning this fast on average (rad/s).
 MIN_BLOCKS, MIN_RATE_RADPS = 20, 0.1
 
@@ -70,16 +78,34 @@ def _held(vectors: np.ndarray) -> np.ndarray:
     return vectors[last]
 
 
-def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float):
-    """The vectors' change per block, and the change the gyro predicts
-    (-ω × v at the blocks' mean); None where there are too few blocks."""
-    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
-    if len(rates) // steps < 3:
+def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = False):
+    """The vectors' change per block of :data:`TURNING_WINDOW_S` (for a
+    sensor that reads slower, between its readings), and the change the
+    gyro predicts, -ω × v at the block's mean; with ``offset``, -ω × (v - h)
+    for the constant ``h`` that fits best (a hard iron: linear in ``h``).
+    None where there are too few blocks."""
+    read = np.flatnonzero(np.any(vectors != 0.0, axis=1))
+    if len(read) > 1 and np.median(np.diff(read)) * dt > TURNING_WINDOW_S:
+        summed = np.concatenate([np.zeros((1, 3)), np.cumsum(rates, axis=0)])
+        steps = np.diff(read)[:, None]
+        rate = (summed[read[1:]] - summed[read[:-1]]) / steps
+        vector = vectors[read]
+        change = np.diff(vector, axis=0) / (steps * dt)
+        vector = (vector[1:] + vector[:-1]) / 2
+    else:
+        steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+        vector, rate = _block_means(_held(vectors), steps), _block_means(rates, steps)
+        change = np.diff(vector, axis=0) / (steps * dt)
+        rate, vector = (rate[1:] + rate[:-1]) / 2, (vector[1:] + vector[:-1]) / 2
+    if len(change) < 2:
         return None
-    vector = _block_means(vectors, steps)
-    rate = _block_means(rates, steps)
-    change = np.diff(vector, axis=0) / (steps * dt)
-    predicted = -np.cross((rate[1:] + rate[:-1]) / 2, (vector[1:] + vector[:-1]) / 2)
+    predicted = -np.cross(rate, vector)
+    if offset:              # change = -ω × v + ω × h = predicted + [ω×] h
+        cross = np.zeros((len(rate), 3, 3))
+        cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -rate[:, 2], rate[:, 1], -rate[:, 0]
+        cross -= cross.transpose(0, 2, 1)
+        h = np.linalg.lstsq(cross.reshape(-1, 3), (change - predicted).reshape(-1), rcond=None)[0]
+        predicted = predicted + cross @ h
     return change, predicted
 
 
@@ -105,39 +131,39 @@ def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> f
 
 
 def _orders() -> list[np.ndarray]:
-    """The right-handed reorderings of three axes (signed permutations of
-    determinant 1): a vector's correlation cannot tell ``v`` from ``-v``,
-    which turn alike, so of each such pair the proper one stands."""
+    """The reorderings of three axes up to a common sign (signed
+    permutations, one of each pair ``M``, ``-M``: a vector's turning cannot
+    tell ``v`` from ``-v``, which turn alike)."""
     orders = []
     for columns in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
+        for signs in itertools.product((1.0, -1.0), repeat=2):
             matrix = np.zeros((3, 3))
-            matrix[range(3), columns] = signs
-            if np.linalg.det(matrix) > 0:
-                orders.append(matrix)
+            matrix[range(3), columns] = (1.0, *signs)
+            orders.append(matrix)
     return orders
+
+
+ORDERS = _orders()
 
 
 def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float):
     """``(declared, better, its correlation)``: how the turning of
-    ``vectors`` (in the device's axes as declared) correlates with the
-    gyro's, and the reordering ``better`` (a matrix: device axes =
-    ``better`` @ declared) that fits far better, or None where the declared
-    axes fit, or where the turning is not seen clearly enough to say."""
-    turning = _turning(rates, _held(vectors), dt)
-    if turning is None:
+    ``vectors`` (in the device's axes as declared; rows of zeros where the
+    sensor did not read) correlates with the gyro's, and the reordering
+    ``better`` (a matrix: device axes = ``better`` @ declared, up to its
+    sign, which turning cannot tell) that fits far better; or None where
+    the declared axes fit, or where the turning is not seen clearly enough
+    to say. A constant offset (a hard iron) is fitted with each order."""
+    turning = _turning(rates, vectors, dt, offset=True)
+    if turning is None or not np.any(turning[1]):
         return None
-    change, predicted = turning
-    if np.sqrt(np.mean(np.sum(predicted * predicted, axis=1))) == 0.0:
-        return None
-    declared = _correlation(change, predicted)
+    declared = _correlation(*turning)
     if declared is None or declared >= AXES_DECLARED_BELOW:
         return None
-    held = _held(vectors)
-    fits = [(_correlation(*_turning(rates, held @ order.T, dt)) or -1.0, index)
-            for index, order in enumerate(_orders())]
+    fits = [(_correlation(*_turning(rates, vectors @ order.T, dt, offset=True)) or -1.0, index)
+            for index, order in enumerate(ORDERS)]
     best, index = max(fits)
-    return (declared, _orders()[index], best) if best >= AXES_OTHER_ABOVE else None
+    return (declared, ORDERS[index], best) if best >= AXES_OTHER_ABOVE else None
 
 
 def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
@@ -161,11 +187,17 @@ def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
     rate = _block_means(rates, steps)[:len(starts) - 1][paired]
     if np.sqrt(np.mean(np.sum(rate * rate, axis=1))) < MIN_RATE_RADPS:
         return None
+    if not np.any(turned):
+        return 1.0, None                    # a reference that never turns while the gyro does
+    bias = np.zeros(3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)    # a poorly defined fit: see below
-        rotation, _ = Rotation.align_vectors(turned, rate)
-    unexplained = float(np.sum((turned - rotation.apply(rate)) ** 2) / np.sum(turned * turned))
-    spread = np.linalg.svd(rate, compute_uv=False)
+        for _ in range(BIAS_ITERATIONS):    # turned ≈ C (rate - b): C, then b, in turn
+            rotation, _ = Rotation.align_vectors(turned, rate - bias)
+            bias = np.mean(rate - rotation.inv().apply(turned), axis=0)
+    unexplained = float(np.sum((turned - rotation.apply(rate - bias)) ** 2)
+                        / np.sum(turned * turned))
+    spread = np.linalg.svd(rate - bias, compute_uv=False)
     return unexplained, (rotation if spread[1] >= 0.2 * spread[0] else None)
 
 
@@ -175,6 +207,22 @@ def reference_fits(fit) -> bool:
     evidence against it)."""
     return fit is None or (fit[0] <= REFERENCE_UNEXPLAINED and (
         fit[1] is None or math.degrees(fit[1].magnitude()) <= REFERENCE_TURNED_DEG))
+
+
+#: What a warned-of reference's scores mean, and what to check.
+REFERENCE_ADVICE = ("every score includes it (check the reference's convention, its axes "
+                    "against the IMU's and its clock against the gyro's)")
+
+
+def reference_problem(fit) -> str:
+    """What a :func:`reference_fit` that does not fit says, in words."""
+    unexplained, rotation = fit
+    if unexplained > REFERENCE_UNEXPLAINED or rotation is None:
+        return (f"turns unlike the gyro ({unexplained * 100:.0f} % of its turning unexplained "
+                "by any fixed rotation of the gyro's rates, less a constant bias; about "
+                f"{OWN_BODY_UNEXPLAINED * 100:.0f} % for the gyro's own body)")
+    return (f"turns as the gyro only with its axes turned "
+            f"{math.degrees(rotation.magnitude()):.1f}° from the gyro's")
 
 
 def first_fitting(rates: np.ndarray, candidates, dt: float) -> str | None:

@@ -223,8 +223,8 @@ def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tm
     table.update({name: angles[:, i] for i, name in enumerate(("yaw", "pitch", "roll"))})
     _csv(tmp_path, table)
     # Real rates (noise, a bias) find the 20° within half a degree.
-    with pytest.warns(UserWarning, match=r"recording.reference: its axes are turned "
-                      r"(19\.[5-9]|20\.[0-4])° from the gyro's"):
+    with pytest.warns(UserWarning, match=r"recording.reference: it turns as the gyro only "
+                      r"with its axes turned (19\.[5-9]|20\.[0-4])° from the gyro's"):
         load_declared(_declare(tmp_path, "log.csv"))
     with pytest.raises(InvalidParameterError, match='reference.sequence = .zyx.: makes a '
                        'reference that turns unlike the gyro .*; sequence = "ZYX" would fit'):

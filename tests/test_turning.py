@@ -12,8 +12,9 @@ from scipy.spatial.transform import Rotation
 
 from dynamics.validation import InvalidParameterError
 from sensors.recording import load_recording
-from sensors.turning import (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE, REFERENCE_UNEXPLAINED,
-                             _orders, axes_fit, first_fitting, reference_fit, reference_fits)
+from sensors.turning import (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE, ORDERS,
+                             REFERENCE_UNEXPLAINED, axes_fit, first_fitting, reference_fit,
+                             reference_fits)
 
 RATE_HZ = 200.0
 DT = 1.0 / RATE_HZ
@@ -77,6 +78,38 @@ def test_the_wrong_order_and_the_inverse_are_refused_and_the_right_one_found(mot
     assert first_fitting(rates, candidates[:1], DT) is None
 
 
+@pytest.mark.parametrize("bias_degps", [1.0, 5.0])
+def test_a_gyro_bias_is_fitted_not_read_as_a_wrong_reference(bias_degps):
+    """A MEMS gyro's bias of degrees a second, on a slow motion (0.2 rad/s),
+    leaves the reference explained: the bias is fitted with the rotation."""
+    rates, attitude = _motion(scale=0.2)
+    biased = rates + np.radians(bias_degps) * np.array([0.6, 0.0, -0.8])
+    unexplained, rotation = reference_fit(biased, _quat(attitude), DT)
+    assert unexplained < 0.01 and np.degrees(rotation.magnitude()) < 0.5
+
+
+def test_a_reference_that_never_turns_is_all_unexplained(motion):
+    rates, _ = motion
+    fit = reference_fit(rates, _quat(Rotation.identity(len(rates))), DT)
+    assert fit == (1.0, None) and not reference_fits(fit)
+
+
+def test_a_reference_that_fits_nothing_is_warned_of_not_refused(tmp_path):
+    """Turning unlike the gyro with no other declaration fitting (here a
+    clock 1 s off the gyro's) is a warning naming what to check: no key
+    declares a clock's offset."""
+    rates, attitude = _motion(scale=3.0)
+    late = int(1.0 * RATE_HZ)
+    quat = _quat(attitude)
+    shifted = np.concatenate([np.repeat(quat[:1], late, axis=0), quat[:-late]])
+    path = tmp_path / "trial.npz"
+    np.savez(path, imu_gyr_radps=rates, opt_quat=shifted,
+             movement=np.ones(len(rates), dtype=bool), sampling_rate_hz=np.array(RATE_HZ))
+    with pytest.warns(UserWarning, match=r"opt_quat turns unlike the gyro \(\d+ % .*check the "
+                      r"reference's convention, its axes against the IMU's and its clock"):
+        load_recording(path)
+
+
 def test_too_little_turning_or_reference_is_no_evidence(motion):
     rates, attitude = motion
     still = np.zeros_like(rates)
@@ -101,19 +134,27 @@ def _field(attitude, hard_iron_uT=np.zeros(3)):
     return attitude.inv().apply(FIELD_ENU_UT) + hard_iron_uT
 
 
-@pytest.mark.parametrize("hard_iron", [np.zeros(3), np.array([30.0, -20.0, 10.0])])
-def test_right_axes_pass_even_with_a_hard_iron(motion, hard_iron):
+@pytest.mark.parametrize("hard_iron_uT", [0.0, 46.0, 150.0])
+def test_a_hard_iron_neither_hides_wrong_axes_nor_flags_right_ones(motion, hard_iron_uT):
+    """A constant offset is fitted with each order: the right axes pass and
+    a swap of two is found, however large the hard iron (an uncalibrated
+    phone's reaches tens of µT, beyond the field's 47)."""
     rates, attitude = motion
+    hard_iron = hard_iron_uT * np.array([0.6, -0.64, 0.48])
     assert axes_fit(rates, _field(attitude, hard_iron), DT) is None
+    fit = axes_fit(rates, _field(attitude, hard_iron)[:, [1, 0, 2]], DT)
+    assert fit is not None and fit[2] > AXES_OTHER_ABOVE
+    assert np.allclose(np.abs(fit[1]), [[0, 1, 0], [1, 0, 0], [0, 0, 1]])
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 23), st.booleans())
-def test_wrong_axes_are_found_and_undone(motion, index, left_handed):
-    """Readings in any other order of the axes (right- or left-handed): the
-    order proposed undoes it, up to the sign a vector's turning cannot show."""
-    order = _orders()[index] * (-1.0 if left_handed else 1.0)
-    if np.allclose(np.abs(order), np.eye(3)) and np.allclose(np.diag(order), order[0, 0]):
+@given(st.integers(0, len(ORDERS) - 1), st.booleans())
+def test_wrong_axes_are_found_and_undone(motion, index, negated):
+    """Readings in any other order of the axes, right- or left-handed: the
+    order proposed undoes it, up to the sign a vector's turning cannot
+    show."""
+    order = ORDERS[index] * (-1.0 if negated else 1.0)
+    if np.allclose(np.abs(np.diag(order)), 1.0) and np.allclose(np.diag(order), order[0, 0]):
         return                                   # ±identity: the right axes
     rates, attitude = motion
     fit = axes_fit(rates, _field(attitude) @ order.T, DT)
@@ -122,6 +163,17 @@ def test_wrong_axes_are_found_and_undone(motion, index, left_handed):
     assert correlation > AXES_OTHER_ABOVE and declared < AXES_DECLARED_BELOW
     undone = better @ order
     assert np.allclose(undone, np.eye(3)) or np.allclose(undone, -np.eye(3))
+
+
+def test_a_magnetometer_reading_once_a_second_is_judged():
+    """Blocks span a reading and a half at least: a 1 Hz magnetometer
+    beside a 200 Hz gyro, its x and y swapped, is found (a minute of
+    turning: forty blocks)."""
+    rates, attitude = _motion(seconds=60.0)
+    field = np.zeros((len(rates), 3))
+    field[::int(RATE_HZ)] = _field(attitude)[::int(RATE_HZ)][:, [1, 0, 2]]
+    fit = axes_fit(rates, field, DT)
+    assert fit is not None and np.allclose(np.abs(fit[1]), [[0, 1, 0], [1, 0, 0], [0, 0, 1]])
 
 
 def test_readings_slower_than_the_gyro_are_held_between(motion):
@@ -140,12 +192,13 @@ def test_an_npz_reference_scalar_last_is_refused_naming_the_fix(tmp_path):
                   sampling_rate_hz=np.array(RATE_HZ))
     path = tmp_path / "trial.npz"
     np.savez(path, opt_quat=np.roll(quat, -1, axis=1), **arrays)
-    with pytest.raises(InvalidParameterError, match=r"opt_quat turns unlike imu_gyr_radps "
+    with pytest.raises(InvalidParameterError, match=r"opt_quat turns unlike the gyro "
                        r"\(\d+ % .*read as \[x, y, z, w\] it would fit"):
         load_recording(path)
     np.savez(path, opt_quat=_quat(attitude * Rotation.from_euler("z", 20, degrees=True)),
              **arrays)
-    with pytest.warns(UserWarning, match="opt_quat's axes are turned 20.0° from the gyro's"):
+    with pytest.warns(UserWarning, match="opt_quat turns as the gyro only with its axes "
+                      "turned 20.0° from the gyro's"):
         load_recording(path)
     np.savez(path, opt_quat=quat, **arrays)
     with warnings.catch_warnings():

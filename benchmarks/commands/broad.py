@@ -150,7 +150,6 @@ def _write(args, result, tunings, dataset, train) -> None:
     from benchmarks.broad.benchmark import with_scored_against
     drawn = {name: figure_bytes(args.out / name, figure(result)) for name, figure in
              (("broad.png", figures.groups_figure), ("broad_trial.png", figures.trial_figure))}
-    from benchmarks.broad.benchmark import with_scored_against
     write_text(args.out / "broad_trials.csv",
                with_scored_against(result.trials, result).to_csv(index=False))
     write_text(args.out / "broad_groups.csv",

@@ -22,7 +22,7 @@ from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
 from sensors.declared import GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS, declared_recordings
 from sensors.recording import reading_interval_s
-from sensors.turning import reference_fit, turning_scale
+from sensors.turning import reference_fit, reference_fits, turning_scale
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
@@ -271,8 +271,7 @@ def loaded_guess(declaration: dict, table: dict, path, notes: list):
             if err.name.endswith("recording.reference.order"):
                 continue
             break
-        told = parts[0].reference_quat
-        if order and reference_fit(parts[0].gyro_radps, told, 1.0 / parts[0].rate_hz):
+        if order and _told_by_turning(parts):
             notes[:] = [note for note in notes if not note.startswith(ONE_ARRAY)]
             notes.append(f"{ONE_ARRAY}is told by its turning against the gyro's: {order}")
         return parts
@@ -280,6 +279,14 @@ def loaded_guess(declaration: dict, table: dict, path, notes: list):
         reference["order"] = orders[0]
     notes.append(f"as suggested, it does not load: {refused}")
     return None
+
+
+def _told_by_turning(parts) -> bool:
+    """Whether every part's reference turns as its gyro does, and one at
+    least turns enough to tell (:func:`sensors.turning.reference_fit`)."""
+    fits = [reference_fit(part.gyro_radps, part.reference_quat, 1.0 / part.rate_hz)
+            for part in parts]
+    return any(fit is not None for fit in fits) and all(map(reference_fits, fits))
 
 
 def declaration_toml(declaration: dict, source: str) -> str:

@@ -14,8 +14,9 @@ parallel loop's were.
 """
 from __future__ import annotations
 
+import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -24,7 +25,9 @@ _POOL_LOCK = threading.Lock()
 
 
 def _pool() -> ThreadPoolExecutor:
-    """The threads that run every share but the caller's, made once."""
+    """The threads that run every share but the caller's, made once per
+    process (a forked child, which inherits the pool but not its threads,
+    makes its own)."""
     global _POOL
     with _POOL_LOCK:
         if _POOL is None:
@@ -34,15 +37,28 @@ def _pool() -> ThreadPoolExecutor:
         return _POOL
 
 
-def on_every_core(advance_runs, n_runs: int, *args) -> None:
+def _forget_pool() -> None:
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
+def on_every_core(advance_runs, n_runs: int, *args, threads: int | None = None) -> None:
     """``advance_runs(first, last, *args)`` over runs ``0 … n_runs - 1``,
-    one contiguous share per thread."""
+    one contiguous share per thread (``threads``, default numba's count).
+    Every share has finished when it returns, whatever raised (the first
+    error is raised then)."""
     from numba import get_num_threads
-    threads = max(1, min(get_num_threads(), n_runs))
+    threads = max(1, min(get_num_threads() if threads is None else threads, n_runs))
     bounds = np.linspace(0, n_runs, threads + 1).round().astype(np.int64)
     shares = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
     futures = [_pool().submit(advance_runs, first, last, *args) for first, last in shares[:-1]]
-    advance_runs(*shares[-1], *args)
+    try:
+        advance_runs(*shares[-1], *args)
+    finally:
+        wait(futures)
     for future in futures:
         future.result()
 
