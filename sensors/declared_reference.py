@@ -12,7 +12,7 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from sensors.recording_keys import choice, refuse
-from sensors.turning import (REFERENCE_ADVICE, first_fitting, reference_fit, reference_fits,
+from sensors.turning import (first_fitting, reference_advice, reference_fit, reference_fits,
                              reference_problem)
 
 #: The reference is interpolated between readings at most this many of its
@@ -80,7 +80,7 @@ def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tupl
         refuse(path, f"recording.reference.{key}", section.get(key, "wxyz"), "makes a "
                f"reference that {reference_problem(fit)}; {fitting} would fit")
     warnings.warn(f"{path.name}: recording.reference: it {reference_problem(fit)}: "
-                  f"{REFERENCE_ADVICE}", stacklevel=2)
+                  f"{reference_advice(rates, reference, dt)}", stacklevel=2)
 
 
 def _reference_candidates(path: Path, section: dict, values: np.ndarray):

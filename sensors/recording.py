@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
-from sensors.turning import (REFERENCE_ADVICE, first_fitting, reference_fit, reference_fits,
+from sensors.turning import (first_fitting, reference_advice, reference_fit, reference_fits,
                              reference_problem)
 
 #: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
@@ -239,7 +239,8 @@ def _check_reference_turning(gyro: np.ndarray, reference: np.ndarray, rate: floa
     fitting = first_fitting(gyro, candidates.items(), 1.0 / rate)
     if fitting:
         refuse(f"opt_quat {reference_problem(fit)}; {fitting} it would fit")
-    warnings.warn(f"opt_quat {reference_problem(fit)}: {REFERENCE_ADVICE}", stacklevel=3)
+    warnings.warn(f"opt_quat {reference_problem(fit)}: "
+                  f"{reference_advice(gyro, reference, 1.0 / rate)}", stacklevel=3)
 
 
 def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:

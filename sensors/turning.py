@@ -212,6 +212,37 @@ def reference_fits(fit) -> bool:
 #: What a warned-of reference's scores mean, and what to check.
 REFERENCE_ADVICE = ("every score includes it (check the reference's convention, its axes "
                     "against the IMU's and its clock against the gyro's)")
+#: The offsets of its clock against the gyro's a warned-of reference is
+#: tried at, s: within half a second either way, every 5 ms.
+MAX_CLOCK_OFFSET_S, CLOCK_OFFSET_STEP_S = 0.5, 0.005
+
+
+def clock_offset(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
+    """``(offset_s, unexplained)``: the shift of the reference's clock
+    against the gyro's (positive: its attitudes come that late) whose
+    :func:`reference_fit` leaves the least unexplained; None where none fits."""
+    step = max(1, int(round(CLOCK_OFFSET_STEP_S / dt)))
+    most = int(round(MAX_CLOCK_OFFSET_S / dt))
+    best = None
+    for shift in range(-most, most + 1, step):
+        fit = (reference_fit(rates[:len(rates) - shift], reference_quat[shift:], dt)
+               if shift >= 0 else reference_fit(rates[-shift:], reference_quat[:shift], dt))
+        if fit is not None and (best is None or fit[0] < best[1]):
+            best = (shift * dt, fit[0])
+    return best
+
+
+def reference_advice(rates: np.ndarray, reference_quat: np.ndarray, dt: float) -> str:
+    """What to check of a reference that does not fit: its clock's offset
+    where one explains its turning (:func:`clock_offset`), else
+    :data:`REFERENCE_ADVICE`."""
+    found = clock_offset(rates, reference_quat, dt)
+    if found is None or found[1] > REFERENCE_UNEXPLAINED or abs(found[0]) < dt / 2:
+        return REFERENCE_ADVICE
+    offset_s, unexplained = found
+    return (f"its clock {abs(offset_s) * 1e3:.0f} ms {'behind' if offset_s > 0 else 'ahead of'} "
+            f"the gyro's would explain it ({unexplained * 100:.1f} % unexplained then): every "
+            "score includes that offset")
 
 
 def reference_problem(fit) -> str:

@@ -94,20 +94,34 @@ def test_a_reference_that_never_turns_is_all_unexplained(motion):
     assert fit == (1.0, None) and not reference_fits(fit)
 
 
-def test_a_reference_that_fits_nothing_is_warned_of_not_refused(tmp_path):
-    """Turning unlike the gyro with no other declaration fitting (here a
-    clock 1 s off the gyro's) is a warning naming what to check: no key
-    declares a clock's offset."""
+def _late_reference_npz(folder, seconds_late: float):
+    """A fast motion's archive whose reference attitudes come late."""
     rates, attitude = _motion(scale=3.0)
-    late = int(1.0 * RATE_HZ)
+    late = int(seconds_late * RATE_HZ)
     quat = _quat(attitude)
     shifted = np.concatenate([np.repeat(quat[:1], late, axis=0), quat[:-late]])
-    path = tmp_path / "trial.npz"
+    path = folder / "trial.npz"
     np.savez(path, imu_gyr_radps=rates, opt_quat=shifted,
              movement=np.ones(len(rates), dtype=bool), sampling_rate_hz=np.array(RATE_HZ))
+    return path
+
+
+def test_a_reference_that_fits_nothing_is_warned_of_not_refused(tmp_path):
+    """Turning unlike the gyro with no other declaration fitting (here a
+    clock 1 s off the gyro's, beyond the offsets tried) is a warning naming
+    what to check: no key declares a clock's offset."""
     with pytest.warns(UserWarning, match=r"opt_quat turns unlike the gyro \(\d+ % .*check the "
                       r"reference's convention, its axes against the IMU's and its clock"):
-        load_recording(path)
+        load_recording(_late_reference_npz(tmp_path, 1.0))
+
+
+def test_a_reference_clock_behind_the_gyros_is_found(tmp_path):
+    """A reference whose attitudes come 0.45 s late turns unlike the gyro
+    (14 % unexplained); shifted by its offset it fits, and the note says
+    by how much."""
+    with pytest.warns(UserWarning, match=r"opt_quat turns unlike the gyro .*: its clock 450 ms "
+                      r"behind the gyro's would explain it \(0\.0 % unexplained then\)"):
+        load_recording(_late_reference_npz(tmp_path, 0.45))
 
 
 def test_too_little_turning_or_reference_is_no_evidence(motion):
