@@ -80,7 +80,7 @@ def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tupl
         refuse(path, f"recording.reference.{key}", section.get(key, "wxyz"), "makes a "
                f"reference that {reference_problem(fit)}; {fitting} would fit")
     warnings.warn(f"{path.name}: recording.reference: it {reference_problem(fit)}: "
-                  f"{reference_advice(rates, reference, dt)}", stacklevel=2)
+                  f"{reference_advice(fit, rates, reference, dt)}", stacklevel=2)
 
 
 def _reference_candidates(path: Path, section: dict, values: np.ndarray):

@@ -240,7 +240,7 @@ def _check_reference_turning(gyro: np.ndarray, reference: np.ndarray, rate: floa
     if fitting:
         refuse(f"opt_quat {reference_problem(fit)}; {fitting} it would fit")
     warnings.warn(f"opt_quat {reference_problem(fit)}: "
-                  f"{reference_advice(gyro, reference, 1.0 / rate)}", stacklevel=3)
+                  f"{reference_advice(fit, gyro, reference, 1.0 / rate)}", stacklevel=3)
 
 
 def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:

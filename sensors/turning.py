@@ -101,9 +101,7 @@ def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = F
         return None
     predicted = -np.cross(rate, vector)
     if offset:              # change = -ω × v + ω × h = predicted + [ω×] h
-        cross = np.zeros((len(rate), 3, 3))
-        cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -rate[:, 2], rate[:, 1], -rate[:, 0]
-        cross -= cross.transpose(0, 2, 1)
+        cross = np.cross(rate[:, None, :], np.eye(3)).transpose(0, 2, 1)   # [ω×]: ω × e_j
         h = np.linalg.lstsq(cross.reshape(-1, 3), (change - predicted).reshape(-1), rcond=None)[0]
         predicted = predicted + cross @ h
     return change, predicted
@@ -232,10 +230,13 @@ def clock_offset(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
     return best
 
 
-def reference_advice(rates: np.ndarray, reference_quat: np.ndarray, dt: float) -> str:
-    """What to check of a reference that does not fit: its clock's offset
-    where one explains its turning (:func:`clock_offset`), else
-    :data:`REFERENCE_ADVICE`."""
+def reference_advice(fit, rates: np.ndarray, reference_quat: np.ndarray, dt: float) -> str:
+    """What to check of a reference whose ``fit`` (:func:`reference_fit`)
+    does not fit: where its turning is left unexplained, its clock's offset
+    if one explains it (:func:`clock_offset`), else :data:`REFERENCE_ADVICE`
+    (which alone a reference that fits with its axes turned is told)."""
+    if fit[0] <= REFERENCE_UNEXPLAINED:
+        return REFERENCE_ADVICE
     found = clock_offset(rates, reference_quat, dt)
     if found is None or found[1] > REFERENCE_UNEXPLAINED or abs(found[0]) < dt / 2:
         return REFERENCE_ADVICE

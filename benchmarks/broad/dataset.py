@@ -400,6 +400,14 @@ def _column(array: np.ndarray) -> np.ndarray:
 _NOTED = set()
 
 
+def _note_once(path: Path, note: str) -> None:
+    """Warn ``note`` of the trial at ``path``, once: a trial loaded again is
+    not noted again."""
+    if (path, note) not in _NOTED:
+        _NOTED.add((path, note))
+        warnings.warn(note, stacklevel=3)
+
+
 #: A gyro or accelerometer with at least this many readings at its rail is
 #: said to clip (BROAD's magnetometer, held between its own slower
 #: samples, sits three to nine readings at its extreme; no gyro or
@@ -418,9 +426,8 @@ def _note_clipping(recording: Recording, path: Path) -> None:
         count, extreme = clipped(values) if values is not None else (0, 0.0)
         note = (f"trial {recording.name}: {count} {name} readings at ±{extreme:.6g} {unit}, its "
                 f"rail (clipped): {CLIPPING_HARM[name]}")
-        if count >= CLIPPED_NOTE_READINGS and (path, note) not in _NOTED:
-            _NOTED.add((path, note))
-            warnings.warn(note, stacklevel=2)
+        if count >= CLIPPED_NOTE_READINGS:
+            _note_once(path, note)
 
 
 def _note_dropouts(recording: Recording, path: Path) -> None:
@@ -436,10 +443,7 @@ def _note_dropouts(recording: Recording, path: Path) -> None:
         if start:
             parts.append(f"the start attitude is taken at sample {start}, the first whose two "
                          "readings are non-zero and not parallel")
-        note = f"trial {recording.name}: {'; '.join(parts)}"
-        if (path, note) not in _NOTED:        # a trial loaded again is not noted again
-            _NOTED.add((path, note))
-            warnings.warn(note, stacklevel=2)
+        _note_once(path, f"trial {recording.name}: {'; '.join(parts)}")
 
 
 def _read_mat(path: Path, refuse) -> dict:
