@@ -37,6 +37,14 @@ def first_faces(currents, normals, threshold, opposite, span_tolerance):
     # One set of working arrays for all the sets (an allocation per set was
     # half this function's time).
     order, first, second = np.empty(faces, dtype=np.int64), np.empty(3), np.empty(3)
+    # Each face's opposite faces, listed once (a cube's face has one: the
+    # test below then reads one face, not all six).
+    opposites, n_opposite = np.empty((faces, faces), dtype=np.int64), np.zeros(faces, np.int64)
+    for face in range(faces):
+        for other in range(faces):
+            if opposite[face, other]:
+                opposites[face, n_opposite[face]] = other
+                n_opposite[face] += 1
     for row in range(sets):
         c = currents[row]
         _brightest_first(c, order)
@@ -46,8 +54,8 @@ def first_faces(currents, normals, threshold, opposite, span_tolerance):
         for index in range(faces):
             face = order[index]
             take = not (count >= 3 and c[face] <= threshold)
-            for other in range(faces):
-                if chosen[row, other] and opposite[face, other]:
+            for index_opposite in range(n_opposite[face]):
+                if chosen[row, opposites[face, index_opposite]]:
                     take = False
             n = normals[face]
             # np.cross(first, n), and the norm and dot product numpy's reductions take.

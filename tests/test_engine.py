@@ -120,20 +120,39 @@ def test_the_shares_cover_every_run_once(n_runs, threads):
 
 
 def test_every_share_finishes_before_an_error_is_raised():
-    """A share that raises: the others still finish before the error
-    reaches the caller (no thread left writing into the state)."""
-    from benchmarks.engine.kernels.cores import on_every_core
-    done = []
+    """A share that raises: every share already taken still finishes before
+    the error reaches the caller (no thread left writing into the state),
+    and no share is taken after it."""
+    import threading
+    import time
+    from benchmarks.engine.kernels.cores import on_every_core, share_bounds
+    started, done, lock = [], [], threading.Lock()
 
     def advance_runs(first, last, out):
+        with lock:
+            started.append(first)
         if first == 0:
             raise ValueError("share 0")
-        import time
         time.sleep(0.05)
-        done.append((first, last))
+        with lock:
+            done.append(first)
     with pytest.raises(ValueError, match="share 0"):
-        on_every_core(advance_runs, 8, None, threads=4)
-    assert sorted(done) == [(2, 4), (4, 6), (6, 8)]
+        on_every_core(advance_runs, 64, None, threads=2)
+    assert 0 in started and sorted(done) == sorted(set(started) - {0})
+    # Two threads take the first two shares at once; after the error, the
+    # other thread finishes its share and takes no more.
+    assert len(started) <= 2 < len(share_bounds(64, 2)) - 1
+
+
+@pytest.mark.parametrize("n_runs, threads, shares", [(1, 2, 1), (20, 2, 2), (64, 2, 4),
+                                                      (1024, 2, 16), (1024, 1, 8)])
+def test_shares_are_several_a_thread_where_the_runs_allow(n_runs, threads, shares):
+    """Several shares a thread (SHARES_PER_THREAD), each of MIN_SHARE_RUNS
+    runs at least, one a thread at least (fewer threads than runs)."""
+    from benchmarks.engine.kernels.cores import share_bounds
+    bounds = share_bounds(n_runs, min(threads, n_runs))
+    assert len(bounds) - 1 == shares and bounds[0] == 0 and bounds[-1] == n_runs
+    assert np.all(np.diff(bounds) > 0)
 
 
 def test_only_requested_estimators_run():

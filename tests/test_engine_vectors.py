@@ -164,3 +164,23 @@ def test_block_by_block_vector_readings_are_the_whole_runs(cuts, seed):
             block = sensor.measure(q_true[start:stop], part, rng, first_step=start)
             for field in ("body", "reference", "available", "variance"):
                 assert np.array_equal(getattr(block, field), getattr(full, field)[start:stop])
+
+
+@settings(max_examples=10, deadline=None)
+@given(n_runs=st.integers(1, 7), parts=st.integers(1, 4), seed=st.integers(0, 2**31))
+def test_vector_readings_made_in_parts_are_those_made_at_once(n_runs, parts, seed):
+    """The engine makes a block's vector readings in parts of the runs, in
+    threads (vector_block with a pool): every array is the one made for all
+    the runs at once, bit for bit, however the runs are parted."""
+    from concurrent.futures import ThreadPoolExecutor
+    from benchmarks.engine.vectors import vector_block, vector_streams
+    scenario = CUBESAT.replace(tstop=120.0)
+    q_true = simulate_truth(scenario).q_true
+    seeds = seed + np.arange(n_runs)
+    at_once = vector_block(vector_streams(scenario, seeds), n_runs, 0, q_true)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        in_parts = vector_block(vector_streams(scenario, seeds), n_runs, 0, q_true, pool,
+                                parts).result()
+    assert set(in_parts) == set(at_once)
+    for name, values in at_once.items():
+        assert np.array_equal(in_parts[name], values), name

@@ -344,18 +344,19 @@ def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict,
     core, then each kernel advances every run through it (each makes the
     sensors' readings from the noise itself: measured, that costs no more
     than sharing them). The vector sensors' readings of the next block are
-    made in a thread of their own while the kernels run this one: their
-    streams are their own, and each still draws block after block, so the
-    numbers are those made in turn (a CubeSat campaign's host work, most of
-    its time, then runs beside its kernels). Returns each kernel's sensor
-    state."""
+    made in threads of their own (a part of the runs each, one a core) while
+    the kernels run this one: their streams are their own, and each still
+    draws block after block, so the numbers are those made in turn (a
+    CubeSat campaign's host work, most of its time, then runs beside its
+    kernels, and the kernels' shares even out the cores). Returns each
+    kernel's sensor state."""
     readings = {name: sensors.state() for name in kernels}
     blocks = zip(range(0, scenario.n_steps, sensors.block_steps),
                  truth_and_rate_blocks(scenario, sensors.block_steps, cache_steps))
-    with ThreadPoolExecutor(max_workers=1) as ahead:
+    with ThreadPoolExecutor(max_workers=sensors.threads) as ahead:
         upcoming = _vectors_ahead(ahead, sensors, next(blocks, None))
         while upcoming is not None:
-            (k0, (truth, rates)), vectors = upcoming[0], upcoming[1].result()
+            (k0, (truth, rates)), vectors = upcoming[0], _shared(sensors, upcoming[1].result())
             upcoming = _vectors_ahead(ahead, sensors, next(blocks, None))
             block = _block(sensors, scenario, k0, truth, rates, vectors)
             for row, name in enumerate(kernels):
@@ -367,17 +368,18 @@ def _advance(scenario: Scenario, sensors: _Sensors, kernels: dict, states: dict,
 
 def _vectors_ahead(pool, sensors: _Sensors, item):
     """``(item, the future of its vector readings)`` for the block ``item``
-    (``(k0, (truth, rates))``), made in ``pool``; None past the last block."""
+    (``(k0, (truth, rates))``): each distinct stream's readings made once, in
+    ``pool``'s threads (:func:`vector_block`); None past the last block."""
     if item is None:
         return None
     k0, (truth, _) = item
-    return item, pool.submit(_vector_readings, sensors, k0, np.ascontiguousarray(truth.q_true))
+    return item, vector_block(sensors.vectors, len(sensors.first), k0,
+                              np.ascontiguousarray(truth.q_true), pool, sensors.threads)
 
 
-def _vector_readings(sensors: _Sensors, k0: int, q_true: np.ndarray) -> dict:
+def _shared(sensors: _Sensors, arrays: dict) -> dict:
     """:func:`vector_block`'s arrays of every run: each distinct stream's
-    readings made once, and copied to the runs that share it."""
-    arrays = vector_block(sensors.vectors, len(sensors.first), k0, q_true)
+    copied to the runs that share it."""
     if len(sensors.first) < len(sensors.sources):
         for name in ("vector_body", "vector_variance", "vector_available"):
             arrays[name] = np.take(arrays[name], sensors.sources, axis=0)

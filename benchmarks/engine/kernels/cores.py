@@ -1,7 +1,13 @@
-"""Every run of a batch on every core: the runs split into one contiguous
-share per thread, each share advanced by a kernel's compiled loop
-(``advance_runs(first, last, …)``, serial, releasing the GIL) in a thread
-of its own, the last share in the caller's.
+"""Every run of a batch on every core: the runs split into contiguous
+shares, each advanced by a kernel's compiled loop (``advance_runs(first,
+last, …)``, serial, releasing the GIL), taken in turn by every thread (the
+caller's too) until none is left.
+
+Why several shares a thread, taken as each thread comes free: a core that
+is also doing other work (a CubeSat campaign's vector readings are made in
+a thread beside the kernels; another process) would otherwise hold every
+other thread waiting for its one share at the end of each block (measured:
+1024 CubeSat MEKF runs spent a third of their time so).
 
 Why threads and not numba's parallel loop (``prange``): the arithmetic of
 each run is the same, in the same order, so every number is the same to
@@ -14,11 +20,18 @@ parallel loop's were.
 """
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
+
+#: Shares a thread, at most (fewer where a share would have under
+#: :data:`MIN_SHARE_RUNS` runs): enough for the threads to even out a core
+#: that is busy elsewhere, few enough that a share's call costs nothing.
+SHARES_PER_THREAD = 8
+MIN_SHARE_RUNS = 16
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
@@ -46,27 +59,45 @@ os.register_at_fork(after_in_child=_forget_pool)
 
 
 def on_every_core(advance_runs, n_runs: int, *args, threads: int | None = None) -> None:
-    """``advance_runs(first, last, *args)`` over runs ``0 … n_runs - 1``,
-    one contiguous share per thread (``threads``, default numba's count).
-    Every share has finished when it returns, whatever raised (the first
-    error is raised then)."""
+    """``advance_runs(first, last, *args)`` over runs ``0 … n_runs - 1``, in
+    contiguous shares taken in turn by each thread (``threads``, default
+    numba's count). Every share taken has finished when it returns; after
+    an error no further share is taken, and the first error is raised."""
     from numba import get_num_threads
     threads = max(1, min(get_num_threads() if threads is None else threads, n_runs))
-    bounds = np.linspace(0, n_runs, threads + 1).round().astype(np.int64)
-    shares = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
-    futures = [_pool().submit(advance_runs, first, last, *args) for first, last in shares[:-1]]
+    bounds = share_bounds(n_runs, threads)
+    taken, failed = itertools.count(), threading.Event()
+
+    def take_shares():
+        for share in iter(taken.__next__, None):     # next() of a count is atomic
+            if share >= len(bounds) - 1 or failed.is_set():
+                return
+            try:
+                advance_runs(bounds[share], bounds[share + 1], *args)
+            except BaseException:
+                failed.set()
+                raise
+
+    futures = [_pool().submit(take_shares) for _ in range(threads - 1)]
     try:
-        advance_runs(*shares[-1], *args)
+        take_shares()
     finally:
         wait(futures)
     for future in futures:
         future.result()
 
 
+def share_bounds(n_runs: int, threads: int) -> list:
+    """The shares' bounds: ``[0, …, n_runs]``, :data:`SHARES_PER_THREAD` a
+    thread of at least :data:`MIN_SHARE_RUNS` runs (one a thread at least)."""
+    shares = max(threads, min(threads * SHARES_PER_THREAD, n_runs // MIN_SHARE_RUNS))
+    return np.linspace(0, n_runs, shares + 1).round().astype(np.int64).tolist()
+
+
 def on_every_core_of(advance_runs):
     """A kernel's ``advance(block, sensors, state, record, row)``: every run
     of the batch (the record's, :class:`~benchmarks.engine.kernels.common.Record`)
-    through the block by ``advance_runs``, one share per core."""
+    through the block by ``advance_runs``, on every core."""
     def advance(block, sensors, state, record, row):
         on_every_core(advance_runs, record.diverged.shape[1], block, sensors, state, record,
                       row)
