@@ -439,3 +439,75 @@ def test_a_folder_given_as_dot_is_named_in_the_attribution(tmp_path, monkeypatch
     (tmp_path / "README.md").write_text("# Phone walks, 2026\n")
     assert f"the recordings in {tmp_path.name} (README.md: Phone walks, 2026)" in \
         dataset_attribution(Path("."))
+
+
+def test_the_trials_table_puts_a_filters_claimed_errors_beside_its_rmse(tmp_path):
+    """broad_trials.csv: heading_sd_deg and inclination_sd_deg for a filter
+    that keeps a covariance (the MEKF, its smoother), NaN for one that keeps
+    none (Madgwick's), right after the three RMSEs."""
+    import pandas as pd
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(SHIPPED), "--trials", "02",
+                 "--estimators", "mekf,mekf-smoother,madgwick", "--out", str(out),
+                 "--quiet"]) == 0
+    trials = pd.read_csv(out / "broad_trials.csv")
+    columns = list(trials.columns)
+    assert columns.index("heading_sd_deg") == columns.index("inclination_rmse_deg") + 1
+    assert columns.index("inclination_sd_deg") == columns.index("heading_sd_deg") + 1
+    trials = trials.set_index("estimator")
+    for name in ("mekf", "mekf-smoother"):
+        for column in ("heading_sd_deg", "inclination_sd_deg"):
+            assert 0.0 < trials.loc[name, column] < 5.0
+    # The smoother knows more than each of its passes: it claims less.
+    assert trials.loc["mekf-smoother", "heading_sd_deg"] < trials.loc["mekf", "heading_sd_deg"]
+    assert trials.loc[["madgwick"], ["heading_sd_deg", "inclination_sd_deg"]].isna().all(None)
+
+
+def _claimed_against_drawn(covariance, rng, n=20000):
+    """Attitudes q = q̂ ⊗ δq(δθ), δθ ~ N(0, C) (the filters' body-frame
+    error), scored by the authors' metric against q̂: the sums of squared
+    heading and tilt errors over the n draws, and what ``claimed_deg`` says
+    of q̂ with C."""
+    from scipy.spatial.transform import Rotation
+    from benchmarks.broad.metric import claimed_deg
+    estimate = Rotation.random(random_state=rng)
+    draws = rng.multivariate_normal(np.zeros(3), covariance, size=n)
+    truth = (estimate * Rotation.from_rotvec(draws)).as_quat()[:, [3, 0, 1, 2]]
+    q_hat = np.tile(estimate.as_quat()[[3, 0, 1, 2]], (n, 1))
+    errors = errors_deg(q_hat, truth)
+    claimed = claimed_deg(q_hat, np.tile(covariance, (n, 1, 1)), truth, np.ones(n, bool))
+    up = estimate.inv().apply([0.0, 0.0, 1.0])
+    return errors, claimed, up
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_claimed_heading_and_tilt_are_what_the_covariance_gives(seed):
+    """claimed_deg against draws from the covariance it reads: the heading
+    error's squares sum, over n draws, to n σ_h² within 5 standard
+    deviations of a χ²(n) (√(2n) σ_h²); the tilt's, a weighted sum of two
+    χ²(1), to its mean n tr(C_t) within 5 of its standard deviation
+    √(2n tr(C_t²)). A covariance a quarter of the one drawn from (σ halved)
+    is shown to fail the same bound."""
+    rng = np.random.default_rng(seed)
+    root = rng.normal(size=(3, 3)) * math.radians(1.0)
+    covariance = root @ root.T + np.eye(3) * math.radians(0.1) ** 2
+    errors, claimed, up = _claimed_against_drawn(covariance, rng)
+    n = len(errors["heading"])
+    heading_var = math.radians(claimed["heading_sd_deg"]) ** 2
+    heading_sum = np.sum(np.radians(errors["heading"]) ** 2)
+    assert abs(heading_sum - n * heading_var) < 5 * math.sqrt(2 * n) * heading_var
+    projector = np.eye(3) - np.outer(up, up)
+    tilt = projector @ covariance @ projector
+    assert math.radians(claimed["inclination_sd_deg"]) ** 2 == pytest.approx(np.trace(tilt))
+    tilt_sum = np.sum(np.radians(errors["inclination"]) ** 2)
+    assert abs(tilt_sum - n * np.trace(tilt)) < 5 * math.sqrt(2 * n * np.trace(tilt @ tilt))
+    # Mistuned: the filter claims a quarter of its covariance.
+    assert abs(heading_sum - n * heading_var / 4) > 5 * math.sqrt(2 * n) * heading_var / 4
+
+
+def test_claimed_is_nan_without_a_covariance_or_a_scored_sample():
+    from benchmarks.broad.metric import CLAIMED, claimed_deg
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (5, 1))
+    assert all(math.isnan(v) for v in claimed_deg(q, None, q, np.ones(5, bool)).values())
+    found = claimed_deg(q, np.tile(np.eye(3), (5, 1, 1)), q, np.zeros(5, bool))
+    assert set(found) == set(CLAIMED) and all(math.isnan(v) for v in found.values())

@@ -228,3 +228,27 @@ def test_the_kernels_innovation_likelihood_is_the_per_run_filters(trial, name):
     assert kernel_run.path == "kernel" and kernel_run.likelihood[1] == sums["updates"] > 100
     assert kernel_run.likelihood[0] == pytest.approx(sums["log_det"] + sums["nis"], rel=1e-9)
     assert run_recorded(build_estimator(name, scenario), omega, vectors).likelihood is None
+
+
+@pytest.mark.parametrize("name", ["mekf", "usque", "mekf-smoother"])
+def test_the_kept_attitude_covariance_is_the_per_run_classs(trial, name):
+    """The covariance the kernel path keeps (and the smoother's fusion of
+    its passes) is the per-run class's ``track`` covariance, to 1e-9 of its
+    scale at every sample: the tables' claimed heading and inclination
+    (:func:`benchmarks.broad.metric.claimed_deg`) read the filter's own."""
+    scenario, omega, vectors = trial
+    n = len(omega)
+    trace = build_estimator(name, scenario).track(omega, np.tile([1.0, 0, 0, 0], (n, 1)),
+                                                  np.zeros(n, bool), vectors=vectors)
+    run = run_recorded(build_estimator(name, scenario), omega, vectors)
+    assert run.attitude_covariance.shape == (n, 3, 3)
+    scale = np.abs(trace.attitude_covariance).max()
+    np.testing.assert_allclose(run.attitude_covariance, trace.attitude_covariance, rtol=0,
+                               atol=1e-9 * scale)
+
+
+def test_a_path_that_keeps_no_covariance_says_none(trial):
+    scenario, omega, vectors = trial
+    for name in ("madgwick", "triad", "dead-reckoning"):
+        assert run_recorded(build_estimator(name, scenario), omega,
+                            vectors).attitude_covariance is None

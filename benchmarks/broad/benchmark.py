@@ -28,8 +28,8 @@ from benchmarks.broad.agreement import AGAINST, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.tuning import judged_samples
-from benchmarks.broad.metric import METRICS, errors_deg, rmse_of, scored_samples, \
-    unscored_reason
+from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
+    scored_samples, unscored_reason
 from dynamics.validation import InvalidParameterError
 from benchmarks.engine.recorded import path_of, run_recorded
 from benchmarks.output import progress
@@ -43,8 +43,8 @@ DEFAULT_ESTIMATORS = ("dead-reckoning", "triad", "mekf", "mekf-smoother", "usque
 PEERS = ("vqf", "vqf-6d", "vqf-offline", "fusion")
 #: The vector sensors, in the tables' order, and their short names.
 SENSORS = {"accelerometer": "acc", "magnetometer": "mag"}
-TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, "us_per_sample", "samples",
-                 "movement_samples", "scored_samples",
+TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, *CLAIMED, "us_per_sample",
+                 "samples", "movement_samples", "scored_samples",
                  "rejected_accelerometer", "rejected_magnetometer",
                  "rejected_accelerometer_share", "rejected_magnetometer_share",
                  "diverged_step", "path", *AGREEMENT)
@@ -118,12 +118,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
         seconds = time.perf_counter() - start
         errors = errors_deg(run.estimates, recording.reference_quat)
-        scores = rmse_of(errors, run.estimates, recording.reference_quat, movement)
-        if not sensing.heading_observed(type(estimator), readings):
-            # No heading reference (VQF 6D): its heading is the gyro's, and its
-            # total would rank a heading that happens to start near the
-            # reference's; only its inclination is a score.
-            scores.update(total_rmse_deg=math.nan, heading_rmse_deg=math.nan)
+        scores = _scores(errors, run, recording.reference_quat, movement,
+                         sensing.heading_observed(type(estimator), readings))
         rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
@@ -149,6 +145,20 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             curves = {name: (recording.time_s[judged], curve)
                       for name, curve in agreement_curves.items()}
     return rows, curves, labels
+
+
+def _scores(errors: dict, run, reference: np.ndarray, movement: np.ndarray,
+            heading: bool) -> dict:
+    """:data:`METRICS` of ``run`` (its ``errors``) and :data:`CLAIMED`. Without
+    a ``heading`` reference (VQF 6D) its heading is the gyro's, and its total
+    would rank a heading that happens to start near the reference's: only its
+    inclination is a score."""
+    scores = {**rmse_of(errors, run.estimates, reference, movement),
+              **claimed_deg(run.estimates, run.attitude_covariance, reference, movement)}
+    if not heading:
+        scores.update(total_rmse_deg=math.nan, heading_rmse_deg=math.nan,
+                      heading_sd_deg=math.nan)
+    return scores
 
 
 def _rejections(estimator, run, readings: dict) -> dict:

@@ -22,6 +22,9 @@ from dynamics.quaternion import quat_conjugate, quat_multiply
 
 #: The three RMSEs, degrees, in the authors' names.
 METRICS = ("total_rmse_deg", "heading_rmse_deg", "inclination_rmse_deg")
+#: What a filter's own covariance claims of its heading and inclination
+#: errors, each beside its RMSE (:func:`claimed_deg`).
+CLAIMED = ("heading_sd_deg", "inclination_sd_deg")
 
 
 def earth_error_quat(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -85,3 +88,30 @@ def rmse_of(errors: dict, estimate: np.ndarray, reference: np.ndarray,
         return {metric: float("nan") for metric in METRICS}
     return {f"{key}_rmse_deg": float(np.sqrt(np.mean(error[scored] ** 2)))
             for key, error in errors.items()}
+
+
+def claimed_deg(estimate: np.ndarray, covariance, reference: np.ndarray,
+                movement: np.ndarray) -> dict:
+    """:data:`CLAIMED`: the heading and inclination errors that the
+    estimator's own attitude covariance ``covariance`` ``(N, 3, 3)`` (rad²,
+    body-frame error, :math:`q = \\hat q \\otimes \\delta q(\\delta\\theta)`, as the
+    MEKF keeps it; Markley & Crassidis 2014, §6.2) claims, as RMS over the
+    samples the metric scores, degrees: comparable each with its RMSE, which
+    a consistent filter matches. The earth-frame error's rotation about the
+    vertical is :math:`u^T \\delta\\theta` to first order, with :math:`u` the
+    vertical in the body frame, so the heading variance is :math:`u^T C u`
+    and the tilt's mean square what is left of the trace, :math:`\\mathrm{tr}\\,C
+    - u^T C u`. NaN without a covariance (a filter that keeps none) or where
+    one is not finite on a scored sample."""
+    scored = scored_samples(reference, movement)
+    if covariance is None or not scored.any() or \
+            not np.isfinite(covariance[scored]).all() or not np.isfinite(estimate[scored]).all():
+        return {name: float("nan") for name in CLAIMED}
+    from scipy.spatial.transform import Rotation
+    q = estimate[scored]
+    up = Rotation.from_quat(q[:, [1, 2, 3, 0]]).inv().apply([0.0, 0.0, 1.0])
+    C = covariance[scored]
+    heading = np.einsum("ni,nij,nj->n", up, C, up)
+    tilt = np.trace(C, axis1=1, axis2=2) - heading
+    return {"heading_sd_deg": float(np.degrees(np.sqrt(np.mean(heading)))),
+            "inclination_sd_deg": float(np.degrees(np.sqrt(np.mean(np.maximum(tilt, 0.0)))))}

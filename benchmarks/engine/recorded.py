@@ -53,6 +53,10 @@ class RecordedRun:
     #: With ``innovations``: the sum of ln det S + NIS over the applied
     #: updates and their count (None for an estimator without innovations).
     likelihood: tuple | None = None
+    #: ``(N, 3, 3)``: each output's attitude covariance (rad², body-frame
+    #: error), where its path keeps one (a kernel that reports a covariance,
+    #: the smoother's fusion); None elsewhere.
+    attitude_covariance: np.ndarray | None = None
 
 
 def path_of(estimator, vectors=()) -> str:
@@ -94,7 +98,10 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
     if path == "kernel":
         run, record, _ = _kernel_record(estimator, omega, vectors, innovations=innovations)
         sums = record.likelihood[0, 0]
-        return replace(run, likelihood=(float(sums[0]), int(sums[1])) if innovations else None)
+        covariance = (attitude_covariances(record.variances[0, 0])
+                      if getattr(kernel(estimator.name), "REPORTS_COVARIANCE", False) else None)
+        return replace(run, likelihood=(float(sums[0]), int(sums[1])) if innovations else None,
+                       attitude_covariance=covariance)
     if path == "compiled" and _frame_learnt(estimator, vectors):
         from benchmarks.engine.kernels import complementary
         acc, has_acc, mag, has_mag = _channels(vectors)
@@ -181,11 +188,22 @@ def _smoothed(smoother, omega: np.ndarray, vectors) -> RecordedRun:
     backward, bias_b, covariance_b = with_covariance(
         backward_filter, reversed_rates(omega, smoother.rate_interpolation),
         reversed_readings(vectors))
-    quat, _, _ = fuse((forward.estimates, bias_f, covariance_f),
-                      (backward.estimates[::-1], bias_b[::-1], covariance_b[::-1]))
+    quat, _, covariance = fuse((forward.estimates, bias_f, covariance_f),
+                               (backward.estimates[::-1], bias_b[::-1], covariance_b[::-1]))
     return RecordedRun(estimates=quat, rejected=forward.rejected, path="kernel",
                        diverged_step=diverged_step(forward.diverged_step,
-                                                   backward.diverged_step, len(omega)))
+                                                   backward.diverged_step, len(omega)),
+                       attitude_covariance=covariance[:, :3, :3].copy())
+
+
+def attitude_covariances(kept: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)`` from a kernel's kept attitude variances ``(N, ≥ 6)``:
+    the diagonal, then the xy, xz and yz terms (:func:`~benchmarks.engine.
+    kernels.common.keep_variances`)."""
+    covariance = np.empty((len(kept), 3, 3))
+    for (i, j), column in zip(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)), range(6)):
+        covariance[:, i, j] = covariance[:, j, i] = kept[:, column]
+    return covariance
 
 
 def _kernel_record(estimator, omega: np.ndarray, vectors, full_state: bool = False,
