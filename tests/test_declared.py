@@ -488,6 +488,7 @@ def test_a_sensor_mostly_rejected_is_noted_below_the_table(trial, tmp_path, caps
     assert "rests on the gyro alone" not in capsys.readouterr().out
 
 
+@pytest.mark.slow     # the whole trial through the command twice (6 s): in .ci/run's slow group
 def test_a_clipped_accelerometer_is_noted(trial, tmp_path, capsys):
     """An accelerometer clipped at its rail (here ±11 m/s², below the
     trial's peaks) is said to be; the same log unclipped raises no note."""

@@ -168,7 +168,9 @@ def _accelerating_from_the_start(dt: float, n: int):
     return gyro, q, _readings(acc, mag, n, every=4)
 
 
-@pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])
+# USQUE's per-run steps take 7 s here: it runs in the slow group (.ci/run).
+@pytest.mark.parametrize("filter_class", [MultiplicativeEKF,
+                                          pytest.param(USQUE, marks=pytest.mark.slow)])
 def test_a_start_in_motion_neither_tilts_nor_learns_a_false_bias(filter_class, monkeypatch):
     # Accelerating from its first sample, the low-pass's first mean is mostly
     # the acceleration's; read at the density's confidence it tilts the
