@@ -460,7 +460,7 @@ def test_the_trials_table_puts_a_filters_claimed_errors_beside_its_rmse(tmp_path
             assert 0.0 < trials.loc[name, column] < 5.0
     # The smoother knows more than each of its passes: it claims less.
     assert trials.loc["mekf-smoother", "heading_sd_deg"] < trials.loc["mekf", "heading_sd_deg"]
-    assert trials.loc[["madgwick"], ["heading_sd_deg", "inclination_sd_deg"]].isna().all(None)
+    assert trials.loc[["madgwick"], ["heading_sd_deg", "inclination_sd_deg"]].isna().all(axis=None)
 
 
 def _claimed_against_drawn(covariance, rng, n=20000):
@@ -472,8 +472,8 @@ def _claimed_against_drawn(covariance, rng, n=20000):
     from benchmarks.broad.metric import claimed_deg
     estimate = Rotation.random(random_state=rng)
     draws = rng.multivariate_normal(np.zeros(3), covariance, size=n)
-    truth = (estimate * Rotation.from_rotvec(draws)).as_quat()[:, [3, 0, 1, 2]]
-    q_hat = np.tile(estimate.as_quat()[[3, 0, 1, 2]], (n, 1))
+    truth = (estimate * Rotation.from_rotvec(draws)).as_quat(scalar_first=True)
+    q_hat = np.tile(estimate.as_quat(scalar_first=True), (n, 1))
     errors = errors_deg(q_hat, truth)
     claimed = claimed_deg(q_hat, np.tile(covariance, (n, 1, 1)), truth, np.ones(n, bool))
     up = estimate.inv().apply([0.0, 0.0, 1.0])

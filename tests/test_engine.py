@@ -126,13 +126,15 @@ def test_every_share_finishes_before_an_error_is_raised():
     import threading
     import time
     from benchmarks.engine.kernels.cores import on_every_core, share_bounds
-    started, done, lock = [], [], threading.Lock()
+    started, done, lock, raised = [], [], threading.Lock(), threading.Event()
 
     def advance_runs(first, last, out):
         with lock:
             started.append(first)
         if first == 0:
+            raised.set()
             raise ValueError("share 0")
+        raised.wait(10.0)    # share 0 has raised: the taking stops within the sleep
         time.sleep(0.05)
         with lock:
             done.append(first)

@@ -478,10 +478,14 @@ def test_the_smoother_is_rts_on_a_linear_case():
         kf.update(z[k])
         xs.append(kf.x.copy())
         ps.append(kf.P.copy())
-    smoothed, _, _, _ = rts_smoother(np.array(xs), np.array(ps), [kf.F] * n, [kf.Q] * n)
+    smoothed, covariances, _, _ = rts_smoother(np.array(xs), np.array(ps), [kf.F] * n,
+                                               [kf.Q] * n)
     angles = np.array([2 * q[1:] * np.sign(q[0]) for q in trace.quat])
     scale = float(np.abs(truth).max())
     np.testing.assert_allclose(angles, smoothed[:, :3], rtol=0, atol=1e-5 * scale)
+    # And its attitude covariance is RTS's (the fusion's P_f - G P_f).
+    np.testing.assert_allclose(trace.attitude_covariance, covariances[:, :3, :3], rtol=1e-3,
+                               atol=1e-6 * float(np.abs(covariances[:, :3, :3]).max()))
     # It smooths: nearer the truth than the filter, which is nearer than the readings.
     error = lambda a: float(np.sqrt(np.mean((a - truth) ** 2)))
     assert error(angles) < 0.8 * error(np.array(xs)[:, :3]) < error(z)

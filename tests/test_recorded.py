@@ -253,3 +253,20 @@ def test_a_path_that_keeps_no_covariance_says_none(trial):
     for name in ("madgwick", "triad", "dead-reckoning"):
         assert run_recorded(build_estimator(name, scenario), omega,
                             vectors).attitude_covariance is None
+
+
+def test_the_per_run_path_keeps_the_covariance_its_class_tracks(trial):
+    """The EKF takes the per-run path on IMU readings (its kernel has no
+    vector updates): its covariance is still kept, its class's own, and its
+    estimates are those of ``run``."""
+    scenario, omega, vectors = trial
+    n = 300
+    omega, vectors = omega[:n], tuple(v.steps(slice(n)) for v in vectors)
+    run = run_recorded(build_estimator("ekf", scenario), omega, vectors)
+    assert run.path == "per-run"
+    reference, _ = _per_run(build_estimator("ekf", scenario), omega, vectors)
+    np.testing.assert_array_equal(run.estimates, reference)
+    trace = build_estimator("ekf", scenario).track(omega, np.tile([1.0, 0, 0, 0], (n, 1)),
+                                                   np.zeros(n, bool), vectors=vectors)
+    np.testing.assert_array_equal(run.attitude_covariance, trace.attitude_covariance)
+    assert run.attitude_covariance.shape == (n, 3, 3)

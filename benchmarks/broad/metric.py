@@ -101,15 +101,16 @@ def claimed_deg(estimate: np.ndarray, covariance, reference: np.ndarray,
     vertical is :math:`u^T \\delta\\theta` to first order, with :math:`u` the
     vertical in the body frame, so the heading variance is :math:`u^T C u`
     and the tilt's mean square what is left of the trace, :math:`\\mathrm{tr}\\,C
-    - u^T C u`. NaN without a covariance (a filter that keeps none) or where
-    one is not finite on a scored sample."""
+    - u^T C u`. NaN without a covariance (a filter that keeps none, or a
+    peer's library that does not give it) or where one is not finite on a
+    scored sample."""
     scored = scored_samples(reference, movement)
     if covariance is None or not scored.any() or \
             not np.isfinite(covariance[scored]).all() or not np.isfinite(estimate[scored]).all():
         return {name: float("nan") for name in CLAIMED}
     from scipy.spatial.transform import Rotation
     q = estimate[scored]
-    up = Rotation.from_quat(q[:, [1, 2, 3, 0]]).inv().apply([0.0, 0.0, 1.0])
+    up = Rotation.from_quat(q, scalar_first=True).inv().apply([0.0, 0.0, 1.0])
     C = covariance[scored]
     heading = np.einsum("ni,nij,nj->n", up, C, up)
     tilt = np.trace(C, axis1=1, axis2=2) - heading

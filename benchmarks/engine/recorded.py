@@ -35,6 +35,7 @@ from benchmarks.engine.kernels import KERNELS, kernel, settings_limitation
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
 from estimators.mekf import estimates_hard_iron
+from estimators.records import RecordRuns
 from estimators.smoother import (MekfSmoother, diverged_step, fuse, reversed_readings,
                                  reversed_rates)
 
@@ -54,8 +55,8 @@ class RecordedRun:
     #: updates and their count (None for an estimator without innovations).
     likelihood: tuple | None = None
     #: ``(N, 3, 3)``: each output's attitude covariance (rad², body-frame
-    #: error), where its path keeps one (a kernel that reports a covariance,
-    #: the smoother's fusion); None elsewhere.
+    #: error), where the filter keeps one (a kernel that reports one, the
+    #: smoother's fusion, a per-run class's ``track``); None elsewhere.
     attitude_covariance: np.ndarray | None = None
 
 
@@ -115,17 +116,28 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
             return replace(_finished(np.asarray(estimates, dtype=float), path),
                            rejected=dict(getattr(estimator, "rejected", {})))
         path = "per-run"
-    n = len(omega)
     logged = innovations and hasattr(estimator, "log_innovations")
     if logged:
         estimator.log_innovations = True
-    estimates = estimator.run(omega, np.tile(IDENTITY, (n, 1)), np.zeros(n, dtype=bool),
-                              vectors=vectors)
+    estimates, covariance = _per_run(estimator, omega, vectors)
     sums = estimator.innovation_sums if logged else None
     return RecordedRun(estimates=estimates, diverged_step=estimator.diverged_step,
                        rejected=dict(estimator.rejected), path=path,
                        likelihood=(sums["log_det"] + sums["nis"], sums["updates"])
-                       if logged else None)
+                       if logged else None, attitude_covariance=covariance)
+
+
+def _per_run(estimator, omega: np.ndarray, vectors) -> tuple:
+    """The per-run path: ``(estimates, attitude covariances or None)``. A
+    class that runs a record step by step as the base class does (or the
+    smoother) is tracked, keeping each step's covariance where it has one;
+    any other's own ``run`` is called."""
+    n = len(omega)
+    star, available = np.tile(IDENTITY, (n, 1)), np.zeros(n, dtype=bool)
+    if isinstance(estimator, MekfSmoother) or type(estimator).run is RecordRuns.run:
+        trace = estimator.track(omega, star, available, vectors=vectors)
+        return trace.quat, trace.attitude_covariance
+    return estimator.run(omega, star, available, vectors=vectors), None
 
 
 def _frame_learnt(estimator, vectors) -> bool:

@@ -136,4 +136,5 @@ def _measure_into(arrays: dict, streams: VectorStreams, first: int, last: int, k
         arrays["vector_body"][first:last, :, s] = readings.body
         arrays["vector_variance"][first:last, :, s] = readings.variance
         arrays["vector_available"][first:last, :, s] = readings.available
-        arrays["vector_reference"][:, s] = readings.reference
+        if first == 0:      # the same references in every part: one part writes them
+            arrays["vector_reference"][:, s] = readings.reference

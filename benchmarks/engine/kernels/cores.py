@@ -66,17 +66,21 @@ def on_every_core(advance_runs, n_runs: int, *args, threads: int | None = None) 
     from numba import get_num_threads
     threads = max(1, min(get_num_threads() if threads is None else threads, n_runs))
     bounds = share_bounds(n_runs, threads)
-    taken, failed = itertools.count(), threading.Event()
+    counter, lock, failed = itertools.count(), threading.Lock(), threading.Event()
+
+    def next_share():
+        with lock:
+            return next(counter)
 
     def take_shares():
-        for share in iter(taken.__next__, None):     # next() of a count is atomic
-            if share >= len(bounds) - 1 or failed.is_set():
-                return
-            try:
+        try:
+            for share in iter(next_share, None):
+                if share >= len(bounds) - 1 or failed.is_set():
+                    return
                 advance_runs(bounds[share], bounds[share + 1], *args)
-            except BaseException:
-                failed.set()
-                raise
+        except BaseException:       # an interrupt between two shares too
+            failed.set()
+            raise
 
     futures = [_pool().submit(take_shares) for _ in range(threads - 1)]
     try:
@@ -89,7 +93,9 @@ def on_every_core(advance_runs, n_runs: int, *args, threads: int | None = None) 
 
 def share_bounds(n_runs: int, threads: int) -> list:
     """The shares' bounds: ``[0, …, n_runs]``, :data:`SHARES_PER_THREAD` a
-    thread of at least :data:`MIN_SHARE_RUNS` runs (one a thread at least)."""
+    thread of at least :data:`MIN_SHARE_RUNS` runs (one a thread at least,
+    and no share empty: never more threads than runs)."""
+    threads = max(1, min(threads, n_runs))
     shares = max(threads, min(threads * SHARES_PER_THREAD, n_runs // MIN_SHARE_RUNS))
     return np.linspace(0, n_runs, shares + 1).round().astype(np.int64).tolist()
 
