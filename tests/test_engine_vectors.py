@@ -184,3 +184,34 @@ def test_vector_readings_made_in_parts_are_those_made_at_once(n_runs, parts, see
     assert set(in_parts) == set(at_once)
     for name, values in at_once.items():
         assert np.array_equal(in_parts[name], values), name
+
+
+def test_a_part_of_the_readings_that_fails_raises_its_error():
+    """A sensor failing on one part of the runs: the block's future raises
+    that error (the other part still runs to its end, awaited by the
+    executor as run_batch's ``with`` awaits it)."""
+    from concurrent.futures import ThreadPoolExecutor
+    from dataclasses import replace as replaced
+    from benchmarks.engine.vectors import vector_block, vector_streams
+    scenario = CUBESAT.replace(tstop=30.0)
+    q_true = simulate_truth(scenario).q_true
+    streams = vector_streams(scenario, np.arange(4))
+    first_generator, finished = streams.generators[0][0], []
+
+    class Failing:
+        def __init__(self, sensor):
+            self.sensor, self.name, self.dof = sensor, sensor.name, sensor.dof
+
+        def measure_runs(self, q, references, rngs, first_step=0):
+            if rngs[0] is first_generator:
+                raise ValueError("part 0 failed")
+            readings = self.sensor.measure_runs(q, references, rngs, first_step)
+            finished.append(len(rngs))
+            return readings
+
+    failing = replaced(streams, sensors=(Failing(streams.sensors[0]), *streams.sensors[1:]))
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        future = vector_block(failing, 4, 0, q_true, pool, 2)
+        with pytest.raises(ValueError, match="part 0 failed"):
+            future.result()
+    assert finished == [2]       # the other part, two runs, measured to its end
