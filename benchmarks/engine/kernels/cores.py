@@ -4,19 +4,19 @@ last, …)``, serial, releasing the GIL), taken in turn by every thread (the
 caller's too) until none is left.
 
 Why several shares a thread, taken as each thread comes free: a core that
-is also doing other work (a CubeSat campaign's vector readings are made in
-a thread beside the kernels; another process) would otherwise hold every
-other thread waiting for its one share at the end of each block (measured:
-1024 CubeSat MEKF runs spent a third of their time so).
+is also doing other work (a CubeSat campaign's vector readings are made
+beside the kernels; another process) would otherwise hold every other
+thread waiting for its one share at the end of each block (the README's
+performance section has the CubeSat's times before and after).
 
 Why threads and not numba's parallel loop (``prange``): the arithmetic of
 each run is the same, in the same order, so every number is the same to
 the bit, and numba's parallel passes, which lower a ``prange`` loop, took
 about half of a kernel's compile (measured on a cold cache: the MEKF's
 kernel 89 s with ``parallel=True``, 47 s without). Runs never interact, so
-the shares need no lock. The threads are numba's count
-(:func:`numba.get_num_threads`, which a campaign's worker sets), as the
-parallel loop's were.
+the shares need no lock (only the count of shares taken has one). The
+threads are numba's count (:func:`numba.get_num_threads`, which a
+campaign's worker sets), as the parallel loop's were.
 """
 from __future__ import annotations
 

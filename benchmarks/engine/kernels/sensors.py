@@ -16,9 +16,10 @@ advances its own copy of the gyro's true bias.
 Their arguments are plain arrays, not the block's named tuple: numba
 dropped writes into a named tuple's arrays made inside the parallel loop
 the kernels had, and every read of a field in a loop costs a reference
-count (measured: the loop took three times as long). The star tracker's arrays go as one plain tuple
-(:func:`star_arrays`): read at its readings only, they cost nothing
-measurable so; the gyro's, read every step, go one by one.
+count (measured: the loop took three times as long). The star tracker's
+arrays go as one plain tuple (:func:`star_arrays`): read at its readings
+only, they cost nothing measurable so; the gyro's, read every step, go one
+by one.
 """
 from __future__ import annotations
 
