@@ -23,7 +23,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import InvalidParameterError, finite_vector, standard_deviation
-from sensors.vector import VectorReadings, VectorSensor, normals, to_body
+from sensors.vector import VectorSensor, normals, to_body
 
 #: The specific force at rest in the east-north-up frame, m/s².
 GRAVITY_REACTION_ENU_MPS2 = np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
@@ -65,16 +65,17 @@ class Accelerometer(VectorSensor):
                                         f"must be within ±{MAX_SPECIFIC_FORCE_MPS2:g} m/s^2 "
                                         "(16 g, an IMU accelerometer's widest range)")
 
-    def measure_runs(self, q_true: np.ndarray, references, rngs,
-                     first_step: int = 0) -> VectorReadings:
+    def measure_into(self, q_true: np.ndarray, references, rngs, first_step: int,
+                     body: np.ndarray, variance: np.ndarray,
+                     available: np.ndarray) -> np.ndarray:
         """Readings of the gravity reaction at every scheduled step; one
         3-vector of noise per reading, in time order (``references`` is not
         read: gravity's reference is the local vertical)."""
+        from sensors.vector_arithmetic import noisy_rows    # compiled: loaded where used
         n = len(q_true)
         reference = np.broadcast_to(GRAVITY_REACTION_ENU_MPS2, (n, 3)).copy()
-        available = self.scheduled(n, first_step)
-        steps = np.flatnonzero(available)
-        body = np.zeros((len(rngs), n, 3))
-        body[:, steps] = to_body(q_true[steps], reference[steps]) + self.bias_mps2 + \
-            self.sigma_mps2 * normals(rngs, (len(steps), 3))
-        return self.readings(body, reference, available, self.sigma_mps2 ** 2)
+        steps = np.flatnonzero(self.scheduled(n, first_step))
+        truth = to_body(q_true[steps], reference[steps]) + self.bias_mps2
+        noisy_rows(truth, self.sigma_mps2, normals(rngs, (len(steps), 3)), steps,
+                   self.sigma_mps2 ** 2, body, variance, available)
+        return reference

@@ -21,7 +21,7 @@ import numpy as np
 
 from dynamics.validation import (InvalidParameterError, finite_vector, float_array,
                                  standard_deviation)
-from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
+from sensors.vector import VectorSensor, normals, times_matrix, to_body
 
 #: The largest field a reading may carry, per axis, nT (ten gauss): beyond
 #: the full-scale range of spacecraft and IMU magnetometers (±8 gauss for a
@@ -76,19 +76,20 @@ class Magnetometer(VectorSensor):
                                         "magnetometer's range)")
         self.soft_iron = _soft_iron(soft_iron)
 
-    def measure_runs(self, q_true: np.ndarray, references, rngs,
-                     first_step: int = 0) -> VectorReadings:
+    def measure_into(self, q_true: np.ndarray, references, rngs, first_step: int,
+                     body: np.ndarray, variance: np.ndarray,
+                     available: np.ndarray) -> np.ndarray:
         """Readings of the field ``references.magnetic_field_nT`` (``(N, 3)``,
         reference frame) at every scheduled step; one 3-vector of noise drawn
         per reading, in time order."""
+        from sensors.vector_arithmetic import noisy_rows    # compiled: loaded where used
         field_nT = references.magnetic_field_nT
-        available = self.scheduled(len(q_true), first_step)
-        steps = np.flatnonzero(available)
+        steps = np.flatnonzero(self.scheduled(len(q_true), first_step))
         truth = times_matrix(to_body(q_true[steps], field_nT[steps]), self.soft_iron) + \
             self.bias_nT
-        body = np.zeros((len(rngs), len(q_true), 3))
-        body[:, steps] = truth + self.sigma_nT * normals(rngs, (len(steps), 3))
-        return self.readings(body, field_nT, available, self.sigma_nT ** 2)
+        noisy_rows(truth, self.sigma_nT, normals(rngs, (len(steps), 3)), steps,
+                   self.sigma_nT ** 2, body, variance, available)
+        return field_nT
 
 
 def _soft_iron(value) -> np.ndarray:

@@ -93,13 +93,30 @@ def _brightest_first(c, order):
 
 
 @njit(cache=True, nogil=True)
+def currents_in_sun(truth, sigma, noise, in_sun):
+    """``(R·L, N)``: the currents ``truth + σ·noise`` of every run's steps
+    ``in_sun`` (``truth`` ``(M, N)``, ``noise`` ``(R, M, N)``; ``L`` steps in
+    the Sun), run by run, the rows that are solved for Sun vectors."""
+    runs, faces = noise.shape[0], noise.shape[2]
+    out = np.empty((runs * len(in_sun), faces))
+    for r in range(runs):
+        for index in range(len(in_sun)):
+            m = in_sun[index]
+            for face in range(faces):
+                out[r * len(in_sun) + index, face] = truth[m, face] + sigma * noise[r, m, face]
+    return out
+
+
+@njit(cache=True, nogil=True)
 def solve_sets(currents, lit, which, gains, solvable_sets, variances, solvable, solution,
-               variance):
+               variance, normals):
     """Each set still ``solvable`` whose faces ``lit`` are set ``which`` of
     the distinct ones: its solution ``Σ c_f g_f`` over its lit faces in face
     order (``gains[which]``'s columns, one per lit face), from zero, and its
     set's variance; a set whose faces cannot be solved is no longer
-    ``solvable``. In place."""
+    ``solvable``. In place. Returns the faces each solution lights, ``n_f ·
+    b > 0`` (none for a set not solved), the next pass's ``lit``."""
+    lights = np.zeros(lit.shape, dtype=np.bool_)
     for row in range(len(currents)):
         if not solvable[row]:
             continue
@@ -118,3 +135,23 @@ def solve_sets(currents, lit, which, gains, solvable_sets, variances, solvable, 
                 column += 1
         solution[row, 0], solution[row, 1], solution[row, 2] = s0, s1, s2
         variance[row] = variances[index]
+        for face in range(currents.shape[1]):   # as sensors.vector.times_matrix sums
+            lights[row, face] = s0 * normals[face, 0] + s1 * normals[face, 1] + \
+                s2 * normals[face, 2] > 0.0
+    return lights
+
+
+@njit(cache=True, nogil=True)
+def scatter_solutions(solution, solved_variance, steps, body, variance, available):
+    """The Sun vectors solved for each run's rows (:func:`currents_in_sun`'s
+    order: run by run, a row per step of ``steps``), written in place where
+    one was solved (a finite variance)."""
+    for r in range(body.shape[0]):
+        for index in range(len(steps)):
+            row = r * len(steps) + index
+            if math.isfinite(solved_variance[row]):
+                k = steps[index]
+                body[r, k, 0], body[r, k, 1], body[r, k, 2] = \
+                    solution[row, 0], solution[row, 1], solution[row, 2]
+                variance[r, k] = solved_variance[row]
+                available[r, k] = True

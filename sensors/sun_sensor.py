@@ -41,7 +41,7 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError, finite_number, float_array, \
     standard_deviation, unit_vector
-from sensors.vector import VectorReadings, VectorSensor, normals, times_matrix, to_body
+from sensors.vector import VectorSensor, normals, times_matrix, to_body
 
 #: Illumination below which a sun sensor gives no reading (1: full Sun).
 FULL_SUN = 0.99
@@ -64,20 +64,6 @@ MAX_CURRENT_SIGMA = 1.0
 #: The six faces of a cube, outward normals in the body frame.
 CUBE_FACES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0),
               (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
-
-
-def _rotated(vectors: np.ndarray, rotvecs: np.ndarray) -> np.ndarray:
-    r"""Each of ``vectors`` ``(..., 3)`` rotated by its rotation vector θ
-    (Rodrigues: :math:`v\cos\theta + (\hat k\times v)\sin\theta + \hat k(\hat k\cdot
-    v)(1-\cos\theta)`), element by element (compiled:
-    :func:`sensors.vector_arithmetic.rotated_rows`). scipy's ``Rotation.apply``
-    gives a row a last-bit result that depends on its place in the stack, and
-    a reading must not depend on how a run is cut into blocks."""
-    from sensors.vector_arithmetic import rotated_rows        # compiled: loaded where used
-    shape = np.broadcast_shapes(np.shape(vectors), np.shape(rotvecs))
-    stack = (-1,) + shape[-2:] if len(shape) > 1 else (1, 1, 3)
-    return rotated_rows(np.broadcast_to(vectors, shape).reshape(stack),
-                        np.broadcast_to(rotvecs, shape).reshape(stack)).reshape(shape)
 
 
 def _distinct_rows(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -130,25 +116,27 @@ class FineSunSensor(VectorSensor):
         self.fov_deg = fov
         self.boresight = unit_vector("sun_sensor.boresight", boresight)
 
-    def measure_runs(self, q_true: np.ndarray, references, rngs,
-                     first_step: int = 0) -> VectorReadings:
+    def measure_into(self, q_true: np.ndarray, references, rngs, first_step: int,
+                     body: np.ndarray, variance: np.ndarray,
+                     available: np.ndarray) -> np.ndarray:
         """Readings of the Sun direction ``references.sun_unit`` (``(N, 3)``,
         reference frame; :class:`dynamics.environment.References`); one
         3-vector of noise drawn per scheduled step, in time order, whether or
-        not the Sun is seen (so the noise does not depend on the field of view)."""
+        not the Sun is seen (so the noise does not depend on the field of
+        view). Each Sun vector is turned by its noise element by element
+        (compiled: :func:`sensors.vector_arithmetic.turned_rows`, Rodrigues'
+        formula): scipy's ``Rotation.apply`` gives a row a last-bit result
+        that depends on its place in the stack, and a reading must not depend
+        on how a run is cut into blocks."""
+        from sensors.vector_arithmetic import turned_rows   # compiled: loaded where used
         sun_unit, illumination = references.sun_unit, references.illumination
-        scheduled = self.scheduled(len(q_true), first_step)
-        steps = np.flatnonzero(scheduled)
+        steps = np.flatnonzero(self.scheduled(len(q_true), first_step))
         s = to_body(q_true[steps], sun_unit[steps])
-        delta = self.sigma_rad * normals(rngs, (len(steps), 3))
-        delta -= np.sum(delta * s, axis=-1, keepdims=True) * s
-        seen = (times_matrix(s, self.boresight[None])[:, 0] >= math.cos(math.radians(self.fov_deg))) & \
-            (illumination[steps] >= FULL_SUN)
-        body = np.zeros((len(rngs), len(q_true), 3))
-        body[:, steps] = _rotated(np.broadcast_to(s, delta.shape), delta)
-        available = np.zeros(len(q_true), dtype=bool)
-        available[steps[seen]] = True
-        return self.readings(body, sun_unit, available, self.sigma_rad ** 2)
+        seen = (times_matrix(s, self.boresight[None])[:, 0] >=
+                math.cos(math.radians(self.fov_deg))) & (illumination[steps] >= FULL_SUN)
+        turned_rows(s, self.sigma_rad, normals(rngs, (len(steps), 3)), steps, seen,
+                    self.sigma_rad ** 2, body, variance, available)
+        return sun_unit
 
 
 class CoarseSunSensors(VectorSensor):
@@ -206,9 +194,9 @@ class CoarseSunSensors(VectorSensor):
         for _ in range(2):
             sets, which = _distinct_rows(lit)
             gains, variances, solvable_sets = self._set_solutions(sets)
-            sun_faces.solve_sets(currents, lit, which.astype(np.int64), gains, solvable_sets,
-                                 variances, solvable, solution, variance)
-            lit = times_matrix(solution, self.normals) > 0.0
+            lit = sun_faces.solve_sets(currents, lit, np.asarray(which, dtype=np.int64), gains,
+                                       solvable_sets, variances, solvable, solution, variance,
+                                       self.normals)
         solution[~solvable], variance[~solvable] = np.nan, np.nan
         return solution, variance
 
@@ -246,26 +234,22 @@ class CoarseSunSensors(VectorSensor):
         return sun_faces.first_faces(currents, self.normals, LIT_THRESHOLD_SIGMA * self.sigma,
                                      opposite, SPAN_TOLERANCE)
 
-    def measure_runs(self, q_true: np.ndarray, references, rngs,
-                     first_step: int = 0) -> VectorReadings:
+    def measure_into(self, q_true: np.ndarray, references, rngs, first_step: int,
+                     body: np.ndarray, variance: np.ndarray,
+                     available: np.ndarray) -> np.ndarray:
         """Least-squares Sun vectors from the faces' currents at every
         scheduled step in full Sun; one current noise per face drawn per
         scheduled step, in time order."""
+        from sensors import sun_faces        # compiled: loaded where readings are made
         sun_unit, illumination = references.sun_unit, references.illumination
-        scheduled = self.scheduled(len(q_true), first_step)
-        steps = np.flatnonzero(scheduled)
+        steps = np.flatnonzero(self.scheduled(len(q_true), first_step))
         s = to_body(q_true[steps], sun_unit[steps])
         lit_fraction = np.where(illumination[steps] >= FULL_SUN, 1.0, 0.0)
-        currents = np.maximum(0.0, times_matrix(s, self.normals)) * lit_fraction[:, None] + \
-            self.sigma * normals(rngs, (len(steps), len(self.normals)))
+        truth = np.maximum(0.0, times_matrix(s, self.normals)) * lit_fraction[:, None]
         in_sun = np.flatnonzero(lit_fraction > 0)
-        solution, solved_variance = self._sun_vectors(
-            currents[:, in_sun].reshape(-1, len(self.normals)))
-        body = np.zeros((len(rngs), len(q_true), 3))
-        variance = np.zeros((len(rngs), len(q_true)))
-        available = np.zeros((len(rngs), len(q_true)), dtype=bool)
-        body[:, steps[in_sun]] = solution.reshape(len(rngs), len(in_sun), 3)
-        variance[:, steps[in_sun]] = solved_variance.reshape(len(rngs), len(in_sun))
-        available[:, steps[in_sun]] = np.isfinite(variance[:, steps[in_sun]])
-        variance[~available] = 0.0
-        return self.readings(body, sun_unit, available, variance)
+        currents = sun_faces.currents_in_sun(truth, self.sigma, normals(
+            rngs, (len(steps), len(self.normals))), in_sun)
+        solution, solved_variance = self._sun_vectors(currents)
+        sun_faces.scatter_solutions(solution, solved_variance, steps[in_sun], body, variance,
+                                    available)
+        return sun_unit

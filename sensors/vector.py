@@ -170,17 +170,24 @@ class VectorSensor:
                      first_step: int = 0) -> VectorReadings:
         """:meth:`measure` for several runs of the same truth at once, one
         generator each (the engine's batches): readings with a leading axis
-        of runs. A run's readings are the same bits as :meth:`measure`'s."""
-        raise NotImplementedError
-
-    def readings(self, body, reference, available, variance) -> VectorReadings:
-        """Readings of ``R`` runs: ``body`` ``(R, N, 3)`` (zeroed where none
-        was taken), ``available`` ``(N,)`` or ``(R, N)``, ``variance`` a
-        number or ``(R, N)``."""
-        available = np.broadcast_to(available, body.shape[:2])
-        body = np.where(available[..., None], body, 0.0)
+        of runs, ``body`` ``(R, N, 3)``, ``available`` and ``variance``
+        ``(R, N)`` (zero where no reading was taken). A run's readings are the
+        same bits as :meth:`measure`'s."""
+        shape = (len(rngs), len(q_true))
+        body, variance = np.zeros(shape + (3,)), np.zeros(shape)
+        available = np.zeros(shape, dtype=bool)
+        reference = self.measure_into(q_true, references, rngs, first_step, body, variance,
+                                      available)
         return VectorReadings(sensor=self.name, body=body, reference=reference,
-                              available=available,
-                              variance=np.broadcast_to(np.asarray(variance, dtype=float),
-                                                       available.shape).copy(),
-                              dof=self.dof, unit=self.unit)
+                              available=available, variance=variance, dof=self.dof,
+                              unit=self.unit)
+
+    def measure_into(self, q_true: np.ndarray, references, rngs, first_step: int,
+                     body: np.ndarray, variance: np.ndarray,
+                     available: np.ndarray) -> np.ndarray:
+        """:meth:`measure_runs`' readings written into zeroed arrays ``body``
+        ``(R, N, 3)``, ``variance`` and ``available`` ``(R, N)`` (views of
+        the engine's block arrays: the readings are written once, where they
+        are kept). Returns the reference vectors ``(N, 3)``. Each sensor's
+        model is here; :meth:`measure_runs` and :meth:`measure` call it."""
+        raise NotImplementedError

@@ -1,8 +1,9 @@
 r"""The vector sensors' element-by-element arithmetic, compiled: the products
 of vectors with a sensor's matrix (a magnetometer's soft iron, the coarse sun
-sensors' face normals, a boresight) and the fine sun sensor's rotation of
-each Sun vector by its noise (Rodrigues' formula, Markley & Crassidis 2014,
-§2.7.1).
+sensors' face normals, a boresight), each run's noise added to the truth and
+written where the engine keeps the readings, and the fine sun sensor's
+rotation of each Sun vector by its noise (Rodrigues' formula, Markley &
+Crassidis 2014, §2.7.1).
 
 Why compiled: a campaign measures every run's readings at every scheduled
 step (a thousand CubeSat runs of one orbit: six million sets of currents, six
@@ -35,24 +36,50 @@ def times_matrix_rows(vectors, matrix):
     return out
 
 
+@njit(cache=True, inline="always")
+def _rotated(a, b, c, t0, t1, t2):
+    """The vector (a, b, c) rotated by the rotation vector (t0, t1, t2)."""
+    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    safe = angle if angle > 0.0 else 1.0
+    x, y, z = t0 / safe, t1 / safe, t2 / safe
+    along = x * a + y * b + z * c
+    cos, sin = math.cos(angle), math.sin(angle)
+    scale = along * (1.0 - cos)
+    return (a * cos + (y * c - z * b) * sin + x * scale,
+            b * cos + (z * a - x * c) * sin + y * scale,
+            c * cos + (x * b - y * a) * sin + z * scale)
+
+
 @njit(cache=True, nogil=True)
-def rotated_rows(vectors, rotvecs):
-    r"""``(R, M, 3)``: each of ``vectors`` ``(R, M, 3)`` rotated by its rotation
-    vector θ of ``rotvecs`` (same shape; either may be a broadcast view),
-    :math:`v\cos\theta + (\hat k\times v)\sin\theta + \hat k(\hat k\cdot
-    v)(1-\cos\theta)`, a zero rotation vector's axis taken as θ itself."""
-    out = np.empty(rotvecs.shape)
-    for r in range(rotvecs.shape[0]):
-        for i in range(rotvecs.shape[1]):
-            t0, t1, t2 = rotvecs[r, i, 0], rotvecs[r, i, 1], rotvecs[r, i, 2]
-            angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-            safe = angle if angle > 0.0 else 1.0
-            x, y, z = t0 / safe, t1 / safe, t2 / safe
-            a, b, c = vectors[r, i, 0], vectors[r, i, 1], vectors[r, i, 2]
-            along = x * a + y * b + z * c
-            cos, sin = math.cos(angle), math.sin(angle)
-            scale = along * (1.0 - cos)
-            out[r, i, 0] = a * cos + (y * c - z * b) * sin + x * scale
-            out[r, i, 1] = b * cos + (z * a - x * c) * sin + y * scale
-            out[r, i, 2] = c * cos + (x * b - y * a) * sin + z * scale
-    return out
+def noisy_rows(truth, sigma, noise, steps, variance_value, body, variance, available):
+    """Each run's readings ``truth + σ·noise`` at ``steps``, written in place:
+    ``body[r, steps[m]] = truth[m] + sigma * noise[r, m]`` (``truth`` ``(M,
+    3)``, ``noise`` ``(R, M, 3)``), with the reading's variance and flag."""
+    for r in range(noise.shape[0]):
+        for m in range(len(steps)):
+            k = steps[m]
+            for i in range(3):
+                body[r, k, i] = truth[m, i] + sigma * noise[r, m, i]
+            variance[r, k] = variance_value
+            available[r, k] = True
+
+
+@njit(cache=True, nogil=True)
+def turned_rows(s, sigma, noise, steps, seen, variance_value, body, variance, available):
+    r"""The fine sun sensor's readings, written in place: at each step
+    ``steps[m]`` that is ``seen``, the true Sun vector ``s[m]`` turned by the
+    noise δ = σ·noise[r, m] less its component along ``s[m]`` (δ ⟂ s:
+    :mod:`sensors.sun_sensor`). The projection sums ``δ·s`` as numpy's
+    reduction over three elements does, ``(p₀ + p₁) + p₂``."""
+    for r in range(noise.shape[0]):
+        for m in range(len(steps)):
+            if not seen[m]:
+                continue
+            s0, s1, s2 = s[m, 0], s[m, 1], s[m, 2]
+            d0, d1, d2 = sigma * noise[r, m, 0], sigma * noise[r, m, 1], sigma * noise[r, m, 2]
+            along = d0 * s0 + d1 * s1 + d2 * s2
+            d0, d1, d2 = d0 - along * s0, d1 - along * s1, d2 - along * s2
+            k = steps[m]
+            body[r, k, 0], body[r, k, 1], body[r, k, 2] = _rotated(s0, s1, s2, d0, d1, d2)
+            variance[r, k] = variance_value
+            available[r, k] = True

@@ -202,12 +202,12 @@ def test_a_part_of_the_readings_that_fails_raises_its_error():
         def __init__(self, sensor):
             self.sensor, self.name, self.dof = sensor, sensor.name, sensor.dof
 
-        def measure_runs(self, q, references, rngs, first_step=0):
+        def measure_into(self, q, references, rngs, first_step, *arrays):
             if rngs[0] is first_generator:
                 raise ValueError("part 0 failed")
-            readings = self.sensor.measure_runs(q, references, rngs, first_step)
+            reference = self.sensor.measure_into(q, references, rngs, first_step, *arrays)
             finished.append(len(rngs))
-            return readings
+            return reference
 
     failing = replaced(streams, sensors=(Failing(streams.sensors[0]), *streams.sensors[1:]))
     with ThreadPoolExecutor(max_workers=2) as pool:

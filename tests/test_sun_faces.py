@@ -1,13 +1,15 @@
 """The coarse sun sensors' compiled face choice and least squares
 (sensors/sun_faces.py) give the bits the numpy passes they replaced gave:
-those passes are kept here, as they were, as the reference."""
+those passes are kept here, as they were, as the reference, down to each
+run's readings as the former numpy ``measure_runs`` made them."""
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from sensors.sun_sensor import (CUBE_FACES, LIT_THRESHOLD_SIGMA, MAX_CONDITION,
+from dynamics.environment import References
+from sensors.sun_sensor import (CUBE_FACES, FULL_SUN, LIT_THRESHOLD_SIGMA, MAX_CONDITION,
                                 OPPOSITE_COSINE, SPAN_TOLERANCE, CoarseSunSensors,
                                 _distinct_rows)
-from sensors.vector import times_matrix
+from sensors.vector import normals, times_matrix, to_body
 
 
 def numpy_sun_vectors(self, currents: np.ndarray):
@@ -128,3 +130,49 @@ def test_any_faces_and_currents_read_the_same_bits(faces, seed, sigma, exact_zer
     if exact_zeros:
         currents[rng.random(currents.shape) < 0.3] = 0.0
     same_readings(sensor, currents)
+
+
+def former_measure_runs(sensor, q_true, references, rngs, first_step):
+    """The former numpy ``CoarseSunSensors.measure_runs``: the currents of
+    every scheduled step, those in full Sun solved (by the reference passes
+    above), scattered to each run's steps; body, variance and flags."""
+    steps = np.flatnonzero(sensor.scheduled(len(q_true), first_step))
+    s = to_body(q_true[steps], references.sun_unit[steps])
+    lit_fraction = np.where(references.illumination[steps] >= FULL_SUN, 1.0, 0.0)
+    currents = np.maximum(0.0, times_matrix(s, sensor.normals)) * lit_fraction[:, None] + \
+        sensor.sigma * normals(rngs, (len(steps), len(sensor.normals)))
+    in_sun = np.flatnonzero(lit_fraction > 0)
+    solution, solved = numpy_sun_vectors(sensor,
+                                         currents[:, in_sun].reshape(-1, len(sensor.normals)))
+    body, variance = np.zeros((len(rngs), len(q_true), 3)), np.zeros((len(rngs), len(q_true)))
+    available = np.zeros((len(rngs), len(q_true)), dtype=bool)
+    body[:, steps[in_sun]] = solution.reshape(len(rngs), len(in_sun), 3)
+    variance[:, steps[in_sun]] = solved.reshape(len(rngs), len(in_sun))
+    available[:, steps[in_sun]] = np.isfinite(variance[:, steps[in_sun]])
+    variance[~available] = 0.0
+    return np.where(available[..., None], body, 0.0), variance, available
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), first_step=st.integers(0, 9),
+       interval=st.integers(1, 3), sigma=st.sampled_from([1e-3, 0.02, 0.3]))
+def test_the_readings_of_every_run_are_the_former_passes_bits(seed, runs, first_step, interval,
+                                                              sigma):
+    """The whole reading, from the attitude to each run's written Sun vector,
+    in any block of a run, through the penumbra (no reading) and the faces
+    that cannot be solved (a large σ_c): the former numpy passes' bits."""
+    rng = np.random.default_rng(seed)
+    q = rng.standard_normal((40, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    sun = rng.standard_normal((40, 3))
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    references = References(np.ones((40, 3)), sun, np.where(rng.random(40) < 0.2, 0.5, 1.0))
+    sensor = CoarseSunSensors(sigma, interval * 0.1, 0.1)
+    readings = sensor.measure_runs(q, references, [np.random.default_rng(seed + run)
+                                                   for run in range(runs)], first_step)
+    body, variance, available = former_measure_runs(
+        sensor, q, references, [np.random.default_rng(seed + run) for run in range(runs)],
+        first_step)
+    assert np.array_equal(readings.body, body) and np.array_equal(readings.variance, variance)
+    assert np.array_equal(readings.available, available)
+    assert available.any() or not (references.illumination >= FULL_SUN).any()

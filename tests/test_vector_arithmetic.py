@@ -1,14 +1,20 @@
 """The vector sensors' compiled arithmetic (sensors/vector_arithmetic.py)
 gives the bits the numpy passes it replaced gave: those passes are kept here,
 as they were, as the reference (a reading must not change when it is made by
-the compiled code)."""
+the compiled code), down to each sensor's readings as its former numpy
+``measure_runs`` made them."""
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
-from sensors.sun_sensor import _rotated
-from sensors.vector import times_matrix
+from dynamics.environment import References
+from sensors.accelerometer import GRAVITY_REACTION_ENU_MPS2, Accelerometer
+from sensors.magnetometer import Magnetometer
+from sensors.sun_sensor import FULL_SUN, FineSunSensor
+from sensors.vector import normals, times_matrix, to_body
 
 
 def numpy_times_matrix(vectors, matrix):
@@ -58,26 +64,126 @@ def test_times_matrix_keeps_nan_rows_and_views():
     assert same_bits(result, numpy_times_matrix(vectors, matrix))
 
 
-@settings(max_examples=60, deadline=None)
-@given(data=st.data(), shape=shapes, scale=st.sampled_from([0.0, 1e-9, 1e-3, 0.5, 4.0]))
-def test_rotation_is_the_numpy_passes_to_the_bit(data, shape, scale):
-    vectors = data.draw(arrays(float, shape, elements=finite))
-    rotvecs = scale * data.draw(arrays(float, shape, elements=st.floats(-1, 1, width=64)))
-    assert same_bits(_rotated(vectors, rotvecs), numpy_rotated(vectors, rotvecs))
+def random_truth(seed: int, steps: int):
+    """Attitudes, a field, Sun directions and an illumination that dips
+    below full Sun, over ``steps`` steps."""
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(steps, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    sun = rng.normal(size=(steps, 3))
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    illumination = np.where(rng.random(steps) < 0.2, 0.5, 1.0)
+    return q, References(magnetic_field_nT=3e4 * rng.normal(size=(steps, 3)), sun_unit=sun,
+                         illumination=illumination, position_km=None)
 
 
-def test_rotation_broadcasts_the_truth_over_the_runs():
-    """The fine sun sensor's call: one truth ``(T, 3)`` broadcast over the runs'
-    noises ``(R, T, 3)``; each run's rows as its own call's, and a rotation
-    by θ about an axis across ``v`` turns it by |θ| (the formula's meaning)."""
-    rng = np.random.default_rng(7)
-    truth = rng.normal(size=(50, 3))
-    truth /= np.linalg.norm(truth, axis=1, keepdims=True)
-    noise = 1e-2 * rng.normal(size=(4, 50, 3))
-    noise -= np.sum(noise * truth, axis=-1, keepdims=True) * truth
-    stacked = _rotated(np.broadcast_to(truth, noise.shape), noise)
-    assert same_bits(stacked, numpy_rotated(np.broadcast_to(truth, noise.shape), noise))
-    for run in range(4):
-        assert same_bits(stacked[run], _rotated(truth, noise[run]))
-    turned = np.arccos(np.clip(np.sum(stacked * truth, axis=-1), -1.0, 1.0))
-    assert turned == pytest.approx(np.linalg.norm(noise, axis=-1), rel=1e-6)
+def former_fine_sun(sensor, q_true, references, rngs, first_step):
+    """The former numpy ``FineSunSensor.measure_runs``: body and flags."""
+    sun_unit, illumination = references.sun_unit, references.illumination
+    steps = np.flatnonzero(sensor.scheduled(len(q_true), first_step))
+    s = to_body(q_true[steps], sun_unit[steps])
+    delta = sensor.sigma_rad * normals(rngs, (len(steps), 3))
+    delta -= np.sum(delta * s, axis=-1, keepdims=True) * s
+    seen = (numpy_times_matrix(s, sensor.boresight[None])[:, 0] >=
+            math.cos(math.radians(sensor.fov_deg))) & (illumination[steps] >= FULL_SUN)
+    body = np.zeros((len(rngs), len(q_true), 3))
+    body[:, steps] = numpy_rotated(np.broadcast_to(s, delta.shape), delta)
+    available = np.zeros(len(q_true), dtype=bool)
+    available[steps[seen]] = True
+    return np.where(available[:, None], body, 0.0), np.broadcast_to(available, body.shape[:2])
+
+
+def former_noisy(truth_of, sigma, q_true, reference, rngs, scheduled):
+    """The former numpy ``measure_runs`` of the magnetometer and the
+    accelerometer: the truth plus σ times each run's noise, at ``scheduled``."""
+    steps = np.flatnonzero(scheduled)
+    body = np.zeros((len(rngs), len(q_true), 3))
+    body[:, steps] = truth_of(to_body(q_true[steps], reference[steps])) + \
+        sigma * normals(rngs, (len(steps), 3))
+    return body, np.broadcast_to(scheduled, body.shape[:2])
+
+
+def assert_readings(readings, body, available, sigma2):
+    assert same_bits(readings.body, body)
+    assert np.array_equal(readings.available, available)
+    assert same_bits(readings.variance, np.where(available, sigma2, 0.0))
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), first_step=st.integers(0, 9),
+       interval=st.integers(1, 3), sigma_deg=st.sampled_from([1e-6, 0.05, 3.0, 90.0]),
+       fov_deg=st.sampled_from([5.0, 70.0, 90.0]))
+def test_the_fine_sun_sensor_reads_its_former_bits(seed, runs, first_step, interval,
+                                                   sigma_deg, fov_deg):
+    """Noise across the Sun vector, the field of view and the penumbra, in
+    any block of a run: each run's readings are the numpy passes' bits."""
+    q, references = random_truth(seed, 40)
+    sensor = FineSunSensor(sigma_deg, interval * 0.1, 0.1, fov_deg=fov_deg)
+    readings = sensor.measure_runs(q, references, [np.random.default_rng(seed + run)
+                                                   for run in range(runs)], first_step)
+    body, available = former_fine_sun(sensor, q, references,
+                                      [np.random.default_rng(seed + run) for run in range(runs)],
+                                      first_step)
+    assert_readings(readings, body, available, sensor.sigma_rad ** 2)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), first_step=st.integers(0, 9),
+       interval=st.integers(1, 3))
+def test_the_magnetometer_and_accelerometer_read_their_former_bits(seed, runs, first_step,
+                                                                  interval):
+    """Soft iron, hard iron and the accelerometer's bias, in any block of a run."""
+    q, references = random_truth(seed, 30)
+    rng = np.random.default_rng(seed)
+    soft_iron = np.eye(3) + 0.1 * rng.normal(size=(3, 3))
+    bias = 500.0 * rng.normal(size=3)
+    magnetometer = Magnetometer(120.0, interval * 0.1, 0.1, bias_nT=bias, soft_iron=soft_iron)
+    accelerometer = Accelerometer(0.05, interval * 0.1, 0.1, bias_mps2=bias / 1e4)
+    gravity = np.broadcast_to(GRAVITY_REACTION_ENU_MPS2, (len(q), 3))
+
+    def generators():
+        return [np.random.default_rng(seed + run) for run in range(runs)]
+
+    scheduled = magnetometer.scheduled(len(q), first_step)
+    assert_readings(magnetometer.measure_runs(q, references, generators(), first_step),
+                    *former_noisy(lambda body: numpy_times_matrix(body, soft_iron) + bias,
+                                  120.0, q, references.magnetic_field_nT, generators(),
+                                  scheduled), 120.0 ** 2)
+    assert_readings(accelerometer.measure_runs(q, references, generators(), first_step),
+                    *former_noisy(lambda body: body + bias / 1e4, 0.05, q, gravity,
+                                  generators(), scheduled), 0.05 ** 2)
+
+
+def test_readings_written_into_views_are_the_readings_made_whole():
+    """The engine's call: each sensor writes into strided views of one
+    block array; what it writes is what :meth:`measure_runs` returns."""
+    q, references = random_truth(11, 25)
+    sensor = FineSunSensor(0.5, 0.2, 0.1)
+    whole = sensor.measure_runs(q, references, [np.random.default_rng(run) for run in (0, 1)],
+                                3)
+    body, variance = np.zeros((2, 25, 2, 3)), np.zeros((2, 25, 2))
+    available = np.zeros((2, 25, 2), dtype=bool)
+    reference = sensor.measure_into(q, references, [np.random.default_rng(run) for run in (0, 1)],
+                                    3, body[:, :, 1], variance[:, :, 1], available[:, :, 1])
+    assert same_bits(body[:, :, 1], whole.body) and same_bits(reference, whole.reference)
+    assert np.array_equal(available[:, :, 1], whole.available) and whole.available.any()
+    assert same_bits(variance[:, :, 1], whole.variance)
+    assert not body[:, :, 0].any() and not available[:, :, 0].any()
+
+
+def test_the_fine_sun_sensor_turns_each_reading_by_its_noise():
+    """Each reading is the true Sun vector turned by |δ| (the formula's
+    meaning), and unit length: the noise lies across the Sun vector."""
+    q, references = random_truth(7, 50)
+    references = References(references.magnetic_field_nT, references.sun_unit, np.ones(50))
+    sensor = FineSunSensor(2.0, 0.1, 0.1, fov_deg=90.0)
+    rng = np.random.default_rng(5)
+    readings = sensor.measure_runs(q, references, [rng])
+    s = to_body(q, references.sun_unit)
+    seen = readings.available[0]
+    assert seen.sum() > 10
+    delta = sensor.sigma_rad * np.random.default_rng(5).standard_normal((50, 3))
+    delta -= np.sum(delta * s, axis=-1, keepdims=True) * s
+    turned = np.arccos(np.clip(np.sum(readings.body[0] * s, axis=-1), -1.0, 1.0))
+    assert turned[seen] == pytest.approx(np.linalg.norm(delta, axis=-1)[seen], rel=1e-6)
+    assert np.linalg.norm(readings.body[0][seen], axis=-1) == pytest.approx(1.0, abs=1e-12)

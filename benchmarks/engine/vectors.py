@@ -7,8 +7,9 @@ from each run's own streams (:func:`benchmarks.simulation.vector_generators`)
 over the block's steps: a block's call draws the numbers the per-run path's
 single call draws for those steps, in the same order, so the kernels read the
 per-run path's readings exactly. Each sensor measures the runs of a block
-in one call (:meth:`sensors.vector.VectorSensor.measure_runs`: the truth's
-part once, each run's noise from its own generator), or in one call per
+in one call (:meth:`sensors.vector.VectorSensor.measure_into`: the truth's
+part once, each run's noise from its own generator, written in the block's
+arrays), or in one call per
 part of the runs, in threads beside the kernels (:func:`vector_block`). Unlike the
 gyro's and the tracker's, these readings are not remade inside the kernels:
 a coarse sun sensor's least-squares solution picks its lit faces by rank
@@ -81,7 +82,8 @@ def vector_block(streams: VectorStreams, n_runs: int, k0: int, q_true: np.ndarra
                  pool=None, parts: int = 1):
     """The ``Block.vector_*`` arrays of the block of steps from ``k0`` whose
     truth is ``q_true`` ``(T, 4)``: every run's readings, each sensor's made
-    for all runs at once (:meth:`sensors.vector.VectorSensor.measure_runs`).
+    for all runs at once, written where the block keeps them
+    (:meth:`sensors.vector.VectorSensor.measure_into`).
 
     With a ``pool`` (an executor), the runs are measured in ``parts``
     contiguous parts, each in a task of its own, and a future of the arrays
@@ -129,12 +131,11 @@ def _measure_into(arrays: dict, streams: VectorStreams, first: int, last: int, k
     """Runs ``first`` to ``last - 1``'s readings of every sensor, into ``arrays``."""
     references = references_between(streams.references, k0, k0 + len(q_true))
     for s, sensor in enumerate(streams.sensors):
-        readings = sensor.measure_runs(q_true, references,
-                                       [generators[s] for generators in
-                                        streams.generators[first:last]],
-                                       first_step=k0)
-        arrays["vector_body"][first:last, :, s] = readings.body
-        arrays["vector_variance"][first:last, :, s] = readings.variance
-        arrays["vector_available"][first:last, :, s] = readings.available
+        reference = sensor.measure_into(q_true, references,
+                                        [generators[s] for generators in
+                                         streams.generators[first:last]], k0,
+                                        arrays["vector_body"][first:last, :, s],
+                                        arrays["vector_variance"][first:last, :, s],
+                                        arrays["vector_available"][first:last, :, s])
         if first == 0:      # the same references in every part: one part writes them
-            arrays["vector_reference"][:, s] = readings.reference
+            arrays["vector_reference"][:, s] = reference
