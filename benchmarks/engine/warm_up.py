@@ -20,7 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 #: the helpers they share: the MEKF 57 s, USQUE 53 s, the EKF 17 s, dead
 #: reckoning with and without resets 14 s; the two groups in parallel, 59 s).
 #: The vector sensors' compiled readings (:mod:`sensors.sun_faces`,
-#: :mod:`sensors.vector_arithmetic`, 2 s) go with the first group.
+#: :mod:`sensors.vector_arithmetic`, about 8 s: each function twice, for the
+#: per-run path's arrays and the engine's views) go with the first group.
 GROUPS = (("usque", "dead-reckoning-resets", "dead-reckoning", "vector-sensors"),
           ("mekf", "ekf"))
 
@@ -40,7 +41,8 @@ def compile_kernels(names) -> tuple:
 
 def _compile_vector_sensors() -> None:
     """The vector sensors' compiled readings, through the sensors' own calls
-    for two runs (the array types the engine hands them)."""
+    for two runs: into arrays of their own (the per-run path) and into views
+    of a block's arrays (the engine's; other array types, compiled apart)."""
     import numpy as np
     from dynamics.environment import References
     from sensors.magnetometer import Magnetometer
@@ -50,9 +52,14 @@ def _compile_vector_sensors() -> None:
                             sun_unit=np.tile([0.0, 0.0, 1.0], (steps, 1)),
                             illumination=np.ones(steps), position_km=None)
     attitudes = np.tile([1.0, 0.0, 0.0, 0.0], (steps, 1))
-    for sensor in (FineSunSensor(0.1, 1.0, 1.0), CoarseSunSensors(0.01, 1.0, 1.0),
-                   Magnetometer(100.0, 1.0, 1.0)):
+    sensors = (FineSunSensor(0.1, 1.0, 1.0), CoarseSunSensors(0.01, 1.0, 1.0),
+               Magnetometer(100.0, 1.0, 1.0))
+    body, variance = np.zeros((2, steps, len(sensors), 3)), np.zeros((2, steps, len(sensors)))
+    available = np.zeros((2, steps, len(sensors)), dtype=bool)
+    for s, sensor in enumerate(sensors):
         sensor.measure_runs(attitudes, references, [np.random.default_rng(run) for run in (0, 1)])
+        sensor.measure_into(attitudes, references, [np.random.default_rng(run) for run in (0, 1)],
+                            0, body[:, :, s], variance[:, :, s], available[:, :, s])
 
 
 def warm_up(processes: int = len(GROUPS)) -> None:
