@@ -68,7 +68,7 @@ class VectorReadings:
     body : (N, 3) measured vectors (zeros where none was taken)
     reference : (N, 3) the model's reference vectors at every step
     available : (N,) bool, True where a reading was taken
-    variance : (N,) σ² per axis of each reading
+    variance : (N,) σ² per axis of each reading (0 where none was taken)
     dof : int
     unit : str, the vectors' unit ("nT", "m/s^2", or "" for unit vectors)
     reference_known : bool, as :attr:`VectorObservation.reference_known`

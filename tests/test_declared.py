@@ -81,7 +81,7 @@ def _csv(folder: Path, table: dict, name: str = "log.csv") -> str:
     """The table as a CSV file, each number's shortest exact text (a float
     reads back as the same bits), an empty field where it is NaN."""
     columns = [_fields(np.asarray(values, dtype=float)) for values in table.values()]
-    rows = map(",".join, zip(*columns))
+    rows = map(",".join, zip(*columns, strict=True))
     (folder / name).write_text(",".join(table) + "\n" + "\n".join(rows) + "\n")
     return name
 
@@ -89,13 +89,20 @@ def _csv(folder: Path, table: dict, name: str = "log.csv") -> str:
 _FIELDS: dict = {}
 
 
-def _fields(values: np.ndarray) -> list:
-    """A column's CSV fields, kept by its bits: most tests here change a
-    column or two of the same trial, and writing every number of a whole
-    trial as text (pandas' ``to_csv``) took two seconds a test."""
+@pytest.fixture(scope="module", autouse=True)
+def _forget_fields():
+    """The columns' text is kept for this module's tests only."""
+    yield
+    _FIELDS.clear()
+
+
+def _fields(values: np.ndarray) -> tuple:
+    """A column of floats as CSV fields, kept by its bits: most tests here
+    change a column or two of the same trial, and writing every number of a
+    whole trial as text (pandas' ``to_csv``) took two seconds a test."""
     key = values.tobytes()
     if key not in _FIELDS:
-        _FIELDS[key] = ["" if math.isnan(x) else repr(x) for x in values.tolist()]
+        _FIELDS[key] = tuple("" if math.isnan(x) else repr(x) for x in values.tolist())
     return _FIELDS[key]
 
 

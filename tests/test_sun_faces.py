@@ -153,26 +153,58 @@ def former_measure_runs(sensor, q_true, references, rngs, first_step):
     return np.where(available[..., None], body, 0.0), variance, available
 
 
-@settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), first_step=st.integers(0, 9),
-       interval=st.integers(1, 3), sigma=st.sampled_from([1e-3, 0.02, 0.3]))
-def test_the_readings_of_every_run_are_the_former_passes_bits(seed, runs, first_step, interval,
-                                                              sigma):
-    """The whole reading, from the attitude to each run's written Sun vector,
-    in any block of a run, through the penumbra (no reading) and the faces
-    that cannot be solved (a large σ_c): the former numpy passes' bits."""
+#: Five faces of the cube, the bottom one left out: with the Sun below, at
+#: most four faces see it and no three of them can be solved.
+FIVE_FACES = CUBE_FACES[:5]
+
+
+def readings_and_former(seed, runs, first_step, interval, sigma, faces, steps=40):
+    """A coarse sensor's readings of random attitudes and Sun directions
+    (a fifth of the steps in the penumbra), and the former passes' of the same."""
     rng = np.random.default_rng(seed)
-    q = rng.standard_normal((40, 4))
+    q = rng.standard_normal((steps, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    sun = rng.standard_normal((40, 3))
+    sun = rng.standard_normal((steps, 3))
     sun /= np.linalg.norm(sun, axis=1, keepdims=True)
-    references = References(np.ones((40, 3)), sun, np.where(rng.random(40) < 0.2, 0.5, 1.0))
-    sensor = CoarseSunSensors(sigma, interval * 0.1, 0.1)
+    references = References(np.ones((steps, 3)), sun,
+                            np.where(rng.random(steps) < 0.2, 0.5, 1.0))
+    sensor = CoarseSunSensors(sigma, interval * 0.1, 0.1, normals=faces)
     readings = sensor.measure_runs(q, references, [np.random.default_rng(seed + run)
                                                    for run in range(runs)], first_step)
-    body, variance, available = former_measure_runs(
-        sensor, q, references, [np.random.default_rng(seed + run) for run in range(runs)],
-        first_step)
-    assert np.array_equal(readings.body, body) and np.array_equal(readings.variance, variance)
+    former = former_measure_runs(sensor, q, references,
+                                 [np.random.default_rng(seed + run) for run in range(runs)],
+                                 first_step)
+    return readings, former, references
+
+
+def assert_same_bits(readings, former):
+    body, variance, available = former
+    assert readings.body.tobytes() == body.tobytes()
+    assert readings.variance.tobytes() == variance.tobytes()
     assert np.array_equal(readings.available, available)
-    assert available.any() or not (references.illumination >= FULL_SUN).any()
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), runs=st.integers(1, 4), first_step=st.integers(0, 9),
+       interval=st.integers(1, 3), sigma=st.sampled_from([1e-3, 0.02, 0.3]),
+       faces=st.sampled_from([CUBE_FACES, FIVE_FACES]))
+def test_the_readings_of_every_run_are_the_former_passes_bits(seed, runs, first_step, interval,
+                                                              sigma, faces):
+    """The whole reading, from the attitude to each run's written Sun vector,
+    in any block of a run, through the penumbra (no reading) and the faces
+    that cannot be solved: the former numpy passes' bits."""
+    readings, former, references = readings_and_former(seed, runs, first_step, interval,
+                                                       sigma, faces)
+    assert_same_bits(readings, former)
+    assert former[2].any() or not (references.illumination >= FULL_SUN).any()
+
+
+def test_a_sun_no_three_faces_can_solve_gives_no_reading_as_before():
+    """Five faces: in full Sun, the steps with the Sun below the body give
+    no reading (the sets the least squares cannot solve), the others one,
+    each the former passes' bits."""
+    readings, former, references = readings_and_former(5, 3, 0, 1, 0.01, FIVE_FACES, 400)
+    assert_same_bits(readings, former)
+    in_sun = np.broadcast_to(references.illumination >= FULL_SUN, readings.available.shape)
+    assert (in_sun & ~readings.available).sum() > 50        # the Sun below: unsolvable
+    assert (in_sun & readings.available).sum() > 500

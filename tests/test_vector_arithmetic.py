@@ -23,17 +23,25 @@ def numpy_times_matrix(vectors, matrix):
             + vectors[..., 2:3] * matrix[:, 2])
 
 
-def numpy_rotated(vectors, rotvecs):
-    """The former ``sensors.sun_sensor._rotated`` (Rodrigues, numpy passes)."""
-    angle = np.sqrt(np.sum(rotvecs * rotvecs, axis=-1, keepdims=True))
-    safe = np.where(angle > 0.0, angle, 1.0)
-    axis = rotvecs / safe
-    x, y, z = axis[..., 0:1], axis[..., 1:2], axis[..., 2:3]
-    a, b, c = vectors[..., 0:1], vectors[..., 1:2], vectors[..., 2:3]
-    cross = np.concatenate([y * c - z * b, z * a - x * c, x * b - y * a], axis=-1)
-    along = x * a + y * b + z * c
-    cos, sin = np.cos(angle), np.sin(angle)
-    return vectors * cos + cross * sin + axis * (along * (1.0 - cos))
+def former_rotated_rows(vectors, rotvecs):
+    """The former ``sensors.vector_arithmetic.rotated_rows`` (Rodrigues,
+    element by element, ``math``'s cosine and sine), uncompiled: the
+    rotation the fine sun sensor's readings were made with."""
+    out = np.empty(rotvecs.shape)
+    for r in range(rotvecs.shape[0]):
+        for i in range(rotvecs.shape[1]):
+            t0, t1, t2 = rotvecs[r, i]
+            angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            safe = angle if angle > 0.0 else 1.0
+            x, y, z = t0 / safe, t1 / safe, t2 / safe
+            a, b, c = vectors[r, i]
+            along = x * a + y * b + z * c
+            cos, sin = math.cos(angle), math.sin(angle)
+            scale = along * (1.0 - cos)
+            out[r, i] = (a * cos + (y * c - z * b) * sin + x * scale,
+                         b * cos + (z * a - x * c) * sin + y * scale,
+                         c * cos + (x * b - y * a) * sin + z * scale)
+    return out
 
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, width=64)
@@ -41,8 +49,9 @@ shapes = st.sampled_from([(3,), (1, 3), (7, 3), (2, 5, 3), (3, 1, 2, 3)])
 
 
 def same_bits(a, b):
-    """Equal to the bit, NaN where NaN."""
-    return a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
+    """Equal to the bit (a zero's sign and a NaN's too)."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
 @settings(max_examples=60, deadline=None)
@@ -87,7 +96,7 @@ def former_fine_sun(sensor, q_true, references, rngs, first_step):
     seen = (numpy_times_matrix(s, sensor.boresight[None])[:, 0] >=
             math.cos(math.radians(sensor.fov_deg))) & (illumination[steps] >= FULL_SUN)
     body = np.zeros((len(rngs), len(q_true), 3))
-    body[:, steps] = numpy_rotated(np.broadcast_to(s, delta.shape), delta)
+    body[:, steps] = former_rotated_rows(np.broadcast_to(s, delta.shape), delta)
     available = np.zeros(len(q_true), dtype=bool)
     available[steps[seen]] = True
     return np.where(available[:, None], body, 0.0), np.broadcast_to(available, body.shape[:2])
@@ -169,6 +178,18 @@ def test_readings_written_into_views_are_the_readings_made_whole():
     assert np.array_equal(available[:, :, 1], whole.available) and whole.available.any()
     assert same_bits(variance[:, :, 1], whole.variance)
     assert not body[:, :, 0].any() and not available[:, :, 0].any()
+
+
+def test_a_zero_noise_leaves_the_sun_vector_as_it_is():
+    """A zero rotation vector (its axis taken as θ itself, no division by
+    zero) turns nothing: the reading is the true Sun vector's bits."""
+    from sensors.vector_arithmetic import turned_rows
+    s = np.array([[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]])
+    body, variance = np.zeros((1, 2, 3)), np.zeros((1, 2))
+    available = np.zeros((1, 2), dtype=bool)
+    turned_rows(s, 0.01, np.zeros((1, 2, 3)), np.arange(2), np.ones(2, dtype=bool), 1e-4, body,
+                variance, available)
+    assert same_bits(body[0], s) and available.all() and same_bits(variance, np.full((1, 2), 1e-4))
 
 
 def test_the_fine_sun_sensor_turns_each_reading_by_its_noise():
