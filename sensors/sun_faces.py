@@ -34,9 +34,7 @@ def first_faces(currents, normals, threshold, opposite, span_tolerance):
     at most ``span_tolerance``)."""
     sets, faces = currents.shape
     chosen = np.zeros((sets, faces), dtype=np.bool_)
-    # One set of working arrays for all the sets (an allocation per set was
-    # half this function's time).
-    order, first, second = np.empty(faces, dtype=np.int64), np.empty(3), np.empty(3)
+    order = np.empty(faces, dtype=np.int64)     # one for all the sets: no allocation per set
     # Each face's opposite faces, listed once (a cube's face has one: the
     # test below then reads one face, not all six).
     opposites, n_opposite = np.empty((faces, faces), dtype=np.int64), np.zeros(faces, np.int64)
@@ -48,33 +46,38 @@ def first_faces(currents, normals, threshold, opposite, span_tolerance):
     for row in range(sets):
         c = currents[row]
         _brightest_first(c, order)
-        first[:] = 0.0
-        second[:] = 0.0
         count = 0
+        f0 = f1 = f2 = s0 = s1 = s2 = 0.0      # the first two faces' normals
         for index in range(faces):
             face = order[index]
-            take = not (count >= 3 and c[face] <= threshold)
-            for index_opposite in range(n_opposite[face]):
-                if chosen[row, opposites[face, index_opposite]]:
-                    take = False
-            n = normals[face]
-            # np.cross(first, n), and the norm and dot product numpy's reductions take.
-            a0 = first[1] * n[2] - first[2] * n[1]
-            a1 = first[2] * n[0] - first[0] * n[2]
-            a2 = first[0] * n[1] - first[1] * n[0]
-            if count == 1:
-                take = take and math.sqrt(a0 * a0 + (a1 * a1 + a2 * a2)) > span_tolerance
-            elif count == 2:
-                take = take and abs(a0 * second[0] + (a1 * second[1] + a2 * second[2])) \
-                    > span_tolerance
-            if take:
-                if count == 0:
-                    first[:] = n
-                elif count == 1:
-                    second[:] = n
-                chosen[row, face] = True
-                count += 1
+            if count >= 3 and c[face] <= threshold:
+                continue
+            if _opposite_taken(chosen[row], opposites[face], n_opposite[face]):
+                continue
+            n0, n1, n2 = normals[face, 0], normals[face, 1], normals[face, 2]
+            if count == 1 or count == 2:
+                # np.cross(first, n), and the norm and dot product numpy's reductions take.
+                a0, a1, a2 = f1 * n2 - f2 * n1, f2 * n0 - f0 * n2, f0 * n1 - f1 * n0
+                if count == 1 and not math.sqrt(a0 * a0 + (a1 * a1 + a2 * a2)) > span_tolerance:
+                    continue
+                if count == 2 and not abs(a0 * s0 + (a1 * s1 + a2 * s2)) > span_tolerance:
+                    continue
+            if count == 0:
+                f0, f1, f2 = n0, n1, n2
+            elif count == 1:
+                s0, s1, s2 = n0, n1, n2
+            chosen[row, face] = True
+            count += 1
     return chosen
+
+
+@njit(cache=True, inline="always")
+def _opposite_taken(chosen, opposites, n_opposite):
+    """Whether a face of ``opposites[:n_opposite]`` is ``chosen``."""
+    for index in range(n_opposite):
+        if chosen[opposites[index]]:
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")
