@@ -221,7 +221,7 @@ def test_vqf_is_told_its_magnetometers_rate_where_it_reads_slower():
     assert reading_interval_s(np.array([True, False, False]), 0.01) == 0.01
 
 
-@pytest.mark.parametrize("name", ["vqf", "fusion"])
+@pytest.mark.parametrize("name", ["vqf", pytest.param("fusion", marks=pytest.mark.slow)])
 def test_the_peers_run_as_registry_estimators(name, tmp_path):
     pytest.importorskip({"vqf": "vqf", "fusion": "imufusion"}[name])
     dataset = open_broad(SHIPPED)

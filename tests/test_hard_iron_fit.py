@@ -182,7 +182,7 @@ def test_with_a_magnet_on_the_device_the_fit_holds_the_heading(filter_class):
 
 @pytest.mark.parametrize("filter_class", [
     MultiplicativeEKF, pytest.param(USQUE, marks=pytest.mark.slow),    # its per-run path: 5 s
-    MekfSmoother])
+    pytest.param(MekfSmoother, marks=pytest.mark.slow)])               # two passes: 3 s
 def test_the_kernel_fits_the_hard_iron_as_the_per_run_filter_does(filter_class):
     from benchmarks.engine.recorded import run_recorded
     dt, n = 1 / 200, 4000

@@ -393,7 +393,8 @@ def _imu_settings(dt: float, gate=None) -> dict:
     return imu_filter_settings(dt, gate_probability=gate)
 
 
-@pytest.mark.parametrize("filter_class", [MultiplicativeEKF, USQUE])
+@pytest.mark.parametrize("filter_class", [MultiplicativeEKF,
+                                          pytest.param(USQUE, marks=pytest.mark.slow)])
 def test_a_first_field_from_a_magnet_costs_the_heading_two_seconds(filter_class, monkeypatch):
     # The first reading (beside a magnet 27° off north) is the first
     # reference, and the heading follows it for the magnet's 0.5 s. The
@@ -417,9 +418,13 @@ def test_a_first_field_from_a_magnet_costs_the_heading_two_seconds(filter_class,
     assert heading_errors_deg()[500] > 8.0
 
 
+# USQUE's cases with a gate or a magnet at the start run in the slow group
+# (3 s each): the README's command keeps USQUE's plain case and the MEKF's.
 @pytest.mark.parametrize("filter_class, gate, magnet_at_start", [
-    (MultiplicativeEKF, None, False), (USQUE, None, False), (USQUE, 0.3, False),
-    (MultiplicativeEKF, None, True), (USQUE, None, True), (USQUE, 0.3, True)])
+    (MultiplicativeEKF, None, False), (USQUE, None, False),
+    pytest.param(USQUE, 0.3, False, marks=pytest.mark.slow),
+    (MultiplicativeEKF, None, True), pytest.param(USQUE, None, True, marks=pytest.mark.slow),
+    pytest.param(USQUE, 0.3, True, marks=pytest.mark.slow)])
 def test_the_kernel_runs_the_imu_models_as_the_per_run_filter_does(filter_class, gate,
                                                                    magnet_at_start):
     from benchmarks.engine.recorded import run_recorded

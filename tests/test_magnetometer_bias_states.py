@@ -149,6 +149,7 @@ def test_the_states_beside_the_imu_models_take_the_per_run_path(tmp_path):
     assert path_of(MekfSmoother.from_scenario(Scenario.from_toml(CUBESAT))) == "kernel"
 
 
+@pytest.mark.slow      # the smoother on a CubeSat arc, through the command: 2.4 s
 def test_the_smoother_fuses_the_hard_iron_too(tmp_path):
     # Both passes estimate it; the fused attitude is better than the forward one's.
     scenario = cubesat(tmp_path, 1500.0)

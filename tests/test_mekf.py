@@ -180,6 +180,7 @@ def matched_runs():
     return flight_runs(N_RUNS)
 
 
+@pytest.mark.slow      # with the test below, flight runs of their own: 8 s on two workers
 def test_mekf_converges_from_a_large_error_and_its_bias_to_the_truth(matched_runs):
     bias_nees = []
     for result in matched_runs:
@@ -198,6 +199,7 @@ def test_mekf_converges_from_a_large_error_and_its_bias_to_the_truth(matched_run
     assert low < sum(bias_nees) < high
 
 
+@pytest.mark.slow
 def test_time_averaged_attitude_nees_is_inside_the_chi_square_band(matched_runs):
     # ANEES at each time is ~ χ²(3N)/N for a consistent filter; its average
     # over time has the same mean and no larger a variance, so the single-time
@@ -208,6 +210,7 @@ def test_time_averaged_attitude_nees_is_inside_the_chi_square_band(matched_runs)
     assert low < time_averaged < high
 
 
+@pytest.mark.slow      # beside the consistency it fails, above
 def test_nees_detects_a_mistuned_mekf():
     # The same check on a filter told the star tracker is 10x better than it
     # is (R / 100): it must fail.

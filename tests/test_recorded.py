@@ -42,7 +42,8 @@ def _per_run(estimator, omega, vectors):
 
 
 @pytest.mark.parametrize("name, path", [
-    ("dead-reckoning", "kernel"), ("mekf", "kernel"), ("usque", "kernel"),
+    ("dead-reckoning", "kernel"), ("mekf", "kernel"),
+    pytest.param("usque", "kernel", marks=pytest.mark.slow),       # 3 s
     ("mekf-smoother", "kernel"),
     ("madgwick", "compiled"), ("madgwick-broad", "compiled"), ("mahony", "compiled"),
     ("triad", "batch"), ("vqf", "batch"), ("vqf-6d", "batch"), ("fusion", "batch")])
@@ -215,7 +216,7 @@ def test_a_declination_turns_the_estimate_alike_on_every_path(trial, name):
         assert angles[0] < 0.2 and 1.0 < angles[-1] < 4.0
 
 
-@pytest.mark.parametrize("name", ["mekf", "usque"])
+@pytest.mark.parametrize("name", ["mekf", pytest.param("usque", marks=pytest.mark.slow)])
 def test_the_kernels_innovation_likelihood_is_the_per_run_filters(trial, name):
     # The tuner without a reference (broad --tune halves) reads these sums:
     # both paths give the same ln det S + NIS over the same updates.

@@ -88,7 +88,7 @@ def _outlier_record(scenario, seed, step, size_nT):
     return sensors, tuple(vectors)
 
 
-@pytest.mark.parametrize("name", ["mekf", "usque"])
+@pytest.mark.parametrize("name", ["mekf", pytest.param("usque", marks=pytest.mark.slow)])
 def test_gating_rejects_an_injected_outlier_that_breaks_the_nees_without_it(name):
     # A 20 µT magnetometer glitch at t = 300 s on the CubeSat scenario (two
     # orbits' worth of readings would take longer; 400 s settle the filter).
