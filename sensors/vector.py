@@ -189,5 +189,14 @@ class VectorSensor:
         ``(R, N, 3)``, ``variance`` and ``available`` ``(R, N)`` (views of
         the engine's block arrays: the readings are written once, where they
         are kept). Returns the reference vectors ``(N, 3)``. Each sensor's
-        model is here; :meth:`measure_runs` and :meth:`measure` call it."""
-        raise NotImplementedError
+        model is here; :meth:`measure_runs` and :meth:`measure` call it. A
+        sensor that defines :meth:`measure_runs` instead has its readings
+        copied in."""
+        if type(self).measure_runs is VectorSensor.measure_runs:
+            raise NotImplementedError(f"{type(self).__name__} defines neither measure_into "
+                                      "nor measure_runs")
+        readings = self.measure_runs(q_true, references, rngs, first_step)
+        body[...] = np.where(readings.available[..., None], readings.body, 0.0)
+        variance[...] = np.where(readings.available, readings.variance, 0.0)
+        available[...] = readings.available
+        return readings.reference

@@ -208,3 +208,35 @@ def test_the_fine_sun_sensor_turns_each_reading_by_its_noise():
     turned = np.arccos(np.clip(np.sum(readings.body[0] * s, axis=-1), -1.0, 1.0))
     assert turned[seen] == pytest.approx(np.linalg.norm(delta, axis=-1)[seen], rel=1e-6)
     assert np.linalg.norm(readings.body[0][seen], axis=-1) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_a_sensor_that_defines_only_measure_runs_still_writes_into_views():
+    """A vector sensor written the older way (its own ``measure_runs``) reads
+    the same through ``measure_into``, as the engine calls it; one that
+    defines neither says so."""
+    from sensors.vector import VectorReadings, VectorSensor
+
+    class Older(VectorSensor):
+        name = "older"
+
+        def measure_runs(self, q_true, references, rngs, first_step=0):
+            shape = (len(rngs), len(q_true))
+            available = np.zeros(shape, dtype=bool)
+            available[:, ::2] = True
+            body = np.stack([rng.standard_normal((len(q_true), 3)) for rng in rngs])
+            return VectorReadings(self.name, body, np.ones((len(q_true), 3)), available,
+                                  np.full(shape, 4.0))
+
+    q, references = random_truth(2, 6)
+    whole = Older(0.1, 0.1).measure_runs(q, references, [np.random.default_rng(1)])
+    body, variance = np.zeros((1, 6, 2, 3)), np.zeros((1, 6, 2))
+    available = np.zeros((1, 6, 2), dtype=bool)
+    reference = Older(0.1, 0.1).measure_into(q, references, [np.random.default_rng(1)], 0,
+                                             body[:, :, 0], variance[:, :, 0],
+                                             available[:, :, 0])
+    assert same_bits(reference, whole.reference)
+    assert np.array_equal(available[:, :, 0], whole.available)
+    assert same_bits(body[:, :, 0], np.where(whole.available[..., None], whole.body, 0.0))
+    assert same_bits(variance[:, :, 0], np.where(whole.available, 4.0, 0.0))
+    with pytest.raises(NotImplementedError, match="neither measure_into nor measure_runs"):
+        VectorSensor(0.1, 0.1).measure_runs(q, references, [np.random.default_rng(1)])
