@@ -19,6 +19,20 @@ def random_unit_quaternions(rng, n):
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+def random_sky(seed: int, steps: int):
+    """Random attitudes ``(steps, 4)`` and what the vector sensors see
+    (:class:`dynamics.environment.References`): random Sun directions, a
+    field, and an illumination below full Sun at about a fifth of the steps."""
+    from dynamics.environment import References
+    rng = np.random.default_rng(seed)
+    q = random_unit_quaternions(rng, steps)
+    sun = rng.standard_normal((steps, 3))
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    illumination = np.where(rng.random(steps) < 0.2, 0.5, 1.0)
+    return q, References(magnetic_field_nT=3e4 * rng.standard_normal((steps, 3)),
+                         sun_unit=sun, illumination=illumination)
+
+
 def pytest_report_header(config):
     """Name the versions the suite ran on (CI's log then says what was tested)."""
     from importlib.metadata import PackageNotFoundError, version

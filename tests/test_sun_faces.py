@@ -5,11 +5,11 @@ run's readings as the former numpy ``measure_runs`` made them."""
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from dynamics.environment import References
 from sensors.sun_sensor import (CUBE_FACES, FULL_SUN, LIT_THRESHOLD_SIGMA, MAX_CONDITION,
                                 OPPOSITE_COSINE, SPAN_TOLERANCE, CoarseSunSensors,
                                 _distinct_rows)
 from sensors.vector import normals, times_matrix, to_body
+from tests.conftest import random_sky
 
 
 def numpy_sun_vectors(self, currents: np.ndarray):
@@ -161,13 +161,7 @@ FIVE_FACES = CUBE_FACES[:5]
 def readings_and_former(seed, runs, first_step, interval, sigma, faces, steps=40):
     """A coarse sensor's readings of random attitudes and Sun directions
     (a fifth of the steps in the penumbra), and the former passes' of the same."""
-    rng = np.random.default_rng(seed)
-    q = rng.standard_normal((steps, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    sun = rng.standard_normal((steps, 3))
-    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
-    references = References(np.ones((steps, 3)), sun,
-                            np.where(rng.random(steps) < 0.2, 0.5, 1.0))
+    q, references = random_sky(seed, steps)
     sensor = CoarseSunSensors(sigma, interval * 0.1, 0.1, normals=faces)
     readings = sensor.measure_runs(q, references, [np.random.default_rng(seed + run)
                                                    for run in range(runs)], first_step)

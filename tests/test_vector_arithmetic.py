@@ -15,6 +15,7 @@ from sensors.accelerometer import GRAVITY_REACTION_ENU_MPS2, Accelerometer
 from sensors.magnetometer import Magnetometer
 from sensors.sun_sensor import FULL_SUN, FineSunSensor
 from sensors.vector import normals, times_matrix, to_body
+from tests.conftest import random_sky
 
 
 def numpy_times_matrix(vectors, matrix):
@@ -73,19 +74,6 @@ def test_times_matrix_keeps_nan_rows_and_views():
     assert same_bits(result, numpy_times_matrix(vectors, matrix))
 
 
-def random_truth(seed: int, steps: int):
-    """Attitudes, a field, Sun directions and an illumination that dips
-    below full Sun, over ``steps`` steps."""
-    rng = np.random.default_rng(seed)
-    q = rng.normal(size=(steps, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    sun = rng.normal(size=(steps, 3))
-    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
-    illumination = np.where(rng.random(steps) < 0.2, 0.5, 1.0)
-    return q, References(magnetic_field_nT=3e4 * rng.normal(size=(steps, 3)), sun_unit=sun,
-                         illumination=illumination, position_km=None)
-
-
 def former_fine_sun(sensor, q_true, references, rngs, first_step):
     """The former numpy ``FineSunSensor.measure_runs``: body and flags."""
     sun_unit, illumination = references.sun_unit, references.illumination
@@ -126,7 +114,7 @@ def test_the_fine_sun_sensor_reads_its_former_bits(seed, runs, first_step, inter
                                                    sigma_deg, fov_deg):
     """Noise across the Sun vector, the field of view and the penumbra, in
     any block of a run: each run's readings are the numpy passes' bits."""
-    q, references = random_truth(seed, 40)
+    q, references = random_sky(seed, 40)
     sensor = FineSunSensor(sigma_deg, interval * 0.1, 0.1, fov_deg=fov_deg)
     readings = sensor.measure_runs(q, references, [np.random.default_rng(seed + run)
                                                    for run in range(runs)], first_step)
@@ -142,7 +130,7 @@ def test_the_fine_sun_sensor_reads_its_former_bits(seed, runs, first_step, inter
 def test_the_magnetometer_and_accelerometer_read_their_former_bits(seed, runs, first_step,
                                                                   interval):
     """Soft iron, hard iron and the accelerometer's bias, in any block of a run."""
-    q, references = random_truth(seed, 30)
+    q, references = random_sky(seed, 30)
     rng = np.random.default_rng(seed)
     soft_iron = np.eye(3) + 0.1 * rng.normal(size=(3, 3))
     bias = 500.0 * rng.normal(size=3)
@@ -166,7 +154,7 @@ def test_the_magnetometer_and_accelerometer_read_their_former_bits(seed, runs, f
 def test_readings_written_into_views_are_the_readings_made_whole():
     """The engine's call: each sensor writes into strided views of one
     block array; what it writes is what :meth:`measure_runs` returns."""
-    q, references = random_truth(11, 25)
+    q, references = random_sky(11, 25)
     sensor = FineSunSensor(0.5, 0.2, 0.1)
     whole = sensor.measure_runs(q, references, [np.random.default_rng(run) for run in (0, 1)],
                                 3)
@@ -195,7 +183,7 @@ def test_a_zero_noise_leaves_the_sun_vector_as_it_is():
 def test_the_fine_sun_sensor_turns_each_reading_by_its_noise():
     """Each reading is the true Sun vector turned by |δ| (the formula's
     meaning), and unit length: the noise lies across the Sun vector."""
-    q, references = random_truth(7, 50)
+    q, references = random_sky(7, 50)
     references = References(references.magnetic_field_nT, references.sun_unit, np.ones(50))
     sensor = FineSunSensor(2.0, 0.1, 0.1, fov_deg=90.0)
     rng = np.random.default_rng(5)
@@ -227,7 +215,7 @@ def test_a_sensor_that_defines_only_measure_runs_still_writes_into_views():
             return VectorReadings(self.name, body, np.ones((len(q_true), 3)), available,
                                   np.full(shape, 4.0))
 
-    q, references = random_truth(2, 6)
+    q, references = random_sky(2, 6)
     whole = Older(0.1, 0.1).measure_runs(q, references, [np.random.default_rng(1)])
     body, variance = np.zeros((1, 6, 2, 3)), np.zeros((1, 6, 2))
     available = np.zeros((1, 6, 2), dtype=bool)
