@@ -13,6 +13,9 @@ Run ``python -m benchmarks.broad.without_rest --broad DIR`` (the full
 dataset; the two shipped trials without ``--broad``); it prints each
 estimator's mean over the trials, whole and cut, and their ratio, and
 writes ``without_rest.csv`` (one row per trial and estimator) to ``--out``.
+``--simulated N`` runs it on N simulated hand-held recordings instead
+(:mod:`sensors.handheld`): a uniform field and a true reference, where
+what an estimator loses without its rest is its own, not the room's.
 """
 from __future__ import annotations
 
@@ -37,6 +40,9 @@ from estimators import resolve_estimator
 DEFAULT_ESTIMATORS = ("mekf", "mekf-smoother", "vqf", "vqf-offline")
 #: The magnetometer keeps every MAGNETOMETER_EVERY-th reading in the cut trials.
 MAGNETOMETER_EVERY = 4
+#: What the table of simulated recordings says of its data.
+SIMULATED_ATTRIBUTION = ("Simulated hand-held recordings (dynamics/handheld.py, "
+                         "sensors/handheld.py): no recorded data.")
 
 
 def cut(recording):
@@ -52,7 +58,12 @@ def cut(recording):
 
 def scores(dataset, trial: str, names) -> list[dict]:
     """One trial's rows: each estimator's total RMSE whole and cut."""
-    recording = dataset.load(trial)
+    return recording_scores(dataset.load(trial), trial, names)
+
+
+def recording_scores(recording, trial: str, names) -> list[dict]:
+    """``recording``'s rows, named ``trial``: each estimator's total RMSE
+    whole and cut."""
     whole = imu_inputs(recording)
     start, part, vectors = cut(recording)
     rows = []
@@ -108,23 +119,52 @@ def write_table(out: Path, name: str, table: pd.DataFrame, attribution: str) -> 
     print(f"wrote {out / name}, {out / 'ATTRIBUTION.txt'}\n{attribution}")
 
 
+def simulated_rows(args, names):
+    """The rows of ``args.simulated`` simulated hand-held recordings (seeds
+    0, 1, …: :func:`sensors.handheld.simulated_recording`), a uniform field
+    and a true reference: what an estimator loses there is its own."""
+    from sensors.handheld import simulated_recording
+    if args.broad is not None:
+        raise InvalidParameterError("--simulated", args.simulated, "cannot be given with --broad")
+    if args.simulated < 1:
+        raise InvalidParameterError("--simulated", args.simulated, "must be a whole number >= 1")
+    for name in names:
+        resolve_estimator(name)
+    return [row for seed in progress(range(args.simulated), desc="recordings", quiet=args.quiet)
+            for row in recording_scores(simulated_recording(seed), f"handheld-{seed}", names)]
+
+
 def main(argv=None) -> int:
     parser = script_parser("python -m benchmarks.broad.without_rest", __doc__)
     parser.add_argument("--estimators", default=",".join(DEFAULT_ESTIMATORS))
+    parser.add_argument("--simulated", type=int, metavar="N",
+                        help="N simulated hand-held recordings in a uniform field instead "
+                             "of BROAD's trials")
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.estimators.split(",") if name.strip()]
-    found = trial_rows(args, "without_rest", lambda dataset, trial: scores(dataset, trial, names),
-                       check=lambda: [resolve_estimator(name) for name in names])
-    if found is None:
-        return 2
-    dataset, rows = found
+    if args.simulated is not None:
+        try:
+            rows = simulated_rows(args, names)
+        except InvalidParameterError as err:
+            print(f"without_rest: error: {err}", file=sys.stderr)
+            return 2
+        what, attribution = (f"{args.simulated} simulated hand-held recordings",
+                             SIMULATED_ATTRIBUTION)
+    else:
+        found = trial_rows(args, "without_rest",
+                           lambda dataset, trial: scores(dataset, trial, names),
+                           check=lambda: [resolve_estimator(name) for name in names])
+        if found is None:
+            return 2
+        dataset, rows = found
+        what, attribution = f"{len(dataset.available)} trials", dataset.attribution
     table = pd.DataFrame(rows)
     summary = table.groupby("estimator", sort=False)[["whole_deg", "without_rest_deg"]].mean()
     summary["ratio"] = summary["without_rest_deg"] / summary["whole_deg"]
-    print(f"{len(dataset.available)} trials, total RMSE over the movement after the cut "
+    print(f"{what}, total RMSE over the movement after the cut "
           f"(degrees), magnetometer at 1/{MAGNETOMETER_EVERY} rate in the cut trials:")
     print(summary.to_string(float_format=lambda x: f"{x:.3f}"))
-    write_table(args.out, "without_rest.csv", table, dataset.attribution)
+    write_table(args.out, "without_rest.csv", table, attribution)
     return 0
 
 

@@ -1,0 +1,81 @@
+"""An IMU in the hand of :mod:`dynamics.handheld`: a simulated recording.
+
+The readings are what a MEMS IMU gives of that motion, in the units and
+frames of a recorded trial (:class:`sensors.recording.Recording`), with the
+truth as its reference attitude and no gap in it:
+
+- the gyro: the body rate, plus a constant bias drawn per axis uniformly
+  within ``±gyro_bias_dps``, plus white noise of density
+  ``gyro_noise_density`` (rad/√s);
+- the accelerometer: the specific force in the body frame (the linear
+  acceleration minus gravity, so a device at rest reads +9.81 m/s² up),
+  plus white noise of σ ``accelerometer_sigma_mps2``;
+- the magnetometer: a uniform field of norm ``field_uT`` pointing north
+  (+y) and down at ``dip_deg``, in the body frame, plus white noise of σ
+  ``magnetometer_sigma_uT``.
+
+The noise levels are those of a good MEMS IMU (BROAD's, Laidig et al. 2021:
+a gyro of about 1e-4 rad/√s; an accelerometer's and a magnetometer's
+readings scattering by a few hundredths of their units) and the field is
+central Europe's (IGRF near Berlin: 49 µT at a dip of 66°).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynamics.handheld import HandheldMotion, simulate_handheld
+from dynamics.quaternion import to_rotation
+from dynamics.validation import InvalidParameterError, finite_number, standard_deviation
+from sensors.recording import Recording
+
+#: Standard gravity, m/s² (the readings' gravity; the filters take their own).
+GRAVITY_MPS2 = 9.80665
+
+
+@dataclass(frozen=True)
+class HandheldImu:
+    """The IMU's errors and the field it reads (module docstring)."""
+
+    gyro_bias_dps: float = 0.5
+    gyro_noise_density: float = 1.5e-4
+    accelerometer_sigma_mps2: float = 0.03
+    magnetometer_sigma_uT: float = 0.5
+    field_uT: float = 49.0
+    dip_deg: float = 66.0
+
+    def __post_init__(self):
+        for name in ("gyro_bias_dps", "gyro_noise_density", "accelerometer_sigma_mps2",
+                     "magnetometer_sigma_uT"):
+            standard_deviation(name, getattr(self, name))
+        finite_number("field_uT", self.field_uT, strictly_positive=True)
+        if abs(finite_number("dip_deg", self.dip_deg)) > 90.0:
+            raise InvalidParameterError("dip_deg", self.dip_deg, "must be within ±90°")
+
+    def field_world(self) -> np.ndarray:
+        """The field in the world frame (ENU), µT."""
+        dip = np.radians(self.dip_deg)
+        return self.field_uT * np.array([0.0, np.cos(dip), -np.sin(dip)])
+
+
+def simulated_recording(seed: int, motion: HandheldMotion = HandheldMotion(),
+                        imu: HandheldImu = HandheldImu()) -> Recording:
+    """A recording of ``motion`` by ``imu``, drawn from seed ``seed`` (the
+    motion first, then the bias, then each channel's noise), named
+    ``handheld-SEED``."""
+    rng = np.random.default_rng(seed)
+    truth = simulate_handheld(motion, rng)
+    n, rate = len(truth.q_true), truth.rate_hz
+    to_body = to_rotation(truth.q_true).inv()
+    bias = np.radians(imu.gyro_bias_dps) * rng.uniform(-1.0, 1.0, 3)
+    gyro = truth.omega_radps + bias + imu.gyro_noise_density * np.sqrt(rate) \
+        * rng.standard_normal((n, 3))
+    force = to_body.apply(truth.acceleration_mps2 + [0.0, 0.0, GRAVITY_MPS2])
+    field = to_body.apply(np.tile(imu.field_world(), (n, 1)))
+    return Recording(
+        name=f"handheld-{seed}", gyro_radps=gyro, reference_quat=truth.q_true,
+        movement=truth.movement, rate_hz=rate,
+        info=f"simulated: {motion}, {imu}, seed {seed}",
+        accelerometer_mps2=force + imu.accelerometer_sigma_mps2 * rng.standard_normal((n, 3)),
+        magnetometer_uT=field + imu.magnetometer_sigma_uT * rng.standard_normal((n, 3)))

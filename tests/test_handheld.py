@@ -1,0 +1,128 @@
+"""The simulated hand-held IMU (dynamics/handheld.py, sensors/handheld.py):
+its truth is the integral of its rates, its readings are that truth seen by
+the sensors, bad settings are refused in one line, and the without-rest
+script runs on it."""
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dynamics.handheld import HandheldMotion, simulate_handheld
+from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_rotation
+from dynamics.validation import InvalidParameterError
+from sensors.handheld import GRAVITY_MPS2, HandheldImu, simulated_recording
+
+#: A short motion, so that each example takes milliseconds.
+SHORT = HandheldMotion(rate_hz=50.0, rest_s=1.0, moving_s=4.0, final_rest_s=1.0, taper_s=0.5)
+#: An IMU without errors: its readings are the truth seen by the sensors.
+PERFECT = HandheldImu(gyro_bias_dps=0.0, gyro_noise_density=0.0, accelerometer_sigma_mps2=0.0,
+                      magnetometer_sigma_uT=0.0)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), rate_rms=st.floats(1.0, 400.0))
+def test_the_attitude_is_the_rate_integrated_step_by_step(seed, rate_rms):
+    motion = HandheldMotion(**{**SHORT.__dict__, "rate_rms_dps": rate_rms})
+    truth = simulate_handheld(motion, np.random.default_rng(seed))
+    q = truth.q_true[0]
+    for k in range(1, len(truth.q_true)):
+        q = quat_multiply(q, quat_from_rotvec(truth.omega_radps[k - 1] / motion.rate_hz))
+        assert min(np.abs(q - truth.q_true[k]).max(), np.abs(q + truth.q_true[k]).max()) < 1e-9
+
+
+def test_the_motion_rests_at_both_ends_and_moves_between():
+    truth = simulate_handheld(SHORT, np.random.default_rng(1))
+    rest, moving, final = SHORT.samples()
+    assert truth.movement.tolist() == [False] * rest + [True] * moving + [False] * final
+    still = ~truth.movement
+    assert not truth.omega_radps[still].any() and not truth.acceleration_mps2[still].any()
+    assert np.all(np.abs(truth.omega_radps[truth.movement]).max(axis=0) > 0)
+
+
+def test_without_a_taper_each_axis_has_the_rms_asked_for():
+    motion = HandheldMotion(**{**SHORT.__dict__, "taper_s": 0.0, "rate_rms_dps": 90.0,
+                               "acceleration_rms_mps2": 3.0})
+    truth = simulate_handheld(motion, np.random.default_rng(2))
+    moving = truth.movement
+    np.testing.assert_allclose(np.degrees(truth.omega_radps[moving]).std(axis=0), 90.0,
+                               rtol=1e-12)
+    np.testing.assert_allclose(truth.acceleration_mps2[moving].std(axis=0), 3.0, rtol=1e-12)
+
+
+def test_the_taper_ramps_the_motion_in_and_out():
+    """Over the taper's 25 samples the rate grows as k/25 of the untapered
+    noise: its first samples are small beside the movement's RMS."""
+    truth = simulate_handheld(SHORT, np.random.default_rng(2))
+    rest, moving, _ = SHORT.samples()
+    rms = np.radians(SHORT.rate_rms_dps)
+    edges = np.abs(truth.omega_radps[[rest, rest + moving - 1]])
+    assert not edges.any()
+    assert np.abs(truth.omega_radps[rest + 1]).max() < 5 * rms / 25
+
+
+def test_a_perfect_imu_reads_the_truth():
+    recording = simulated_recording(3, SHORT, PERFECT)
+    truth = simulate_handheld(SHORT, np.random.default_rng(3))
+    np.testing.assert_array_equal(recording.reference_quat, truth.q_true)
+    np.testing.assert_allclose(recording.gyro_radps, truth.omega_radps, atol=1e-15)
+    to_world = to_rotation(recording.reference_quat)
+    np.testing.assert_allclose(to_world.apply(recording.magnetometer_uT),
+                               np.tile(PERFECT.field_world(), (len(truth.q_true), 1)), atol=1e-9)
+    force = to_world.apply(recording.accelerometer_mps2)   # at rest, gravity reads up
+    np.testing.assert_allclose(force, truth.acceleration_mps2 + [0.0, 0.0, GRAVITY_MPS2],
+                               atol=1e-9)
+    field = PERFECT.field_world()
+    assert np.linalg.norm(field) == pytest.approx(49.0)
+    assert np.degrees(np.arctan2(-field[2], field[1])) == pytest.approx(66.0)
+
+
+def test_the_gyro_bias_is_constant_and_within_its_bound():
+    imu = HandheldImu(gyro_bias_dps=2.0, gyro_noise_density=0.0)
+    recording = simulated_recording(4, SHORT, imu)
+    truth = simulate_handheld(SHORT, np.random.default_rng(4))
+    offset = np.degrees(recording.gyro_radps - truth.omega_radps)
+    np.testing.assert_allclose(offset, np.tile(offset[0], (len(offset), 1)), atol=1e-12)
+    assert np.all(np.abs(offset[0]) <= 2.0) and np.any(offset[0] != 0.0)
+
+
+@pytest.mark.parametrize("make, shown", [
+    (lambda: HandheldMotion(rate_hz=0.0), "rate_hz = 0.0: must be > 0"),
+    (lambda: HandheldMotion(moving_s=-1.0), "moving_s = -1.0: must be > 0"),
+    (lambda: HandheldMotion(rest_s=float("nan")), "rest_s = nan: must be finite"),
+    (lambda: HandheldMotion(bandwidth_hz=150.0), "bandwidth_hz = 150.0: must be below half"),
+    (lambda: HandheldMotion(moving_s=4.0, taper_s=3.0), "taper_s = 3.0: must be at most half"),
+    (lambda: HandheldImu(dip_deg=100.0), "dip_deg = 100.0: must be within ±90°"),
+    (lambda: HandheldImu(field_uT=0.0), "field_uT = 0.0: must be > 0"),
+    (lambda: HandheldImu(gyro_bias_dps=-1.0), "gyro_bias_dps = -1.0"),
+])
+def test_a_bad_setting_is_refused_in_one_line(make, shown):
+    with pytest.raises(InvalidParameterError) as refused:
+        make()
+    assert str(refused.value).startswith(shown) and "\n" not in str(refused.value)
+
+
+def test_the_without_rest_script_runs_on_simulated_recordings(tmp_path, capsys):
+    from benchmarks.broad import without_rest
+    assert without_rest.main(["--simulated", "1", "--estimators", "mekf", "--quiet",
+                              "--out", str(tmp_path)]) == 0
+    table = pd.read_csv(tmp_path / "without_rest.csv")
+    assert table[["trial", "estimator"]].values.tolist() == [["handheld-0", "mekf"]]
+    assert table["cut_at_sample"].tolist() == [HandheldMotion().samples()[0]]   # 10 s at 200 Hz
+    assert np.all(np.isfinite(table[["whole_deg", "without_rest_deg"]].to_numpy()))
+    assert "1 simulated hand-held recordings" in capsys.readouterr().out
+    assert "Simulated" in (tmp_path / "ATTRIBUTION.txt").read_text()
+
+
+@pytest.mark.parametrize("argv, shown", [
+    (["--simulated", "0"], "--simulated = 0: must be a whole number >= 1"),
+    (["--simulated", "1", "--broad", "x"], "--simulated = 1: cannot be given with --broad"),
+    (["--simulated", "1", "--estimators", "nope"], "estimator = 'nope'"),
+])
+def test_the_without_rest_script_refuses_bad_simulations_in_one_line(argv, shown, tmp_path,
+                                                                     capsys):
+    from benchmarks.broad import without_rest
+    assert without_rest.main(argv + ["--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"without_rest: error: {shown}") and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
