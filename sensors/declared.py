@@ -25,7 +25,8 @@ reads it into a checked :class:`~sensors.recording.Recording`.
 The formats: CSV and Parquet (pandas), ``.npz`` (numpy), ``.mat`` (scipy)
 and HDF5 (h5py); a column is a 1-D array, or ``columns`` names one (N, 3)
 or (N, 4) array. Each sensor keeps its own timestamps: the gyro's samples
-are the recording's steps (its rate the median of their intervals), and
+are the recording's steps (its rate fitted to their times, a dropped sample
+put back with the rate before it: :func:`clock_steps`), and
 every other reading is taken at the first gyro sample at or after its time,
 as the star tracker's readings are (:mod:`sensors.star_tracker`); a sample
 with no reading of a sensor holds none (a row of zeros: a dropout, which
@@ -152,8 +153,8 @@ def _time_origin(table: dict, sections: dict) -> int:
 def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
           span: slice) -> Recording:
     """One unbroken stretch ``span`` of the gyro's clock as a recording."""
-    gyro_time, gyro = read["gyro"][0][span], read["gyro"][1][span]
-    rate = 1.0 / float(np.median(np.diff(gyro_time)))
+    gyro_time, gyro = _gyro_on_grid(path, *(column[span] for column in read["gyro"]))
+    rate = 1.0 / clock_period(gyro_time)
     _check_rate(path, rate, declaration.get("time_unit", "s"))
     if not np.any(gyro != 0.0):
         refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
@@ -322,6 +323,48 @@ def _check_clock(path: Path, column, times: np.ndarray) -> None:
     if len(times) < 2:
         refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
                 "at least two")
+
+
+def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each sample's step on a uniform clock, and the clock's period:
+    the least-squares line through the samples' times against their steps,
+    an interval of about k periods counting k steps (k - 1 samples dropped).
+    The steps are counted in the median interval and in the mean one, and
+    the count whose line fits the times better is taken: the median is the
+    period where samples were dropped, the mean where the times are rounded
+    (integer milliseconds at 256 Hz: intervals of 3 and 4 ms, median 4)."""
+    intervals, best = np.diff(times), None
+    for guess in (np.median(intervals), (times[-1] - times[0]) / (len(times) - 1)):
+        steps = np.concatenate([[0], np.cumsum(np.maximum(1.0, np.rint(intervals / guess)))])
+        period, origin = np.polyfit(steps, times, 1)
+        misfit = float(np.mean((times - origin - period * steps) ** 2))
+        if best is None or misfit < best[0]:
+            best = (misfit, steps.astype(np.int64), float(period))
+    return best[1], best[2]
+
+
+def clock_period(times: np.ndarray) -> float:
+    """A sensor's period: the median interval where the fitted one
+    (:func:`clock_steps`) agrees with it to 1 ppm (a clock without drops or
+    rounding, read as before), else the fitted one."""
+    median = float(np.median(np.diff(times)))
+    fitted = clock_steps(times)[1]
+    return median if abs(fitted - median) <= 1e-6 * median else fitted
+
+
+def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
+    """The gyro's times and rates with each dropped sample (:func:`clock_steps`)
+    put back, its rate held from the sample before and its time between its
+    neighbours'; a warning says how many."""
+    steps, _ = clock_steps(times) if len(times) > 1 else (np.arange(len(times)), 0.0)
+    missing = int(steps[-1]) + 1 - len(times)
+    if missing == 0:
+        return times, rates
+    warnings.warn(f"{path.name}: {missing} gyro sample(s) missing between readings (intervals "
+                  "of two or more periods); each is put back with the rate of the sample "
+                  "before it", stacklevel=3)
+    grid = np.arange(steps[-1] + 1)
+    return np.interp(grid, steps, times), rates[np.searchsorted(steps, grid, side="right") - 1]
 
 
 def part_starts(times: np.ndarray) -> np.ndarray:

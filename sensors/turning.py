@@ -66,8 +66,8 @@ MIN_BLOCKS, MIN_RATE_RADPS = 20, 0.1
 
 
 def _block_means(values: np.ndarray, steps: int) -> np.ndarray:
-    blocks = len(values) // steps
-    return values[:blocks * steps].reshape(blocks, steps, -1).mean(axis=1)
+    blocks = len(values) // steps    # none where the values are shorter than a block
+    return values[:blocks * steps].reshape(blocks, steps, values.shape[1]).mean(axis=1)
 
 
 def _held(vectors: np.ndarray) -> np.ndarray:

@@ -9,10 +9,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from benchmarks.cli import main
 from dynamics.validation import InvalidParameterError
-from sensors.declared import load_declared
+from sensors.declared import load_declared, load_parts
 from sensors.tables import read_table
 from sensors.recording import load_recording
 
@@ -532,3 +534,79 @@ def test_a_clipped_accelerometer_is_noted(trial, tmp_path, capsys):
     assert main([*args, "--out", str(tmp_path / "clipped")]) == 0
     assert f"trial log: {count} accelerometer readings at ±11 m/s², its rail (clipped)" in \
         capsys.readouterr().err
+
+
+@settings(max_examples=60, deadline=None)
+@given(rate=st.floats(20.0, 2000.0), quantum_ms=st.sampled_from([0.0, 0.1, 1.0]),
+       drops=st.sampled_from([0.0, 0.05, 0.2]), seed=st.integers(0, 2 ** 32 - 1))
+def test_the_clock_is_fitted_through_rounded_times_and_dropped_samples(rate, quantum_ms, drops,
+                                                                       seed):
+    """A uniform clock of ``rate`` Hz, its times rounded to a quantum q (a
+    logger's whole milliseconds), a share ``drops`` of its samples dropped,
+    never two in a row: each kept sample's step and the period are found.
+    Rounding moves an interval by at most q and the median by at most q:
+    with q <= p/10 an interval of one or two periods reads as 0.82-1.22 or
+    1.73-2.33 medians, so its count is exact; without drops the mean is the
+    period and q < p/2 keeps each count at 1. The least-squares slope over
+    n steps then errs by at most (q/2)·Σ|x - x̄| / Σ(x - x̄)² ≈ 1.5 q/n."""
+    from sensors.declared import clock_period, clock_steps
+    period, quantum = 1.0 / rate, quantum_ms * 1e-3
+    assume(quantum <= period / 10 or (drops == 0.0 and quantum < period / 2))
+    rng = np.random.default_rng(seed)
+    dropped = rng.random(400) < drops
+    dropped[1:] &= ~dropped[:-1]
+    dropped[[0, -1]] = False
+    steps = np.flatnonzero(~dropped)
+    times = 12.5 + steps * period
+    if quantum:
+        times = np.round(times / quantum) * quantum
+    found, fitted = clock_steps(times)
+    np.testing.assert_array_equal(found, steps)
+    span = steps[-1]
+    assert abs(fitted - period) * span <= 1.5 * quantum + 1e-9
+    # clock_period is the median where the fit agrees with it to 1 ppm
+    assert abs(clock_period(times) - period) * span <= 1.5 * quantum + 1e-6 * period * span + 1e-9
+
+
+def test_a_clock_in_integer_milliseconds_scores_as_the_exact_one(trial, tmp_path, capsys):
+    """BROAD's 286 Hz in whole milliseconds (intervals of 3 and 4 ms, median
+    3): the rate is fitted (286 Hz, not 333), and the scores are those of
+    the exact clock to a small part of a degree."""
+    table = _table(trial)
+    exact = _declare(tmp_path, _csv(tmp_path, table, "exact.csv"))
+    table["t"] = np.floor(np.asarray(table["t"]) * 1000.0)
+    rounded = _declare(tmp_path, _csv(tmp_path, table, "ms.csv"), time_unit="ms")
+    scores = {}
+    for path in (exact, rounded):
+        (recording,) = load_parts(path)
+        assert recording.rate_hz == pytest.approx(trial[0].rate_hz, rel=2e-3)
+        out = tmp_path / path.stem
+        assert main(["broad", "--broad", str(path), "--estimators", "mekf", "--out", str(out),
+                     "--quiet"]) == 0
+        scores[path.stem] = pd.read_csv(out / "broad_trials.csv")["total_rmse_deg"].iloc[0]
+    assert abs(scores["ms"] - scores["exact"]) < 0.1 * scores["exact"], scores
+
+
+def test_a_dropped_gyro_sample_is_put_back_with_the_rate_before_it(trial, tmp_path):
+    table = _table(trial)
+    kept = np.ones(len(table["t"]), dtype=bool)
+    kept[[100, 205, 333]] = False
+    declared = _declare(tmp_path, _csv(tmp_path, {k: np.asarray(v)[kept] for k, v in
+                                                  table.items()}, "drops.csv"))
+    with pytest.warns(UserWarning, match="3 gyro sample.s. missing between readings"):
+        (recording,) = load_parts(declared)
+    gyro = np.asarray([table[f"g{axis}"] for axis in "xyz"]).T
+    assert recording.n_samples == len(kept)
+    np.testing.assert_array_equal(recording.gyro_radps[kept], gyro[kept])
+    np.testing.assert_array_equal(recording.gyro_radps[[100, 205, 333]], gyro[[99, 204, 332]])
+    assert recording.rate_hz == pytest.approx(trial[0].rate_hz, rel=1e-9)
+
+
+def test_a_part_shorter_than_a_turning_block_loads(trial, tmp_path):
+    """Two gaps 10 samples apart (35 ms at 286 Hz, shorter than the turning
+    checks' 0.1 s block): the short part loads as one of three, no crash."""
+    table = _table(trial)
+    table["t"] = np.asarray(table["t"]) + np.where(np.arange(len(table["t"])) >= 600, 1.0, 0.0) \
+        + np.where(np.arange(len(table["t"])) >= 610, 1.0, 0.0)
+    parts = load_parts(_declare(tmp_path, _csv(tmp_path, table, "short.csv")))
+    assert [part.n_samples for part in parts] == [600, 10, len(table["t"]) - 610]

@@ -20,7 +20,8 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.declared import GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS, declared_recordings
+from sensors.declared import (GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS, clock_period,
+                              declared_recordings)
 from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits, turning_scale
 
@@ -116,7 +117,7 @@ def clock(times: np.ndarray) -> dict:
     intervals = np.diff(times)
     if not len(intervals):
         return {"readings": len(times)}
-    typical = float(np.median(intervals))
+    typical = clock_period(times)
     return {"readings": len(times), "interval": typical,
             "jitter": float(np.std(intervals) / typical), "longest": float(intervals.max()),
             "gaps": int(np.count_nonzero(intervals > GAP_FACTOR * typical))}
