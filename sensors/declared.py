@@ -88,11 +88,11 @@ def load_declared(path) -> Recording:
     a gap in the gyro's clock: :func:`load_parts` splits the file there)."""
     parts = load_parts(path)
     if len(parts) > 1:
-        second = parts[1]
-        refuse(Path(path), "recording.gyro.time", None, f"has {len(parts) - 1} gap(s) "
-                f"(the first after {parts[0].n_samples} readings, before part "
-                f"{second.name}); a recording is one unbroken gyro log: load_parts splits "
-                "it there")
+        path = Path(path)
+        refuse(path, "recording.gyro.time", read_declaration(path)["gyro"]["time"],
+               f"has {len(parts) - 1} gap(s) (the first after {parts[0].n_samples} readings); "
+               "a recording is one unbroken gyro log: cut the file at its gaps, or run broad "
+               f"--broad {path.name}, which scores each part as a trial of its own")
     return parts[0]
 
 

@@ -323,7 +323,8 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, 
         table[f"q{part}"][split] = np.nan         # each part starts without a reference
     table["t"][split:] += 2.0
     declared = _declare(tmp_path, _csv(tmp_path, table))
-    with pytest.raises(InvalidParameterError, match="has 1 gap.*load_parts splits"):
+    with pytest.raises(InvalidParameterError,
+                       match="= 't': has 1 gap.*run broad --broad .*, which scores each part"):
         load_declared(declared)
     parts = load_parts(declared)
     assert [p.name for p in parts] == ["log_part1", "log_part2"]

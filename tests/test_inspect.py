@@ -150,3 +150,69 @@ def test_time_units_clipping_and_rest_on_made_data():
     assert rest_periods(rates[400:], force[400:], dt) == []
     assert fitting_unit("accelerometer", force / 9.80665) == "g"
     assert fitting_unit("accelerometer", force) == "m/s^2"
+
+
+def _readme_phone(path: Path, seconds: float = 30.0) -> Path:
+    """The README's phone: ``t_ms``, ``gx``…, and the magnetometer on its
+    own clock ``t_mag_ms`` beside ``mx``… (a quarter of the rate; empty
+    cells between its readings), no reference."""
+    recording = load_recording(TRIAL)
+    keep = int(seconds * recording.rate_hz)
+    frame = pd.DataFrame({"t_ms": recording.time_s[:keep] * 1e3})
+    for i, axis in enumerate("xyz"):
+        frame[f"g{axis}"] = recording.gyro_radps[:keep, i]
+        frame[f"a{axis}"] = recording.accelerometer_mps2[:keep, i]
+    frame["t_mag_ms"] = np.where(np.arange(keep) % 4 == 0, frame["t_ms"] + 0.5, np.nan)
+    for i, axis in enumerate("xyz"):
+        frame[f"m{axis}"] = np.where(np.arange(keep) % 4 == 0,
+                                     recording.magnetometer_uT[:keep, i], np.nan)
+    frame.to_csv(path, index=False, float_format="%.17g")
+    return path
+
+
+def test_the_readme_phones_magnetometer_keeps_its_own_clock(tmp_path, capsys):
+    path = _readme_phone(tmp_path / "phone.csv")
+    assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    magnetometer = [line for line in out.splitlines() if line.split()[:1] == ["magnetometer"]]
+    rate = float(magnetometer[0].split("readings,")[1].split("Hz")[0])
+    assert rate == pytest.approx(load_recording(TRIAL).rate_hz / 4, rel=0.01)
+    text = path.with_suffix(".toml").read_text()
+    assert '[recording.magnetometer]\ntime = "t_mag_ms"' in text, text
+
+
+def test_inspect_reads_matlab_vectors_and_a_commented_csv(tmp_path, capsys):
+    from scipy.io import savemat
+    csv = _readme_phone(tmp_path / "phone.csv", seconds=10.0)
+    frame = pd.read_csv(csv)
+    savemat(tmp_path / "phone_mat.mat", {name: frame[name].to_numpy() for name in frame})
+    commented = tmp_path / "phone_commented.csv"
+    commented.write_text("# logger v2.1\n# 286 Hz\n" + csv.read_text())
+    for path in (tmp_path / "phone_mat.mat", commented):
+        assert main(["inspect", str(path)]) == 0, path
+        out = capsys.readouterr().out
+        assert "gyro" in out and "readings," in out and path.with_suffix(".toml").exists()
+
+
+def test_a_parquet_file_without_its_engine_names_the_package(tmp_path, monkeypatch):
+    import pandas
+    from dynamics.validation import InvalidParameterError
+    from sensors.tables import read_table
+
+    def no_engine(*args, **kwargs):
+        raise ImportError("Unable to find a usable engine; tried using: 'pyarrow'")
+    monkeypatch.setattr(pandas, "read_parquet", no_engine)
+    (tmp_path / "log.parquet").write_bytes(b"PAR1")
+    with pytest.raises(InvalidParameterError, match="needs pyarrow, which is not installed"):
+        read_table(tmp_path / "log.parquet")
+
+
+def test_replay_of_a_declaration_without_a_reference_says_so(tmp_path, capsys):
+    path = _readme_phone(tmp_path / "phone.csv", seconds=10.0)
+    assert main(["inspect", str(path)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["replay", "--dataset", str(path.with_suffix(".toml")), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "declares no reference attitude ([recording.reference])" in err
+    assert err.count("\n") == 1 and not out.exists()

@@ -193,12 +193,25 @@ def _values(table: dict, columns) -> np.ndarray:
                             for name in columns])
 
 
-def _time_for(columns, times: list) -> str:
-    """The time column that names the sensor's prefix, else the first."""
+def _time_for(sensor: str, columns, times: list, table: dict) -> str:
+    """The sensor's time column: one whose name names it (its columns'
+    prefix, ``t_acc`` beside ``acc_x``, or a word of the sensor's,
+    ``t_mag_ms`` beside ``mx``), else one that holds a time exactly where
+    its columns hold a reading (a merged table's own clock), else the first."""
     names = [columns] if isinstance(columns, str) else columns
     words = set().union(*(_tokens(name) for name in names)) - set("wxyz")
-    named = [time for time in times if (_tokens(time) - set(TIME_TOKENS)) & words]
-    return (named or times)[0]
+
+    def names_it(time: str) -> bool:
+        rest = _tokens(time) - set(TIME_TOKENS)
+        return bool(rest & words) or any(_sensor_of(token) == sensor for token in rest)
+
+    def reads_with_it(time: str) -> bool:
+        values, stamps = _values(table, columns), np.asarray(table[time], dtype=float)
+        return (stamps.shape == values.shape[:1]
+                and np.array_equal(np.isnan(stamps), np.isnan(values).any(axis=1)))
+
+    return ([time for time in times if names_it(time)]
+            or [time for time in times if reads_with_it(time)] or times)[0]
 
 
 def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
@@ -217,11 +230,12 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
                      "values increase): declare each sensor's time by hand")
         return declaration, notes
     if "gyro" in columns:
-        gyro_time = np.asarray(table[_time_for(columns["gyro"], times)], dtype=float)
+        gyro_time = np.asarray(table[_time_for("gyro", columns["gyro"], times, table)],
+                               dtype=float)
         declaration["time_unit"] = time_unit(np.diff(gyro_time[~np.isnan(gyro_time)]))
     seconds = TIME_UNITS[declaration.get("time_unit", "s")]
     for sensor, chosen in columns.items():
-        section = {"time": _time_for(chosen, times), "columns": chosen}
+        section = {"time": _time_for(sensor, chosen, times, table), "columns": chosen}
         values = _values(table, chosen)
         if sensor in ("accelerometer", "magnetometer"):
             unit = fitting_unit(sensor, values)

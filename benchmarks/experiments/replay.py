@@ -79,7 +79,12 @@ def open_dataset(dataset: str) -> tuple[Recording, str | None]:
         return load_recording(path, name=dataset), ATTRIBUTION
     if str(dataset).endswith(".toml"):
         from sensors.declared import load_declared
-        return load_declared(dataset), None
+        recording = load_declared(dataset)
+        if not recording.has_reference.any():
+            raise InvalidParameterError("dataset", str(dataset), "declares no reference attitude "
+                                        "([recording.reference]): replay scores against one; "
+                                        "broad ranks a recording without one by agreement")
+        return recording, None
     if not str(dataset).endswith(".npz"):
         raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)}, "
                                     "a path to a .npz recording or a [recording] .toml")
