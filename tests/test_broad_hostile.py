@@ -187,13 +187,16 @@ def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, 
 
 
 def test_a_trial_with_no_usable_pair_is_refused_with_the_rule(tmp_path, capsys):
-    # Every other accelerometer reading a dropout, the others parallel to the field.
+    # Every other reading of both a dropout, the others' field parallel to
+    # gravity: the latest readings of the two are parallel at every sample.
     def no_pair(arrays):
         arrays["imu_acc_mps2"][0::2] = 0.0
+        arrays["imu_mag_uT"][0::2] = 0.0
         arrays["imu_mag_uT"][1::2] = 3.0 * arrays["imu_acc_mps2"][1::2]
     folder = _folder(tmp_path, _on(TRIAL_02, no_pair))
-    _refused(tmp_path, capsys, folder, "no sample has accelerometer and magnetometer readings "
-             "both non-zero and at least 1° apart, which the start attitude is taken from")
+    _refused(tmp_path, capsys, folder, "no accelerometer reading and magnetometer reading, the "
+             "latest of each at a sample, are both non-zero and at least 1° apart, which the "
+             "start attitude is taken from")
 
 
 def test_a_rest_of_dropouts_is_no_rest_and_none_is_needed(tmp_path, capsys):

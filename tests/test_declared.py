@@ -611,3 +611,30 @@ def test_a_part_shorter_than_a_turning_block_loads(trial, tmp_path):
         + np.where(np.arange(len(table["t"])) >= 610, 1.0, 0.0)
     parts = load_parts(_declare(tmp_path, _csv(tmp_path, table, "short.csv")))
     assert [part.n_samples for part in parts] == [600, 10, len(table["t"]) - 610]
+
+
+def test_an_accelerometer_and_a_magnetometer_never_on_one_sample_run(trial, tmp_path):
+    """The accelerometer at half the gyro's rate, the magnetometer at a
+    quarter, on samples the accelerometer skips: no sample holds both, and
+    the start and the field's reference pair each field reading with the
+    latest accelerometer one. It scores as the same log with the field read
+    on the accelerometer's samples to a tenth of a degree."""
+    table = _table(trial)
+    rows = np.arange(len(table["t"]))
+    scores = {}
+    for name, mag_rows in (("apart", rows % 4 == 1), ("together", rows % 4 == 0)):
+        logged = {**table,
+                  **{f"a{axis}": np.where(rows % 2 == 0, table[f"a{axis}"], np.nan)
+                     for axis in "xyz"},
+                  **{f"m{axis}": np.where(mag_rows, table[f"m{axis}"], np.nan)
+                     for axis in "xyz"}}
+        path = _declare(tmp_path, _csv(tmp_path, logged, f"{name}.csv"))
+        (recording,) = load_parts(path)
+        shared = np.any(recording.accelerometer_mps2 != 0, axis=1) \
+            & np.any(recording.magnetometer_uT != 0, axis=1)
+        assert shared.any() == (name == "together")
+        out = tmp_path / f"out_{name}"
+        assert main(["broad", "--broad", str(path), "--estimators", "mekf", "--out", str(out),
+                     "--quiet"]) == 0
+        scores[name] = pd.read_csv(out / "broad_trials.csv")["total_rmse_deg"].iloc[0]
+    assert abs(scores["apart"] - scores["together"]) < 0.1, scores

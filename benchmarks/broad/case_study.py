@@ -62,10 +62,9 @@ def start_readings(recording) -> tuple[np.ndarray, np.ndarray]:
     """The accelerometer and magnetometer readings the authors' filters
     start from: the first sample's, as theirs, or where that pair is
     unusable (a dropout, two parallel readings) the first usable pair of
-    the rest (:func:`benchmarks.broad.inputs.start_sample`)."""
-    from benchmarks.broad.inputs import start_sample
-    first = start_sample(recording)
-    return recording.accelerometer_mps2[first], recording.magnetometer_uT[first]
+    the rest (:func:`benchmarks.broad.inputs.start_pair`)."""
+    from benchmarks.broad.inputs import start_pair
+    return start_pair(recording)[1:]
 
 
 def published_results(folder: Path) -> dict:

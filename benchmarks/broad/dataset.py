@@ -441,8 +441,8 @@ def _note_dropouts(recording: Recording, path: Path) -> None:
                                for name, count in counts.items() if count)
         parts = [f"{dropped} exactly zero (dropouts), left out"] if dropped else []
         if start:
-            parts.append(f"the start attitude is taken at sample {start}, the first whose two "
-                         "readings are non-zero and not parallel")
+            parts.append(f"the start attitude is taken at sample {start}, the first where "
+                         "both sensors have read and their latest readings are not parallel")
         _note_once(path, f"trial {recording.name}: {'; '.join(parts)}")
 
 

@@ -136,13 +136,31 @@ def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
+def _latest(channel: np.ndarray) -> np.ndarray:
+    """Each sample's latest reading of ``channel`` at or before it (a row of
+    zeros is no reading); zeros before its first."""
+    read = np.any(channel != 0.0, axis=1)
+    index = np.maximum.accumulate(np.where(read, np.arange(len(channel)), -1))
+    return np.where((index >= 0)[:, None], channel[np.maximum(index, 0)], 0.0)
+
+
+def start_pair(recording: Recording) -> tuple | None:
+    """``(sample, accelerometer, magnetometer)``: the first sample where both
+    sensors have read and their latest readings are at least
+    :data:`MIN_SEPARATION_DEG` apart, and those readings, the start
+    attitude's (None if the trial has none). Sensors that read on the same
+    samples start on one sample's pair; sensors on their own clocks on the
+    later one's reading and the other's last before it."""
+    acc, mag = _latest(recording.accelerometer_mps2), _latest(recording.magnetometer_uT)
+    found = np.flatnonzero(_sine_between(acc, mag) >= math.sin(math.radians(MIN_SEPARATION_DEG)))
+    return (int(found[0]), acc[found[0]], mag[found[0]]) if len(found) else None
+
+
 def start_sample(recording: Recording) -> int | None:
-    """The first sample whose accelerometer and magnetometer readings are both
-    non-zero and at least :data:`MIN_SEPARATION_DEG` apart: the start
-    attitude's (None if the trial has none)."""
-    sine = _sine_between(recording.accelerometer_mps2, recording.magnetometer_uT)
-    found = np.flatnonzero(sine >= math.sin(math.radians(MIN_SEPARATION_DEG)))
-    return int(found[0]) if len(found) else None
+    """The sample the start attitude is taken at (:func:`start_pair`; None
+    if the trial has none)."""
+    pair = start_pair(recording)
+    return None if pair is None else pair[0]
 
 
 def runnable_rule(recording: Recording) -> str | None:
@@ -153,8 +171,9 @@ def runnable_rule(recording: Recording) -> str | None:
         return (f"has {recording.n_samples} sample{'s' * (recording.n_samples != 1)}; a trial "
                 f"needs at least {MIN_SAMPLES} to be run and scored")
     if start_sample(recording) is None:
-        return ("no sample has accelerometer and magnetometer readings both non-zero and at "
-                f"least {MIN_SEPARATION_DEG:g}° apart, which the start attitude is taken from")
+        return ("no accelerometer reading and magnetometer reading, the latest of each at a "
+                f"sample, are both non-zero and at least {MIN_SEPARATION_DEG:g}° apart, which "
+                "the start attitude is taken from")
     return None
 
 
@@ -167,11 +186,19 @@ def _checked_runnable(recording: Recording) -> None:
 def field_reference(recording: Recording) -> np.ndarray:
     """The field's reference vector (ENU, µT) for the filters that read it as
     a vector: its median norm, and its median dip against the accelerometer,
-    over the first :data:`FIELD_WINDOW_S` of usable readings (module docstring)."""
+    over the first :data:`FIELD_WINDOW_S` of usable readings of both on one
+    sample, or where the two never read on one sample each field reading's
+    against the latest accelerometer reading (module docstring)."""
     window = max(1, round(FIELD_WINDOW_S / recording.dt))
     usable = usable_readings(recording)
+    acc = recording.accelerometer_mps2
+    if not np.any(usable["accelerometer"] & usable["magnetometer"]):
+        # sensors on their own clocks: each field reading with the latest
+        # accelerometer reading before it
+        acc = _latest(np.where(usable["accelerometer"][:, None], acc, 0.0))
+        usable = {**usable, "accelerometer": np.any(acc != 0.0, axis=1)}
     both = np.flatnonzero(usable["accelerometer"] & usable["magnetometer"])[:window]
-    acc, mag = recording.accelerometer_mps2[both], recording.magnetometer_uT[both]
+    acc, mag = acc[both], recording.magnetometer_uT[both]
     norm = float(np.median(np.linalg.norm(mag, axis=1)))
     cosine = np.sum(acc * mag, axis=1) / (np.linalg.norm(acc, axis=1) * np.linalg.norm(mag, axis=1))
     dip = math.asin(float(np.clip(np.median(-cosine), -1.0, 1.0)))      # positive downward
@@ -230,9 +257,7 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
     delay = checked_gyro_delay(recording, gyro_delay_s)
     references, variances = references_and_variances(recording, sigmas)
     n, dt = recording.n_samples, recording.dt
-    first = start_sample(recording)
-    start = initial_attitude(recording.accelerometer_mps2[first],
-                             recording.magnetometer_uT[first], references)
+    start = initial_attitude(*start_pair(recording)[1:], references)
     usable = usable_readings(recording)
     vectors = tuple(
         VectorReadings(sensor=name, body=channel, reference=np.tile(references[name], (n, 1)),
