@@ -54,7 +54,8 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
-from sensors.declared_reference import check_reference, declared_reference
+from sensors.declared_reference import (check_gravity_up, check_reference,
+                                        declared_reference)
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
@@ -173,6 +174,8 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
         reference = declared_reference(path, gyro_time, *read["reference"], sections["reference"])
         check_reference(path, gyro_time, gyro, read["reference"], sections["reference"],
                          reference)
+        if "accelerometer" in channels:
+            check_gravity_up(path, reference, channels["accelerometer"], sections["reference"])
     return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
                      movement=~np.isnan(reference).any(axis=1), rate_hz=rate,
                      info=str(declaration.get("description", "")),

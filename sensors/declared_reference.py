@@ -83,6 +83,29 @@ def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tupl
                   f"{reference_advice(fit, rates, reference, dt)}", stacklevel=2)
 
 
+def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarray,
+                     section: dict) -> None:
+    """Refuse a reference and an accelerometer that put gravity down: the
+    accelerometer's readings turned into the world by the reference (ENU,
+    the declared frame converted) must point up on the whole (+9.8 m/s² at
+    rest, and so on average in motion). A median below zero is a flipped
+    accelerometer (a log of acceleration, as Apple's Core Motion gives it,
+    not of specific force) or a reference in the other frame, which no
+    turning of either with the gyro tells apart."""
+    seen = np.isfinite(reference).all(axis=1) & np.any(specific_force != 0.0, axis=1)
+    if not seen.any():
+        return
+    from dynamics.quaternion import to_rotation
+    up = float(np.median(to_rotation(reference[seen]).apply(specific_force[seen])[:, 2]))
+    if up < 0.0:
+        frame = section.get("frame", "ENU")
+        refuse(path, "recording.reference.frame", frame, "puts the accelerometer's gravity down "
+               f"(its median {up:.3g} m/s² up, where gravity reads +9.8): declare frame = "
+               f"\"{'ENU' if frame == 'NED' else 'NED'}\", or, if the reference is right, "
+               "the accelerometer's axes = [\"-x\", \"-y\", \"-z\"] (a log of acceleration, "
+               "not of specific force)")
+
+
 def _reference_candidates(path: Path, section: dict, values: np.ndarray):
     """``(what to declare, the rotations it makes)`` for the declarations a
     logger most often gets wrong: the other quaternion order, or the Euler

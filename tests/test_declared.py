@@ -414,14 +414,15 @@ def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, ch
 def test_ned_and_interpolation_against_known_attitudes(trial, tmp_path):
     # Fixed cases, not the module's own matrix: NED's identity is the body
     # whose x points north and z down, in ENU x -> (0, 1, 0), z -> (0, 0, -1).
+    # (The declared reference alone: an identity reference with the trial's
+    # accelerometer would put gravity down, which loading refuses.)
     from scipy.spatial.transform import Rotation
+    from sensors.declared_reference import declared_reference
     recording, keep = trial
-    table = _table(trial)
-    for i, part in enumerate("wxyz"):
-        table[f"q{part}"] = np.full(keep, [1.0, 0.0, 0.0, 0.0][i])
-    _csv(tmp_path, table)
-    declared = load_declared(_declare(tmp_path, "log.csv", reference_keys='frame = "NED"'))
-    matrix = Rotation.from_quat(declared.reference_quat[10], scalar_first=True).as_matrix()
+    times = recording.time_s[:keep]
+    reference = declared_reference(tmp_path / "log.toml", times, times,
+                                   np.tile([1.0, 0.0, 0.0, 0.0], (keep, 1)), {"frame": "NED"})
+    matrix = Rotation.from_quat(reference[10], scalar_first=True).as_matrix()
     assert np.allclose(matrix @ [1, 0, 0], [0, 1, 0]) and np.allclose(matrix @ [0, 0, 1],
                                                                      [0, 0, -1])
     # Every second reference reading dropped: the interpolated ones are within
@@ -638,3 +639,23 @@ def test_an_accelerometer_and_a_magnetometer_never_on_one_sample_run(trial, tmp_
                      "--quiet"]) == 0
         scores[name] = pd.read_csv(out / "broad_trials.csv")["total_rmse_deg"].iloc[0]
     assert abs(scores["apart"] - scores["together"]) < 0.1, scores
+
+
+@pytest.mark.parametrize("change, frame", [("frame", "NED"), ("sign", "ENU")])
+def test_gravity_turned_down_by_the_reference_is_refused_in_one_line(trial, tmp_path, change,
+                                                                     frame):
+    """A reference in the other frame than declared, or an accelerometer that
+    logs acceleration (gravity read down, as Core Motion's): either puts the
+    accelerometer's gravity down in the world, which cannot be."""
+    table = _table(trial)
+    if change == "sign":
+        for axis in "xyz":
+            table[f"a{axis}"] = -np.asarray(table[f"a{axis}"])
+    keys = 'frame = "NED"' if change == "frame" else ""
+    path = _declare(tmp_path, _csv(tmp_path, table), reference_keys=keys)
+    with pytest.raises(InvalidParameterError) as refused:
+        load_declared(path)
+    message = str(refused.value)
+    assert f"recording.reference.frame = '{frame}': puts the accelerometer's gravity down" \
+        in message and "\n" not in message
+    assert "axes = [\"-x\", \"-y\", \"-z\"]" in message
