@@ -70,9 +70,9 @@ def _block_means(values: np.ndarray, steps: int) -> np.ndarray:
     return values[:blocks * steps].reshape(blocks, steps, values.shape[1]).mean(axis=1)
 
 
-def _held(vectors: np.ndarray) -> np.ndarray:
+def held_readings(vectors: np.ndarray) -> np.ndarray:
     """A vector channel read at some of the gyro's samples (zeros between
-    readings) held from each reading to the next."""
+    readings) held from each reading to the next (zeros before the first)."""
     read = np.any(vectors != 0.0, axis=1)
     last = np.maximum.accumulate(np.where(read, np.arange(len(vectors)), 0))
     return vectors[last]
@@ -94,7 +94,7 @@ def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = F
         vector = (vector[1:] + vector[:-1]) / 2
     else:
         steps = max(1, int(round(TURNING_WINDOW_S / dt)))
-        vector, rate = _block_means(_held(vectors), steps), _block_means(rates, steps)
+        vector, rate = _block_means(held_readings(vectors), steps), _block_means(rates, steps)
         change = np.diff(vector, axis=0) / (steps * dt)
         rate, vector = (rate[1:] + rate[:-1]) / 2, (vector[1:] + vector[:-1]) / 2
     if len(change) < 2:

@@ -13,6 +13,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from benchmarks.cli import main
+from benchmarks.experiments.replay import open_dataset
 from dynamics.validation import InvalidParameterError
 from sensors.declared import load_declared, load_parts
 from sensors.tables import read_table
@@ -452,15 +453,19 @@ def test_integer_epoch_nanoseconds_keep_the_clock(trial, tmp_path):
 
 
 @pytest.mark.slow      # the per-run replay of a whole trial, twice: 5 s
-def test_replay_takes_a_declared_recording_as_its_npz(trial, tmp_path):
+def test_replay_takes_a_declared_recording_as_its_npz(trial, tmp_path, capsys):
     # The gyro-only replay (a pseudo star tracker made from the reference)
-    # on a declared CSV and on the same samples as the toolkit's .npz.
-    recording, keep = trial
-    declared = _declare(tmp_path, _csv(tmp_path, _table(trial)))
+    # on a declared CSV and on the same samples as the toolkit's .npz, its
+    # movement flagged after the rest that replay finds in the CSV.
+    recording, _ = trial
+    keep = int(60 * recording.rate_hz)
+    declared = _declare(tmp_path, _csv(tmp_path, _table((recording, keep))))
     with np.load(TRIAL) as data:
         arrays = {key: data[key][:keep] if data[key].ndim and len(data[key]) > keep else data[key]
                   for key in data.files}
-    arrays["movement"] = ~np.isnan(arrays["opt_quat"]).any(axis=1)
+    found = open_dataset(str(declared))[0].movement
+    assert found.any() and not found[:int(39 * recording.rate_hz)].any()
+    arrays["movement"] = found
     np.savez(tmp_path / "same.npz", **arrays)
     summaries = {}
     for label, source in (("declared", declared), ("npz", tmp_path / "same.npz")):
@@ -468,8 +473,27 @@ def test_replay_takes_a_declared_recording_as_its_npz(trial, tmp_path):
         assert main(["replay", "--dataset", str(source), "--estimators", "mekf", "--out",
                      str(out), "--quiet"]) == 0
         summaries[label] = pd.read_csv(out / "summary.csv").set_index("estimator")
-    columns = ["rms_movement_deg", "mean_deg", "max_deg", "final_deg"]
+    columns = ["rms_movement_deg", "mean_deg", "max_deg", "final_deg", "final_bias_error_degps"]
     assert np.allclose(summaries["declared"][columns], summaries["npz"][columns], rtol=1e-6)
+    assert np.isfinite(summaries["declared"][columns]).all(axis=None)
+
+
+def test_replay_finds_the_rest_a_declared_recording_begins_with(trial, tmp_path):
+    """Trial 02's first 60 s declared: no key flags its rest, and replay
+    finds it as VQF finds rest (Laidig & Seel 2023, §3.4) within half a
+    second of the authors' flag (their movement begins at 40.07 s); a log
+    that moves from its first sample keeps every referenced sample."""
+    recording, _ = trial
+    keep = int(60 * recording.rate_hz)
+    table = _table((recording, keep))
+    with pytest.warns(UserWarning, match="its first 39.7 s are at rest"):
+        found = open_dataset(str(_declare(tmp_path, _csv(tmp_path, table))))[0].movement
+    flagged = recording.movement[:keep]
+    begins = [np.argmax(flags) / recording.rate_hz for flags in (found, flagged)]
+    assert abs(begins[0] - begins[1]) < 0.5, begins
+    moving = {key: np.asarray(value)[int(41 * recording.rate_hz):] for key, value in table.items()}
+    moved = open_dataset(str(_declare(tmp_path, _csv(tmp_path, moving, "moving.csv"))))[0]
+    np.testing.assert_array_equal(moved.movement, moved.has_reference)
 
 
 def test_read_table_names_a_file_it_cannot_read(tmp_path):

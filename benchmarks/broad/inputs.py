@@ -50,6 +50,7 @@ from dynamics.validation import InvalidParameterError, standard_deviation
 from estimators import wahba
 from estimators.imu import GYRO_NOISE_DENSITY
 from sensors.recording import Recording, reading_interval_s
+from sensors.turning import held_readings
 from sensors.vector import VectorReadings
 
 #: The smallest σ per axis the filters that read the vectors take: m/s², µT.
@@ -136,14 +137,6 @@ def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
-def _latest(channel: np.ndarray) -> np.ndarray:
-    """Each sample's latest reading of ``channel`` at or before it (a row of
-    zeros is no reading); zeros before its first."""
-    read = np.any(channel != 0.0, axis=1)
-    index = np.maximum.accumulate(np.where(read, np.arange(len(channel)), -1))
-    return np.where((index >= 0)[:, None], channel[np.maximum(index, 0)], 0.0)
-
-
 def start_pair(recording: Recording) -> tuple | None:
     """``(sample, accelerometer, magnetometer)``: the first sample where both
     sensors have read and their latest readings are at least
@@ -151,7 +144,8 @@ def start_pair(recording: Recording) -> tuple | None:
     attitude's (None if the trial has none). Sensors that read on the same
     samples start on one sample's pair; sensors on their own clocks on the
     later one's reading and the other's last before it."""
-    acc, mag = _latest(recording.accelerometer_mps2), _latest(recording.magnetometer_uT)
+    acc, mag = (held_readings(channel) for channel in (recording.accelerometer_mps2,
+                                                        recording.magnetometer_uT))
     found = np.flatnonzero(_sine_between(acc, mag) >= math.sin(math.radians(MIN_SEPARATION_DEG)))
     return (int(found[0]), acc[found[0]], mag[found[0]]) if len(found) else None
 
@@ -195,7 +189,7 @@ def field_reference(recording: Recording) -> np.ndarray:
     if not np.any(usable["accelerometer"] & usable["magnetometer"]):
         # sensors on their own clocks: each field reading with the latest
         # accelerometer reading before it
-        acc = _latest(np.where(usable["accelerometer"][:, None], acc, 0.0))
+        acc = held_readings(np.where(usable["accelerometer"][:, None], acc, 0.0))
         usable = {**usable, "accelerometer": np.any(acc != 0.0, axis=1)}
     both = np.flatnonzero(usable["accelerometer"] & usable["magnetometer"])[:window]
     acc, mag = acc[both], recording.magnetometer_uT[both]

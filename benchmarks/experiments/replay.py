@@ -84,11 +84,38 @@ def open_dataset(dataset: str) -> tuple[Recording, str | None]:
             raise InvalidParameterError("dataset", str(dataset), "declares no reference attitude "
                                         "([recording.reference]): replay scores against one; "
                                         "broad ranks a recording without one by agreement")
-        return recording, None
+        return with_found_rest(recording), None
     if not str(dataset).endswith(".npz"):
         raise InvalidParameterError("dataset", dataset, f"must be one of {', '.join(DATASETS)}, "
                                     "a path to a .npz recording or a [recording] .toml")
     return load_recording(dataset), None
+
+
+def with_found_rest(recording: Recording) -> Recording:
+    """A logger's ``recording``, whose every sample with a reference is
+    movement (no declaration flags a rest), with the rest it begins with
+    taken out of its movement phase: VQF's rest (Laidig & Seel 2023, §3.4;
+    :func:`benchmarks.experiments.inspection.rest_periods`: the gyro, and the
+    accelerometer where there is one, within their thresholds for at least
+    1.5 s) from its first sample. There, as in a BROAD trial's rest, the
+    gyro's noise and bias are taken; a note says how long it is. Unchanged
+    where none is found."""
+    import warnings
+    from dataclasses import replace
+    from benchmarks.experiments.inspection import rest_periods
+    from sensors.turning import held_readings
+    force = (np.zeros_like(recording.gyro_radps) if recording.accelerometer_mps2 is None
+             else held_readings(recording.accelerometer_mps2))
+    periods = rest_periods(recording.gyro_radps, force, recording.dt)
+    if not periods or periods[0][0] > 0.0:
+        return recording
+    end = int(round(periods[0][1] / recording.dt))
+    warnings.warn(f"{recording.name}: its first {end * recording.dt:.1f} s are at rest (the gyro"
+                  f"{' and the accelerometer' if recording.accelerometer_mps2 is not None else ''}"
+                  " still within VQF's thresholds): the gyro's noise and bias are taken there "
+                  "and the movement is scored after it", stacklevel=2)
+    return replace(recording, movement=recording.movement & (np.arange(recording.n_samples)
+                                                              >= end))
 
 
 def dataset_source(dataset: str) -> tuple:
