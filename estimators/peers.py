@@ -78,16 +78,23 @@ class PeerFilter(MagneticFrame, AttitudeEstimator):
         self._q = self.in_reference_frame(np.asarray(self.update(gyro, acc, mag), dtype=float))
         return self._q.copy()
 
+    #: Whether the peer skips a reading of [0, 0, 0] as no reading (VQF's
+    #: updateAcc and updateMag do): then a channel with readings missing
+    #: runs at once too, zeros where it did not read.
+    skips_zero_readings = False
+
     def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
         """``run``'s estimates at once when every sample has both the
-        accelerometer and the magnetometer and nothing else
-        (:meth:`run_readings`); None otherwise (the per-run path then)."""
+        accelerometer and the magnetometer (or the peer skips zero readings,
+        :attr:`skips_zero_readings`) and nothing else (:meth:`run_readings`);
+        None otherwise (the per-run path then)."""
         found = {v.sensor: v for v in vectors}
-        if set(found) != {"accelerometer", "magnetometer"} or len(vectors) != 2 or \
-                not all(np.all(v.available) for v in vectors):
+        if set(found) != {"accelerometer", "magnetometer"} or len(vectors) != 2 or not (
+                self.skips_zero_readings or all(np.all(v.available) for v in vectors)):
             return None
-        estimates = np.asarray(self.run_readings(omega_meas_radps, found["accelerometer"].body,
-                                                 found["magnetometer"].body), dtype=float)
+        acc, mag = (np.where(np.asarray(found[name].available, dtype=bool)[:, None],
+                             found[name].body, 0.0) for name in ("accelerometer", "magnetometer"))
+        estimates = np.asarray(self.run_readings(omega_meas_radps, acc, mag), dtype=float)
         self.learn_frame(found["magnetometer"].reference[0])
         return self.in_reference_frame(estimates)
 
@@ -108,6 +115,7 @@ class VQF9D(PeerFilter):
     name = "vqf"
     label = "VQF"
     output = "getQuat9D"
+    skips_zero_readings = True      # vqf.cpp, updateAcc/updateMag: "ignore [0 0 0] samples"
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise",
                  magnetometer_interval_s: float | None = None):

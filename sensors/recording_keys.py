@@ -25,7 +25,8 @@ _UNITS = {"gyro": "rad/s, deg/s", "accelerometer": "m/s^2, g",
 
 KEYS = (
     RecordingKey("recording", "file", "path", "the logged file, beside this one or absolute "
-                 "(.csv, .parquet, .npz, .mat, .h5, .hdf5)"),
+                 "(.csv, .parquet with `pip install '.[parquet]'`, .npz, .mat, .h5 or .hdf5 "
+                 "with `'.[hdf5]'`; a CSV's opening lines that begin with `#` are skipped)"),
     RecordingKey("recording", "description", "text", "what the recording is", '""'),
     RecordingKey("recording", "time_unit", "s, ms, us, ns", "the unit of every time column",
                  "s"),

@@ -360,7 +360,7 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, 
 
 
 @pytest.mark.parametrize("change, message", [
-    ("no magnetometer", "declares no .recording.accelerometer. or no .recording.magnetometer."),
+    ("no magnetometer", "declares no .recording.magnetometer.; the IMU filters scored here need both"),
     ("time unit list", "time_unit = \\['s'\\]: must be one of s, ms, us, ns"),
     ("zeros", "accelerometer.columns = None: hold only zeros"),
     ("header only", "gyro.time = 't': holds no rows"),

@@ -216,3 +216,26 @@ def test_replay_of_a_declaration_without_a_reference_says_so(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "declares no reference attitude ([recording.reference])" in err
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_a_clocks_jitter_is_its_spread_between_its_gaps():
+    """A 200 Hz clock with one 2 s gap: jitter 0 and one gap (the gap's
+    interval counted in the jitter made it 371 %); jittered by ±0.2 of a
+    step (uniform), its spread is 0.4/√12·√2 ≈ 16 % of the step."""
+    from benchmarks.experiments.inspection import clock
+    times = np.concatenate([np.arange(2000) * 0.005, 12.0 + np.arange(2000) * 0.005])
+    found = clock(times)
+    assert found["gaps"] == 1 and found["jitter"] < 1e-9
+    assert found["interval"] == pytest.approx(0.005, rel=1e-9)
+    jittered = times + np.random.default_rng(0).uniform(-0.2, 0.2, len(times)) * 0.005
+    assert clock(jittered)["jitter"] == pytest.approx(0.4 / np.sqrt(12) * np.sqrt(2), rel=0.1)
+
+
+def test_a_quaternion_in_numbered_columns_is_the_reference():
+    """q0…q3 (q0 the scalar, as in Madgwick's code) is the reference in the
+    order w, x, y, z, whatever the file's order."""
+    from benchmarks.experiments.inspection import sensor_columns
+    table = {name: np.zeros(10) for name in ("t", "gx", "gy", "gz", "q3", "q1", "q0", "q2")}
+    assert sensor_columns(table)["reference"] == ["q0", "q1", "q2", "q3"]
+    table = {name: np.zeros(10) for name in ("t", "quat_1", "quat_2", "quat_3", "quat_0")}
+    assert sensor_columns(table)["reference"] == ["quat_0", "quat_1", "quat_2", "quat_3"]

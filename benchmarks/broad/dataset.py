@@ -183,7 +183,8 @@ class BroadDataset:
                 data["info"] = np.asarray(str(info[0]))
             recording = checked_recording(data, name, refuse)
         if not recording.has_vectors:
-            refuse("has no accelerometer or no magnetometer channel (imu_acc, imu_mag)")
+            refuse(f"has no {_missing_channels(recording, ('imu_acc', 'imu_mag'))} channel; "
+                   "the IMU filters scored here need both")
         rule = runnable_rule(recording)
         if rule:
             refuse(rule)
@@ -191,6 +192,15 @@ class BroadDataset:
             _note_dropouts(recording, path)
         _note_clipping(recording, path)
         return recording
+
+
+def _missing_channels(recording: Recording, names: tuple) -> str:
+    """The names (accelerometer's, magnetometer's) of the channels
+    ``recording`` lacks, joined by "and"."""
+    lacking = [name for name, channel in zip(names, (recording.accelerometer_mps2,
+                                                      recording.magnetometer_uT))
+               if channel is None]
+    return " and ".join(lacking)
 
 
 def broad_folder(given: Path | None = None) -> Path:
@@ -304,9 +314,11 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
                               for part in parts), stacklevel=2)
         for part in parts:
             if not part.has_vectors:
+                missing = _missing_channels(part, ("[recording.accelerometer]",
+                                                   "[recording.magnetometer]"))
                 raise InvalidParameterError(
-                    parameter, str(path), "declares no [recording.accelerometer] or no "
-                    "[recording.magnetometer]; the IMU filters scored here need both")
+                    parameter, str(path), f"declares no {missing}; the IMU filters scored "
+                    "here need both")
             rule = runnable_rule(part)
             if rule:
                 warnings.warn(f"{path.name}: part {part.name} left out: {rule}", stacklevel=2)

@@ -35,6 +35,8 @@ SENSOR_TOKENS = {
 #: Name tokens of a time column.
 TIME_TOKENS = ("t", "time", "times", "timestamp", "ts", "sec", "seconds", "ms")
 _AXIS = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<axis>[wxyz])$", re.IGNORECASE)
+#: A quaternion's numbered columns, q0 the scalar (Madgwick's q0…q3).
+_NUMBERED = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<index>[0-3])$")
 
 
 def _tokens(name: str) -> set:
@@ -73,6 +75,10 @@ def sensor_columns(table: dict) -> dict:
         match = _AXIS.match(name)
         if match and array.ndim == 1:
             groups.setdefault(match["prefix"], {})[match["axis"].lower()] = name
+        numbered = _NUMBERED.match(name)
+        if not match and numbered and array.ndim == 1 and numbered["prefix"] \
+                and _sensor_of(numbered["prefix"]) == "reference":
+            groups.setdefault(numbered["prefix"], {})["wxyz"[int(numbered["index"])]] = name
     found = {}
     for prefix, axes in groups.items():
         if isinstance(axes, str):
@@ -112,15 +118,17 @@ def time_unit(intervals: np.ndarray) -> str:
 
 
 def clock(times: np.ndarray) -> dict:
-    """A sensor's clock: its readings, rate, jitter and gaps."""
+    """A sensor's clock: its readings, rate, jitter (the intervals' spread
+    between its gaps, over the period) and gaps."""
     times = times[~np.isnan(times)]
     intervals = np.diff(times)
     if not len(intervals):
         return {"readings": len(times)}
     typical = clock_period(times)
+    gaps = intervals > GAP_FACTOR * typical       # the jitter is the spread between them
     return {"readings": len(times), "interval": typical,
-            "jitter": float(np.std(intervals) / typical), "longest": float(intervals.max()),
-            "gaps": int(np.count_nonzero(intervals > GAP_FACTOR * typical))}
+            "jitter": float(np.std(intervals[~gaps]) / typical) if (~gaps).any() else 0.0,
+            "longest": float(intervals.max()), "gaps": int(np.count_nonzero(gaps))}
 
 
 def fitting_unit(sensor: str, values: np.ndarray) -> str | None:
