@@ -4,9 +4,13 @@ The readings are what a MEMS IMU gives of that motion, in the units and
 frames of a recorded trial (:class:`sensors.recording.Recording`), with the
 truth as its reference attitude and no gap in it:
 
-- the gyro: the body rate, plus a constant bias drawn per axis uniformly
-  within ``±gyro_bias_dps``, plus white noise of density
-  ``gyro_noise_density`` (rad/√s);
+- the gyro: the body rate through a matrix ``I + M`` (``M``'s diagonal
+  the scale factors' errors, drawn uniformly within
+  ``±gyro_scale_percent``; off it the axes' misalignments, within
+  ``±gyro_misalignment_deg``), plus a constant bias drawn per axis
+  uniformly within ``±gyro_bias_dps``, plus white noise of density
+  ``gyro_noise_density`` (rad/√s): the errors a MEMS gyro keeps after a
+  factory calibration, which no filter here models;
 - the accelerometer: the specific force in the body frame (the linear
   acceleration minus gravity, so a device at rest reads +9.81 m/s² up),
   plus white noise of σ ``accelerometer_sigma_mps2``;
@@ -39,6 +43,8 @@ class HandheldImu:
     """The IMU's errors and the field it reads (module docstring)."""
 
     gyro_bias_dps: float = 0.5
+    gyro_scale_percent: float = 0.5
+    gyro_misalignment_deg: float = 0.3
     gyro_noise_density: float = 1.5e-4
     accelerometer_sigma_mps2: float = 0.03
     magnetometer_sigma_uT: float = 0.5
@@ -46,12 +52,19 @@ class HandheldImu:
     dip_deg: float = 66.0
 
     def __post_init__(self):
-        for name in ("gyro_bias_dps", "gyro_noise_density", "accelerometer_sigma_mps2",
-                     "magnetometer_sigma_uT"):
+        for name in ("gyro_bias_dps", "gyro_scale_percent", "gyro_misalignment_deg",
+                     "gyro_noise_density", "accelerometer_sigma_mps2", "magnetometer_sigma_uT"):
             standard_deviation(name, getattr(self, name))
         finite_number("field_uT", self.field_uT, strictly_positive=True)
         if abs(finite_number("dip_deg", self.dip_deg)) > 90.0:
             raise InvalidParameterError("dip_deg", self.dip_deg, "must be within ±90°")
+
+    def gyro_errors(self, rng: np.random.Generator) -> np.ndarray:
+        """``M``: the scale factors' errors on the diagonal, the axes'
+        misalignments (small angles, rad) off it, drawn from ``rng``."""
+        bounds = np.full((3, 3), np.radians(self.gyro_misalignment_deg))
+        np.fill_diagonal(bounds, self.gyro_scale_percent / 100.0)
+        return bounds * rng.uniform(-1.0, 1.0, (3, 3))
 
     def field_world(self) -> np.ndarray:
         """The field in the world frame (ENU), µT."""
@@ -62,15 +75,16 @@ class HandheldImu:
 def simulated_recording(seed: int, motion: HandheldMotion = HandheldMotion(),
                         imu: HandheldImu = HandheldImu()) -> Recording:
     """A recording of ``motion`` by ``imu``, drawn from seed ``seed`` (the
-    motion first, then the bias, then each channel's noise), named
-    ``handheld-SEED``."""
+    motion first, then the gyro's bias and its matrix, then each channel's
+    noise), named ``handheld-SEED``."""
     rng = np.random.default_rng(seed)
     truth = simulate_handheld(motion, rng)
     n, rate = len(truth.q_true), truth.rate_hz
     to_body = to_rotation(truth.q_true).inv()
     bias = np.radians(imu.gyro_bias_dps) * rng.uniform(-1.0, 1.0, 3)
-    gyro = truth.omega_radps + bias + imu.gyro_noise_density * np.sqrt(rate) \
-        * rng.standard_normal((n, 3))
+    errors = imu.gyro_errors(rng)
+    gyro = truth.omega_radps @ (np.eye(3) + errors).T + bias \
+        + imu.gyro_noise_density * np.sqrt(rate) * rng.standard_normal((n, 3))
     force = to_body.apply(truth.acceleration_mps2 + [0.0, 0.0, GRAVITY_MPS2])
     field = to_body.apply(np.tile(imu.field_world(), (n, 1)))
     return Recording(

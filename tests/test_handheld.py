@@ -16,7 +16,8 @@ from sensors.handheld import GRAVITY_MPS2, HandheldImu, simulated_recording
 #: A short motion, so that each example takes milliseconds.
 SHORT = HandheldMotion(rate_hz=50.0, rest_s=1.0, moving_s=4.0, final_rest_s=1.0, taper_s=0.5)
 #: An IMU without errors: its readings are the truth seen by the sensors.
-PERFECT = HandheldImu(gyro_bias_dps=0.0, gyro_noise_density=0.0, accelerometer_sigma_mps2=0.0,
+PERFECT = HandheldImu(gyro_bias_dps=0.0, gyro_scale_percent=0.0, gyro_misalignment_deg=0.0,
+                      gyro_noise_density=0.0, accelerometer_sigma_mps2=0.0,
                       magnetometer_sigma_uT=0.0)
 
 
@@ -78,7 +79,8 @@ def test_a_perfect_imu_reads_the_truth():
 
 
 def test_the_gyro_bias_is_constant_and_within_its_bound():
-    imu = HandheldImu(gyro_bias_dps=2.0, gyro_noise_density=0.0)
+    imu = HandheldImu(gyro_bias_dps=2.0, gyro_scale_percent=0.0, gyro_misalignment_deg=0.0,
+                      gyro_noise_density=0.0)
     recording = simulated_recording(4, SHORT, imu)
     truth = simulate_handheld(SHORT, np.random.default_rng(4))
     offset = np.degrees(recording.gyro_radps - truth.omega_radps)
@@ -95,6 +97,7 @@ def test_the_gyro_bias_is_constant_and_within_its_bound():
     (lambda: HandheldImu(dip_deg=100.0), "dip_deg = 100.0: must be within ±90°"),
     (lambda: HandheldImu(field_uT=0.0), "field_uT = 0.0: must be > 0"),
     (lambda: HandheldImu(gyro_bias_dps=-1.0), "gyro_bias_dps = -1.0"),
+    (lambda: HandheldImu(gyro_scale_percent=float("inf")), "gyro_scale_percent = inf"),
 ])
 def test_a_bad_setting_is_refused_in_one_line(make, shown):
     with pytest.raises(InvalidParameterError) as refused:
@@ -126,3 +129,19 @@ def test_the_without_rest_script_refuses_bad_simulations_in_one_line(argv, shown
     err = capsys.readouterr().err
     assert err.startswith(f"without_rest: error: {shown}") and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_the_gyro_reads_the_rate_through_its_scale_and_misalignment():
+    """Without bias and noise the gyro is (I + M) ω: M's diagonal within the
+    scale bound, its other entries within the misalignment's, found back by
+    least squares from the readings to the exact rates."""
+    imu = HandheldImu(gyro_bias_dps=0.0, gyro_noise_density=0.0, gyro_scale_percent=2.0,
+                      gyro_misalignment_deg=1.0)
+    recording = simulated_recording(5, SHORT, imu)
+    truth = simulate_handheld(SHORT, np.random.default_rng(5))
+    matrix = np.linalg.lstsq(truth.omega_radps, recording.gyro_radps, rcond=None)[0].T
+    errors = matrix - np.eye(3)
+    assert np.all(np.abs(np.diag(errors)) <= 0.02) and np.any(np.diag(errors) != 0.0)
+    off = errors[~np.eye(3, dtype=bool)]
+    assert np.all(np.abs(off) <= np.radians(1.0)) and np.any(off != 0.0)
+    np.testing.assert_allclose(recording.gyro_radps, truth.omega_radps @ matrix.T, atol=1e-12)
