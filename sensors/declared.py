@@ -103,11 +103,36 @@ def load_parts(path) -> list[Recording]:
     …), each with the readings of the other sensors in its span."""
     path = Path(path)
     declaration = read_declaration(path)
-    try:
-        table = read_table(data_file(path, declaration))
-    except InvalidParameterError as err:          # named by the declaration that gave it
-        refuse(path, "recording.file", declaration["file"], err.rule)
+    own = all(isinstance(declaration.get(name), dict) and "file" in declaration[name]
+              for name in SENSORS if name in declaration)
+    table = {} if own and "file" not in declaration else \
+        _read(path, "recording.file", declaration)
     return declared_recordings(declaration, table, path)
+
+
+def _read(path: Path, key: str, section: dict) -> dict:
+    """The table of the file ``section`` names (``key``: where, for errors)."""
+    try:
+        return read_table(data_file(path, section, key))
+    except InvalidParameterError as err:          # named by the declaration that gave it
+        refuse(path, key, section.get("file"), err.rule)
+
+
+def sensor_tables(path: Path, declaration: dict, table: dict) -> dict:
+    """Sensor → the table its columns are in: ``table`` (the ``[recording]``
+    file's), or the sensor's own ``file`` (a logger that writes one file per
+    sensor), each file read once."""
+    read, tables = {}, {}
+    for name in SENSORS:
+        section = declaration.get(name)
+        given = section.get("file") if isinstance(section, dict) else None
+        if given is None:
+            tables[name] = table
+            continue
+        if given not in read:
+            read[given] = _read(path, f"recording.{name}.file", section)
+        tables[name] = read[given]
+    return tables
 
 
 def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Recording]:
@@ -120,8 +145,9 @@ def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Reco
     if "gyro" not in sections:
         refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
-    origin = _time_origin(table, sections)
-    read = {name: _sensor(path, table, name, section, TIME_UNITS[clock_unit], origin)
+    tables = sensor_tables(path, declaration, table)
+    origin = _time_origin(tables, sections)
+    read = {name: _sensor(path, tables[name], name, section, TIME_UNITS[clock_unit], origin)
             for name, section in sections.items()}
     gyro_time, gyro = read["gyro"]
     starts = part_starts(gyro_time)
@@ -138,11 +164,12 @@ def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Reco
             for name, (a, b) in zip(names, bounds)]
 
 
-def _time_origin(table: dict, sections: dict) -> int:
+def _time_origin(tables: dict, sections: dict) -> int:
     """The earliest first value of the declared integer time columns (0 if
     any is not integer): every sensor's times are counted from it."""
     firsts = []
-    for section in sections.values():
+    for name, section in sections.items():
+        table = tables[name]
         column = np.asarray(table.get(section.get("time"), [])) if isinstance(section, dict) \
             and isinstance(section.get("time"), str) else np.asarray([])
         if column.size == 0 or column.dtype.kind not in "iu":
@@ -204,13 +231,15 @@ def read_declaration(path: Path) -> dict:
     return declared["recording"]
 
 
-def data_file(path: Path, declaration: dict) -> Path:
+def data_file(path: Path, declaration: dict, key: str = "recording.file") -> Path:
+    """The file ``declaration`` (``[recording]`` or a sensor's section, at
+    ``key``) names, beside ``path`` or absolute."""
     given = declaration.get("file")
     if not isinstance(given, str) or not given:
-        refuse(path, "recording.file", given, "must name the logged file")
+        refuse(path, key, given, "must name the logged file")
     data = Path(given) if Path(given).is_absolute() else path.parent / given
     if not data.is_file():
-        refuse(path, "recording.file", given, f"is not a file (looked for {data})")
+        refuse(path, key, given, f"is not a file (looked for {data})")
     return data
 
 

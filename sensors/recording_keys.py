@@ -26,11 +26,15 @@ _UNITS = {"gyro": "rad/s, deg/s", "accelerometer": "m/s^2, g",
 KEYS = (
     RecordingKey("recording", "file", "path", "the logged file, beside this one or absolute "
                  "(.csv, .parquet with `pip install '.[parquet]'`, .npz, .mat, .h5 or .hdf5 "
-                 "with `'.[hdf5]'`; a CSV's opening lines that begin with `#` are skipped)"),
+                 "with `'.[hdf5]'`; a CSV's opening lines that begin with `#` are skipped)",
+                 "required unless each sensor names its own"),
     RecordingKey("recording", "description", "text", "what the recording is", '""'),
     RecordingKey("recording", "time_unit", "s, ms, us, ns", "the unit of every time column",
                  "s"),
     *(key for sensor in _SENSORS for key in (
+        RecordingKey(f"recording.{sensor}", "file", "path",
+                     "its own logged file, where a logger writes one file per sensor (its "
+                     "time and columns are read there)", "[recording]'s"),
         RecordingKey(f"recording.{sensor}", "time", "column", "its time column (its own clock)"),
         RecordingKey(f"recording.{sensor}", "columns", "columns",
                      ("its 4 columns, or 3 of Euler angles" if sensor == "reference" else

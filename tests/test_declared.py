@@ -683,3 +683,50 @@ def test_gravity_turned_down_by_the_reference_is_refused_in_one_line(trial, tmp_
     assert f"recording.reference.frame = '{frame}': puts the accelerometer's gravity down" \
         in message and "\n" not in message
     assert "axes = [\"-x\", \"-y\", \"-z\"]" in message
+
+
+def test_one_file_per_sensor_is_one_recording(trial, tmp_path, capsys):
+    """A logger that writes one file per sensor (phone apps' Gyroscope.csv,
+    Accelerometer.csv, …, integer nanosecond times): each section names its
+    own file, and the recording is the one the merged table declares, to
+    the bit; inspect reads each file, and a missing one is one line."""
+    table = _table(trial)
+    merged = load_declared(_declare(tmp_path, _csv(tmp_path, table)))
+    stamps = np.round(np.asarray(table["t"]) * 1e9).astype(np.int64)
+    for prefix, sensor in (("g", "gyro"), ("a", "accelerometer"), ("m", "magnetometer"),
+                           ("q", "reference")):
+        axes = "wxyz" if prefix == "q" else "xyz"
+        frame = pd.DataFrame({"time": stamps, **{f"{prefix}{axis}": np.asarray(
+            table[f"{prefix}{axis}"]) for axis in axes}})
+        _csv_ints(tmp_path / f"{sensor}.csv", frame)
+    sections = "\n".join(
+        f'[recording.{sensor}]\nfile = "{sensor}.csv"\ntime = "time"\ncolumns = {columns}\n'
+        + (f'unit = "{unit}"\n' if unit else "")
+        for sensor, columns, unit in (
+            ("gyro", '["gx", "gy", "gz"]', "rad/s"), ("accelerometer", '["ax", "ay", "az"]',
+                                                      "m/s^2"),
+            ("magnetometer", '["mx", "my", "mz"]', "uT"),
+            ("reference", '["qw", "qx", "qy", "qz"]', None)))
+    declared = tmp_path / "apart.toml"
+    declared.write_text('[recording]\ntime_unit = "ns"\n\n' + sections)
+    apart = load_declared(declared)
+    for field in ("gyro_radps", "accelerometer_mps2", "magnetometer_uT", "reference_quat"):
+        np.testing.assert_allclose(getattr(apart, field), getattr(merged, field), rtol=0,
+                                   atol=1e-12, equal_nan=True, err_msg=field)
+    assert apart.rate_hz == pytest.approx(merged.rate_hz, rel=1e-6)
+    assert main(["inspect", str(declared)]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{sensor}.csv:" in out for sensor in ("gyro", "magnetometer", "reference"))
+    (tmp_path / "magnetometer.csv").unlink()
+    with pytest.raises(InvalidParameterError, match="recording.magnetometer.file = "
+                       "'magnetometer.csv': is not a file"):
+        load_declared(declared)
+
+
+def _csv_ints(path: Path, frame: pd.DataFrame) -> None:
+    """``frame`` as a CSV: integer columns as integers, floats as their
+    shortest exact text."""
+    columns = [frame[name].astype(str).tolist() if frame[name].dtype.kind in "iu"
+               else list(_fields(frame[name].to_numpy(dtype=float))) for name in frame]
+    path.write_text(",".join(frame.columns) + "\n"
+                    + "\n".join(",".join(row) for row in zip(*columns)) + "\n")

@@ -29,7 +29,8 @@ def arguments(commands, defaults) -> None:
 
 
 def run(args, _scenario):
-    from sensors.declared import data_file, declared_recordings, read_declaration
+    from sensors.declared import (SENSORS, data_file, declared_recordings, read_declaration,
+                                  sensor_tables)
     from sensors.tables import read_table
     from benchmarks.experiments.inspection import (declaration_toml, findings,
                                                    guess_declaration, loaded_guess)
@@ -39,8 +40,8 @@ def run(args, _scenario):
     target = None
     if declared:
         declaration = read_declaration(args.file)
-        data = data_file(args.file, declaration)
-        table, notes = read_table(data), []
+        data = data_file(args.file, declaration) if "file" in declaration else None
+        table, notes = (read_table(data) if data else {}), []
     else:
         target = (args.out or args.file.parent) / f"{args.file.stem}.toml"
         if target.exists():
@@ -49,13 +50,19 @@ def run(args, _scenario):
         data, table = args.file, read_table(args.file)
         relative = os.path.relpath(args.file.resolve(), target.parent.resolve())
         declaration, notes = guess_declaration(table, relative)
-    print(f"{data.name}: {len(table)} columns ({', '.join(list(table)[:12])}"
-          f"{', …' if len(table) > 12 else ''})")
+    tables = sensor_tables(args.file, declaration, table) if declared else \
+        dict.fromkeys(SENSORS, table)
+    files = {data.name: table} if data else {}
+    files.update((Path(declaration[sensor]["file"]).name, tables[sensor]) for sensor in SENSORS
+                 if isinstance(declaration.get(sensor), dict) and "file" in declaration[sensor])
+    for name, columns in files.items():
+        print(f"{name}: {len(columns)} columns ({', '.join(list(columns)[:12])}"
+              f"{', …' if len(columns) > 12 else ''})")
     # The user's own declaration: its error, exit 2; a guess: a note.
     parts = declared_recordings(declaration, table, args.file) if declared else \
         loaded_guess(declaration, table, target, notes)
     if parts is not None:
-        for line in findings(parts, table, declaration):
+        for line in findings(parts, tables, declaration):
             print(f"  {line}")
     for note in notes:
         print(f"{PROG}: note: {note}", file=sys.stderr)

@@ -333,16 +333,17 @@ def _toml(value) -> str:
     return json.dumps(str(value))
 
 
-def findings(parts, table: dict, declaration: dict) -> list[str]:
+def findings(parts, tables: dict, declaration: dict) -> list[str]:
     """What the file holds, one line each: every sensor's clock, clipping,
     and for each part of the loaded recording (``parts``: split at the
-    gyro's gaps) the rest periods, gravity and the field."""
+    gyro's gaps) the rest periods, gravity and the field. ``tables``: each
+    sensor's table (:func:`sensors.declared.sensor_tables`)."""
     seconds = TIME_UNITS[declaration.get("time_unit", "s")]
     lines = []
     for sensor in ("gyro", "accelerometer", "magnetometer", "reference"):
         if sensor not in declaration:
             continue
-        section = declaration[sensor]
+        section, table = declaration[sensor], tables[sensor]
         values = _values(table, section["columns"])
         times = np.asarray(table[section["time"]], dtype=float)
         times = times[~np.isnan(values).all(axis=1)] * seconds
