@@ -118,6 +118,19 @@ def _read(path: Path, key: str, section: dict) -> dict:
         refuse(path, key, section.get("file"), err.rule)
 
 
+def data_files(path: Path, declaration: dict) -> list[Path]:
+    """Every file ``declaration`` reads: ``[recording]``'s, where it names
+    one, and each sensor's own, once each, in that order."""
+    files = [data_file(path, declaration)] if "file" in declaration else []
+    for name in SENSORS:
+        section = declaration.get(name)
+        if isinstance(section, dict) and "file" in section:
+            files.append(data_file(path, section, f"recording.{name}.file"))
+    if not files:
+        data_file(path, declaration)             # its refusal: no file named at all
+    return list(dict.fromkeys(files))
+
+
 def sensor_tables(path: Path, declaration: dict, table: dict) -> dict:
     """Sensor → the table its columns are in: ``table`` (the ``[recording]``
     file's), or the sensor's own ``file`` (a logger that writes one file per

@@ -491,9 +491,18 @@ def test_replay_finds_the_rest_a_declared_recording_begins_with(trial, tmp_path)
     flagged = recording.movement[:keep]
     begins = [np.argmax(flags) / recording.rate_hz for flags in (found, flagged)]
     assert abs(begins[0] - begins[1]) < 0.5, begins
-    moving = {key: np.asarray(value)[int(41 * recording.rate_hz):] for key, value in table.items()}
+    late = {**table, **{f"a{axis}": np.concatenate([[np.nan, np.nan], np.asarray(
+        table[f"a{axis}"])[2:]]) for axis in "xyz"}}     # the accelerometer's first reading late
+    with pytest.warns(UserWarning, match="its first 39.7 s are at rest"):
+        open_dataset(str(_declare(tmp_path, _csv(tmp_path, late, "late.csv"))))
+    # A log that moves from its first sample, its reference begun a second
+    # later: no rest at all (not the samples before the reference), so no
+    # bias at rest to judge the filters' against.
+    moving = {key: np.array(value)[int(41 * recording.rate_hz):] for key, value in table.items()}
+    for part in "wxyz":
+        moving[f"q{part}"][:int(recording.rate_hz)] = np.nan
     moved = open_dataset(str(_declare(tmp_path, _csv(tmp_path, moving, "moving.csv"))))[0]
-    np.testing.assert_array_equal(moved.movement, moved.has_reference)
+    assert moved.movement.all() and np.isnan(moved.rest_gyro_mean_radps()).all()
 
 
 def test_read_table_names_a_file_it_cannot_read(tmp_path):
@@ -717,6 +726,12 @@ def test_one_file_per_sensor_is_one_recording(trial, tmp_path, capsys):
     assert main(["inspect", str(declared)]) == 0
     out = capsys.readouterr().out
     assert all(f"{sensor}.csv:" in out for sensor in ("gyro", "magnetometer", "reference"))
+    from benchmarks.experiments.replay import dataset_source
+    assert dataset_source(str(declared))[0] == "recording"        # replay --tuned's key
+    assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out",
+                 str(tmp_path / "scored"), "--quiet"]) == 0
+    scores = pd.read_csv(tmp_path / "scored" / "broad_trials.csv")["total_rmse_deg"]
+    assert np.isfinite(scores).all()
     (tmp_path / "magnetometer.csv").unlink()
     with pytest.raises(InvalidParameterError, match="recording.magnetometer.file = "
                        "'magnetometer.csv': is not a file"):

@@ -31,7 +31,7 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
-from sensors.declared import GAP_FACTOR, data_file, load_parts, read_declaration
+from sensors.declared import GAP_FACTOR, data_files, load_parts, read_declaration
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -336,12 +336,13 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
 def declared_parts(path: Path) -> tuple:
     """The parts of the ``[recording]`` at ``path``, read once while the
     file is unchanged (the dataset lists them, then loads each)."""
-    data = data_file(path, read_declaration(path))
-    return _declared_parts(path, path.stat().st_mtime_ns, data.stat().st_mtime_ns)
+    data = data_files(path, read_declaration(path))
+    return _declared_parts(path, path.stat().st_mtime_ns,
+                           tuple(file.stat().st_mtime_ns for file in data))
 
 
 @functools.lru_cache(maxsize=16)
-def _declared_parts(path: Path, _modified_ns: int, _data_modified_ns: int) -> tuple:
+def _declared_parts(path: Path, _modified_ns: int, _data_modified_ns: tuple) -> tuple:
     return tuple(load_parts(path))
 
 

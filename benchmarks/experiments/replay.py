@@ -98,17 +98,21 @@ def with_found_rest(recording: Recording) -> Recording:
     :func:`benchmarks.experiments.inspection.rest_periods`: the gyro, and the
     accelerometer where there is one, within their thresholds for at least
     1.5 s) from its first sample. There, as in a BROAD trial's rest, the
-    gyro's noise and bias are taken; a note says how long it is. Unchanged
-    where none is found."""
+    gyro's noise and bias are taken; a note says how long it is. Where none
+    is found, it moves from its first sample: no rest, even before its
+    reference begins."""
     import warnings
     from dataclasses import replace
     from benchmarks.experiments.inspection import rest_periods
     from sensors.turning import held_readings
     force = (np.zeros_like(recording.gyro_radps) if recording.accelerometer_mps2 is None
              else held_readings(recording.accelerometer_mps2))
+    read = np.flatnonzero(np.any(force != 0.0, axis=1))
+    if len(read):                    # before its first reading, the accelerometer's first
+        force[:read[0]] = force[read[0]]
     periods = rest_periods(recording.gyro_radps, force, recording.dt)
-    if not periods or periods[0][0] > 0.0:
-        return recording
+    if not periods or periods[0][0] > 0.0:   # no rest: it moves from its first sample
+        return replace(recording, movement=np.ones(recording.n_samples, dtype=bool))
     end = int(round(periods[0][1] / recording.dt))
     warnings.warn(f"{recording.name}: its first {end * recording.dt:.1f} s are at rest (the gyro"
                   f"{' and the accelerometer' if recording.accelerometer_mps2 is not None else ''}"
@@ -129,8 +133,9 @@ def dataset_source(dataset: str) -> tuple:
         path = shipped_file(DATASETS[dataset]) if dataset in DATASETS else Path(dataset)
         digest = hashlib.sha256(Path(path).read_bytes())
         if str(dataset).endswith(".toml"):      # the declaration and the file it reads
-            from sensors.declared import data_file, read_declaration
-            digest.update(data_file(path, read_declaration(path)).read_bytes())
+            from sensors.declared import data_files, read_declaration
+            for data in data_files(path, read_declaration(path)):
+                digest.update(data.read_bytes())
         digest = digest.hexdigest()
     except OSError as err:
         raise InvalidParameterError("dataset", dataset, f"cannot be read "
