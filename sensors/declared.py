@@ -26,7 +26,7 @@ The formats: CSV and Parquet (pandas), ``.npz`` (numpy), ``.mat`` (scipy)
 and HDF5 (h5py); a column is a 1-D array, or ``columns`` names one (N, 3)
 or (N, 4) array. Each sensor keeps its own timestamps: the gyro's samples
 are the recording's steps (its rate fitted to their times, a dropped sample
-put back with the rate before it: :func:`clock_steps`), and
+put back with the rate before it: :func:`sensors.clocks.clock_steps`), and
 every other reading is taken at the first gyro sample at or after its time,
 as the star tracker's readings are (:mod:`sensors.star_tracker`); a sample
 with no reading of a sensor holds none (a row of zeros: a dropout, which
@@ -54,12 +54,14 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
+from sensors.clocks import clock_period, clock_steps, part_starts
 from sensors.declared_reference import (check_gravity_up, check_reference,
                                         declared_reference)
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
-from sensors.turning import TURNING_FACTOR, axes_fit, turning_scale
+from sensors.turning import (MIRRORED_CORRELATION, TURNING_FACTOR, axes_fit, gravity_turning,
+                             turning_scale)
 from sensors.tables import read_table
 
 #: Each time unit in seconds.
@@ -75,8 +77,6 @@ UNITS = {
     "magnetometer": {"uT": 1.0, "nT": 1e-3, "gauss": 100.0, "mT": 1e3},
 }
 SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
-#: A gap in the gyro's clock: an interval this many times its median.
-GAP_FACTOR = 3.0
 #: Plausible medians of each vector sensor's norm in its toolkit unit: in
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
@@ -206,7 +206,7 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
         _check_norm(path, sensor, values, sections[sensor]["unit"])
     if "accelerometer" in channels:
         _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
-                       sections["gyro"]["unit"])
+                       sections["gyro"]["unit"], sections["gyro"]["columns"])
     for sensor, values in channels.items():
         _check_axes(path, sensor, gyro, values, 1.0 / rate, sections[sensor])
     reference = np.full((len(gyro_time), 4), np.nan)
@@ -370,33 +370,6 @@ def _check_clock(path: Path, column, times: np.ndarray) -> None:
                 "at least two")
 
 
-def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
-    """Each sample's step on a uniform clock, and the clock's period:
-    the least-squares line through the samples' times against their steps,
-    an interval of about k periods counting k steps (k - 1 samples dropped).
-    The steps are counted in the median interval and in the mean one, and
-    the count whose line fits the times better is taken: the median is the
-    period where samples were dropped, the mean where the times are rounded
-    (integer milliseconds at 256 Hz: intervals of 3 and 4 ms, median 4)."""
-    intervals, best = np.diff(times), None
-    for guess in (np.median(intervals), (times[-1] - times[0]) / (len(times) - 1)):
-        steps = np.concatenate([[0], np.cumsum(np.maximum(1.0, np.rint(intervals / guess)))])
-        period, origin = np.polyfit(steps, times, 1)
-        misfit = float(np.mean((times - origin - period * steps) ** 2))
-        if best is None or misfit < best[0]:
-            best = (misfit, steps.astype(np.int64), float(period))
-    return best[1], best[2]
-
-
-def clock_period(times: np.ndarray) -> float:
-    """A sensor's period: the median interval where the fitted one
-    (:func:`clock_steps`) agrees with it to 1 ppm (a clock without drops or
-    rounding, read as before), else the fitted one."""
-    median = float(np.median(np.diff(times)))
-    fitted = clock_steps(times)[1]
-    return median if abs(fitted - median) <= 1e-6 * median else fitted
-
-
 def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
     """The gyro's times and rates with each dropped sample (:func:`clock_steps`)
     put back, its rate held from the sample before and its time between its
@@ -410,13 +383,6 @@ def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
                   "before it", stacklevel=3)
     grid = np.arange(steps[-1] + 1)
     return np.interp(grid, steps, times), rates[np.searchsorted(steps, grid, side="right") - 1]
-
-
-def part_starts(times: np.ndarray) -> np.ndarray:
-    """Where the gyro's clock starts anew: the first sample after each gap
-    (an interval over :data:`GAP_FACTOR` times the typical one), and 0."""
-    steps = np.diff(times)
-    return np.concatenate([[0], np.flatnonzero(steps > GAP_FACTOR * np.median(steps)) + 1])
 
 
 def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
@@ -443,9 +409,16 @@ def _check_rate(path: Path, rate: float, unit: str) -> None:
 
 
 def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
-                   unit: str) -> None:
+                   unit: str, columns) -> None:
     """Refuse a gyro whose rates, in the declared unit, turn gravity 57
-    times faster or slower than the accelerometer sees it turn."""
+    times faster or slower than the accelerometer sees it turn, or the
+    other way (every sensor's columns in a left-handed order)."""
+    found = gravity_turning(rates, specific_force, dt)
+    if found is not None and found[0] <= MIRRORED_CORRELATION:
+        refuse(path, "recording.gyro.columns", columns,
+               f"turn gravity the other way from the accelerometer's readings (correlation "
+               f"{found[0]:.2f}): the sensors' columns as declared make a left-handed frame "
+               "(a logger's z, y, x order?); declare each sensor's columns as x, y, z")
     scale = turning_scale(rates, specific_force, dt)
     if scale is None or 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR:
         return

@@ -38,6 +38,9 @@ TURNING_WINDOW_S = 0.1
 #: gravity, and is no evidence), the scale that fits them must be within
 #: this factor of 1 (a unit's mistake is 57).
 TURNING_CORRELATION, TURNING_FACTOR = 0.3, 10.0
+#: Below this, gravity turns the other way from the gyro's prediction: a
+#: mirrored (left-handed) frame, which no clean log comes near (BROAD: 0.84-0.99).
+MIRRORED_CORRELATION = -2 * TURNING_CORRELATION
 #: The axes check: declared axes whose turning correlates below the first
 #: with the gyro's, where another order of the axes correlates above the
 #: second, are wrong. A correct magnetometer on BROAD's 30 trials correlates
@@ -112,10 +115,13 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float | None:
     return float(np.sum(a * b)) / scale if scale > 0.0 else None
 
 
-def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
-    """The factor by which ``rates`` must be multiplied to turn gravity as
-    the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
-    None where the turning is not seen clearly enough to say."""
+def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> tuple | None:
+    """``(correlation, scale)`` of gravity's turning as the accelerometer
+    sees it with the turning ``rates`` predict, and the factor by which the
+    rates must be multiplied to match it (1 for a gyro in the toolkit's
+    rad/s); None where there is too little of it. A correlation near −1 is
+    a frame mirrored between the two: columns in a left-handed order
+    (``ω × v`` changes its sign under a reflection of both)."""
     if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
         return None                       # too few accelerometer readings on the clock
     turning = _turning(rates, specific_force, dt)
@@ -123,9 +129,17 @@ def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> f
         return None
     change, predicted = turning
     correlation = _correlation(change, predicted)
-    if correlation is None or correlation < TURNING_CORRELATION:
+    if correlation is None:
         return None
-    return float(np.sum(change * predicted)) / float(np.sum(predicted * predicted))
+    return correlation, float(np.sum(change * predicted)) / float(np.sum(predicted * predicted))
+
+
+def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
+    """The factor by which ``rates`` must be multiplied to turn gravity as
+    the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
+    None where the turning is not seen clearly enough to say."""
+    found = gravity_turning(rates, specific_force, dt)
+    return None if found is None or found[0] < TURNING_CORRELATION else found[1]
 
 
 def _orders() -> list[np.ndarray]:

@@ -584,7 +584,7 @@ def test_the_clock_is_fitted_through_rounded_times_and_dropped_samples(rate, qua
     1.73-2.33 medians, so its count is exact; without drops the mean is the
     period and q < p/2 keeps each count at 1. The least-squares slope over
     n steps then errs by at most (q/2)·Σ|x - x̄| / Σ(x - x̄)² ≈ 1.5 q/n."""
-    from sensors.declared import clock_period, clock_steps
+    from sensors.clocks import clock_period, clock_steps
     period, quantum = 1.0 / rate, quantum_ms * 1e-3
     assume(quantum <= period / 10 or (drops == 0.0 and quantum < period / 2))
     rng = np.random.default_rng(seed)
@@ -745,3 +745,19 @@ def _csv_ints(path: Path, frame: pd.DataFrame) -> None:
                else list(_fields(frame[name].to_numpy(dtype=float))) for name in frame]
     path.write_text(",".join(frame.columns) + "\n"
                     + "\n".join(",".join(row) for row in zip(*columns)) + "\n")
+
+
+def test_every_sensor_in_a_mirrored_order_is_refused(trial, tmp_path):
+    """x and z swapped in every sensor (a logger's z, y, x written as x, y,
+    z): each sensor turns with the others, but in a left-handed frame,
+    where ω × v changes its sign: gravity turns against the gyro's
+    prediction (correlation -1), which the axes check, blind to a common
+    mirror, let through (128° for the MEKF)."""
+    table = _table(trial, whole=True)
+    for prefix in "gam":
+        table[f"{prefix}x"], table[f"{prefix}z"] = table[f"{prefix}z"], table[f"{prefix}x"]
+    with pytest.raises(InvalidParameterError) as refused:
+        load_declared(_declare(tmp_path, _csv(tmp_path, table)))
+    message = str(refused.value)
+    assert "recording.gyro.columns = ['gx', 'gy', 'gz']: turn gravity the other way" in message
+    assert "left-handed" in message and "\n" not in message

@@ -31,7 +31,8 @@ from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
-from sensors.declared import GAP_FACTOR, data_files, load_parts, read_declaration
+from sensors.clocks import GAP_FACTOR
+from sensors.declared import data_files, load_parts, read_declaration
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"

@@ -20,8 +20,8 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.declared import (GAP_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS, clock_period,
-                              declared_recordings)
+from sensors.clocks import GAP_FACTOR, clock_period
+from sensors.declared import PLAUSIBLE_NORMS, TIME_UNITS, UNITS, declared_recordings
 from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits, turning_scale
 
