@@ -81,6 +81,10 @@ SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: A specific force's norm is near g at rest and stays within a few g of it
+#: in a hand's motion: its 5th percentile below this share of its 95th is
+#: an accelerometer without gravity (or falls and jumps).
+GRAVITY_FREE_RATIO = 0.2
 
 
 def load_declared(path) -> Recording:
@@ -203,7 +207,7 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
     channels = {sensor: _on_clock(gyro_time, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
     for sensor, values in channels.items():
-        _check_norm(path, sensor, values, sections[sensor]["unit"])
+        _check_norm(path, sensor, values, sections[sensor]["unit"], sections[sensor]["columns"])
     if "accelerometer" in channels:
         _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
                        sections["gyro"]["unit"], sections["gyro"]["columns"])
@@ -452,8 +456,11 @@ def _listed_axes(names: list) -> str:
     return "[" + ", ".join(f'"{name}"' for name in names) + "]"
 
 
-def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
-    """A vector sensor's median norm, where it read, plausible in its unit."""
+def _check_norm(path: Path, name: str, values: np.ndarray, unit: str,
+                section_columns=None) -> None:
+    """A vector sensor's median norm, where it read, plausible in its unit;
+    an accelerometer without gravity (:data:`GRAVITY_FREE_RATIO`) refused, or
+    noted where its median is in place."""
     norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
     if not len(norms):
         refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
@@ -461,8 +468,17 @@ def _check_norm(path: Path, name: str, values: np.ndarray, unit: str) -> None:
     median = float(np.median(norms))
     low, high = PLAUSIBLE_NORMS[name]
     limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]
+    low_norm, high_norm = np.percentile(norms, [5.0, 95.0])
+    gravity_free = name == "accelerometer" and low_norm < GRAVITY_FREE_RATIO * high_norm
+    no_gravity = (f"hold no gravity: their norm's 5th percentile is {low_norm / high_norm:.0%} "
+                  "of its 95th (a phone's user acceleration?); declare the accelerometer's "
+                  "readings that include gravity")
     if low <= median <= high and np.abs(values).max() <= limit:
+        if gravity_free:          # or a recording of jumps and falls: said, not refused
+            warnings.warn(f"{path.name}: recording.{name}.columns may {no_gravity}", stacklevel=3)
         return
+    if gravity_free:              # no unit would make it gravity
+        refuse(path, f"recording.{name}.columns", section_columns, no_gravity)
     fitting = [other for other, factor in UNITS[name].items() if other != unit and
                low <= median / UNITS[name][unit] * factor <= high]
     hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""

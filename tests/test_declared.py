@@ -761,3 +761,20 @@ def test_every_sensor_in_a_mirrored_order_is_refused(trial, tmp_path):
     message = str(refused.value)
     assert "recording.gyro.columns = ['gx', 'gy', 'gz']: turn gravity the other way" in message
     assert "left-handed" in message and "\n" not in message
+
+
+@pytest.mark.parametrize("unit, scale", [("m/s^2", 1.0), ("g", 1.0 / 9.80665)])
+def test_an_accelerometer_without_gravity_is_refused_whatever_its_unit(trial, tmp_path, unit,
+                                                                        scale):
+    """A phone's user acceleration (gravity taken out) reads near zero at
+    rest: no unit makes it gravity, and none is offered (unit = "g" was,
+    and then scored 141°)."""
+    table = _table(trial)
+    for axis in "xyz":
+        values = np.asarray(table[f"a{axis}"])
+        table[f"a{axis}"] = (values - np.median(values)) * scale
+    with pytest.raises(InvalidParameterError) as refused:
+        load_declared(_declare(tmp_path, _csv(tmp_path, table), acc_unit=unit))
+    message = str(refused.value)
+    assert "recording.accelerometer.columns = ['ax', 'ay', 'az']: hold no gravity" in message
+    assert "would fit" not in message and "\n" not in message

@@ -391,8 +391,9 @@ def _reference_turning(recording) -> str:
     axes = ("its axes' turn from the gyro's undetermined (a turn about one axis)"
             if rotation is None else
             f"its axes {np.degrees(rotation.magnitude()):.1f}° from the gyro's")
-    return (f"reference: turns as the gyro does, {100 * unexplained:.1f} % of its turning "
-            f"unexplained; {axes}")
+    verdict = "turns as the gyro does" if reference_fits(fit) else \
+        "does not turn as the gyro does"
+    return f"reference: {verdict}, {100 * unexplained:.1f} % of its turning unexplained; {axes}"
 
 
 def _calibration(field: np.ndarray) -> str:
