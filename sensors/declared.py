@@ -111,7 +111,7 @@ def load_parts(path) -> list[Recording]:
               for name in SENSORS if name in declaration)
     table = {} if own and "file" not in declaration else \
         _read(path, "recording.file", declaration)
-    return declared_recordings(declaration, table, path)
+    return declared_recordings(declaration, sensor_tables(path, declaration, table), path)
 
 
 def _read(path: Path, key: str, section: dict) -> dict:
@@ -152,17 +152,16 @@ def sensor_tables(path: Path, declaration: dict, table: dict) -> dict:
     return tables
 
 
-def declared_recordings(declaration: dict, table: dict, path: Path) -> list[Recording]:
+def declared_recordings(declaration: dict, tables: dict, path: Path) -> list[Recording]:
     """The recordings ``declaration`` (a ``[recording]`` section) makes of
-    ``table`` (:func:`read_table`), split at the gyro's gaps; errors name
-    ``path``, the declaration."""
+    ``tables`` (sensor → the table its columns are in: :func:`sensor_tables`),
+    split at the gyro's gaps; errors name ``path``, the declaration."""
     clock_unit = choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
                          TIME_UNITS)
     sections = {name: declaration[name] for name in SENSORS if name in declaration}
     if "gyro" not in sections:
         refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
-    tables = sensor_tables(path, declaration, table)
     origin = _time_origin(tables, sections)
     read = {name: _sensor(path, tables[name], name, section, TIME_UNITS[clock_unit], origin)
             for name, section in sections.items()}

@@ -59,7 +59,7 @@ def run(args, _scenario):
         print(f"{name}: {len(columns)} columns ({', '.join(list(columns)[:12])}"
               f"{', …' if len(columns) > 12 else ''})")
     # The user's own declaration: its error, exit 2; a guess: a note.
-    parts = declared_recordings(declaration, table, args.file) if declared else \
+    parts = declared_recordings(declaration, tables, args.file) if declared else \
         loaded_guess(declaration, table, target, notes)
     if parts is not None:
         for line in findings(parts, tables, declaration):

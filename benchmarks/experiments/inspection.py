@@ -21,7 +21,7 @@ import numpy as np
 from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
 from sensors.clocks import GAP_FACTOR, clock_period
-from sensors.declared import PLAUSIBLE_NORMS, TIME_UNITS, UNITS, declared_recordings
+from sensors.declared import PLAUSIBLE_NORMS, SENSORS, TIME_UNITS, UNITS, declared_recordings
 from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits, turning_scale
 
@@ -208,15 +208,15 @@ def _time_for(sensor: str, columns, times: list, table: dict) -> str:
     its columns hold a reading (a merged table's own clock), else the first."""
     names = [columns] if isinstance(columns, str) else columns
     words = set().union(*(_tokens(name) for name in names)) - set("wxyz")
+    unread = np.isnan(_values(table, columns)).any(axis=1)
 
     def names_it(time: str) -> bool:
         rest = _tokens(time) - set(TIME_TOKENS)
         return bool(rest & words) or any(_sensor_of(token) == sensor for token in rest)
 
     def reads_with_it(time: str) -> bool:
-        values, stamps = _values(table, columns), np.asarray(table[time], dtype=float)
-        return (stamps.shape == values.shape[:1]
-                and np.array_equal(np.isnan(stamps), np.isnan(values).any(axis=1)))
+        stamps = np.asarray(table[time], dtype=float)
+        return stamps.shape == unread.shape and np.array_equal(np.isnan(stamps), unread)
 
     return ([time for time in times if names_it(time)]
             or [time for time in times if reads_with_it(time)] or times)[0]
@@ -288,7 +288,7 @@ def loaded_guess(declaration: dict, table: dict, path, notes: list):
         if order:
             reference["order"] = order
         try:
-            parts = declared_recordings(declaration, table, path)
+            parts = declared_recordings(declaration, dict.fromkeys(SENSORS, table), path)
         except InvalidParameterError as err:
             refused = refused or err
             if err.name.endswith("recording.reference.order"):
