@@ -4,7 +4,9 @@ it stops.
 A logger's times are rarely the clock's: rounded to whole milliseconds, a
 sample dropped now and then, a gap where it paused. :func:`clock_steps`
 fits the uniform clock through them, :func:`part_starts` finds where it
-stops (:mod:`sensors.declared` splits a recording there).
+stops (:mod:`sensors.declared` splits a recording there). A counter that
+rolls over (an Arduino's ``micros()`` every 2³² µs, 71.6 minutes; a 16-bit
+tick counter) is unwrapped first (:func:`unwrapped`).
 """
 from __future__ import annotations
 
@@ -12,6 +14,27 @@ import numpy as np
 
 #: A gap in the gyro's clock: an interval this many times its median.
 GAP_FACTOR = 3.0
+#: The sizes of the counters a logger's times roll over at: 16 and 32 bits.
+COUNTER_MODULI = (2 ** 16, 2 ** 32)
+
+
+def unwrapped(times: np.ndarray) -> np.ndarray:
+    """Integer ``times`` with each roll-over of their counter undone: where
+    they go back by nearly a modulus of :data:`COUNTER_MODULI` (all of them
+    below it, and the step across the roll-over, the modulus added, no more
+    than :data:`GAP_FACTOR` times the typical one), the modulus is added to
+    every time from there. Other times, and any that go back otherwise, are
+    left as they are (the check that times increase names them)."""
+    if times.dtype.kind not in "iu" or len(times) < 3 or times.min() < 0:
+        return times
+    steps = np.diff(times.astype(np.int64))
+    typical = np.median(steps[steps > 0]) if np.any(steps > 0) else 0
+    for modulus in COUNTER_MODULI:
+        rolled = (steps < 0) & (steps + modulus > 0) & (steps + modulus <= GAP_FACTOR * typical)
+        if times.max() < modulus and rolled.any():
+            return times.astype(np.int64) + modulus * np.concatenate(
+                [[0], np.cumsum(rolled)]).astype(np.int64)
+    return times
 
 
 def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:

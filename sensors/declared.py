@@ -45,48 +45,25 @@ axes or a reference's convention that turn unlike the gyro
 """
 from __future__ import annotations
 
-import math
 import tomllib
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from dynamics.environment import STANDARD_GRAVITY_MPS2
-from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
-from sensors.clocks import clock_period, clock_steps, part_starts
+from dynamics.validation import InvalidParameterError
+from sensors.clocks import clock_period, clock_steps, part_starts, unwrapped
 from sensors.declared_reference import (check_gravity_up, check_reference,
                                         declared_reference)
+from sensors.declared_units import (UNITS, check_norm, check_rate, check_rates,
+                                    check_reference_scale, check_turning, seconds_per_tick)
 from sensors.magnetometer_calibration import calibrated
-from sensors.recording import VECTOR_LIMITS, Recording, kind_in_words
+from sensors.recording import Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
-from sensors.turning import (MIRRORED_CORRELATION, TURNING_FACTOR, axes_fit, gravity_turning,
-                             turning_scale)
 from sensors.tables import read_table
+from sensors.turning import axes_fit
 
-#: Each time unit in seconds.
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
-#: The gyro's plausible rates, Hz: from a logger's slowest (a phone saving
-#: power, 1 Hz) to the fastest MEMS output (tens of kHz). Beyond them the
-#: times' unit is wrong, not the IMU.
-PLAUSIBLE_RATE_HZ = (1.0, 1e5)
-#: Each sensor's units: name → factor to the toolkit's unit (rad/s, m/s², µT).
-UNITS = {
-    "gyro": {"rad/s": 1.0, "deg/s": math.pi / 180.0},
-    "accelerometer": {"m/s^2": 1.0, "g": STANDARD_GRAVITY_MPS2},
-    "magnetometer": {"uT": 1.0, "nT": 1e-3, "gauss": 100.0, "mT": 1e3},
-}
 SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
-#: Plausible medians of each vector sensor's norm in its toolkit unit: in
-#: motion an accelerometer's median stays near g; the Earth's field is 25 to
-#: 65 µT, a room's or a vehicle's disturbances allowed for.
-PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
-#: A specific force's norm is near g at rest and stays within a few g of it
-#: in a hand's motion: its 5th percentile below this share of its 95th is
-#: an accelerometer without gravity (or falls and jumps).
-GRAVITY_FREE_RATIO = 0.2
-
-
 def load_declared(path) -> Recording:
     """The recording that the ``[recording]`` TOML at ``path`` declares,
     checked; :class:`InvalidParameterError` names the file and the key (and
@@ -156,14 +133,13 @@ def declared_recordings(declaration: dict, tables: dict, path: Path) -> list[Rec
     """The recordings ``declaration`` (a ``[recording]`` section) makes of
     ``tables`` (sensor → the table its columns are in: :func:`sensor_tables`),
     split at the gyro's gaps; errors name ``path``, the declaration."""
-    clock_unit = choice(path, "recording.time_unit", declaration.get("time_unit", "s"),
-                         TIME_UNITS)
+    tick = seconds_per_tick(path, declaration.get("time_unit", "s"))
     sections = {name: declaration[name] for name in SENSORS if name in declaration}
     if "gyro" not in sections:
         refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
     origin = _time_origin(tables, sections)
-    read = {name: _sensor(path, tables[name], name, section, TIME_UNITS[clock_unit], origin)
+    read = {name: _sensor(path, tables[name], name, section, tick, origin)
             for name, section in sections.items()}
     gyro_time, gyro = read["gyro"]
     starts = part_starts(gyro_time)
@@ -199,24 +175,26 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
     """One unbroken stretch ``span`` of the gyro's clock as a recording."""
     gyro_time, gyro = _gyro_on_grid(path, *(column[span] for column in read["gyro"]))
     rate = 1.0 / clock_period(gyro_time)
-    _check_rate(path, rate, declaration.get("time_unit", "s"))
+    check_rate(path, rate, declaration.get("time_unit", "s"))
     if not np.any(gyro != 0.0):
         refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
                 "the gyro recorded no rate (a channel not logged, or a dead sensor)")
     channels = {sensor: _on_clock(gyro_time, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
     for sensor, values in channels.items():
-        _check_norm(path, sensor, values, sections[sensor]["unit"], sections[sensor]["columns"])
+        check_norm(path, sensor, values, sections[sensor]["unit"], sections[sensor]["columns"])
     if "accelerometer" in channels:
-        _check_turning(path, gyro, channels["accelerometer"], 1.0 / rate,
-                       sections["gyro"]["unit"], sections["gyro"]["columns"])
+        check_turning(path, gyro, channels["accelerometer"], 1.0 / rate, sections["gyro"],
+                      declaration.get("time_unit", "s"))
     for sensor, values in channels.items():
         _check_axes(path, sensor, gyro, values, 1.0 / rate, sections[sensor])
     reference = np.full((len(gyro_time), 4), np.nan)
     if "reference" in read:
         reference = declared_reference(path, gyro_time, *read["reference"], sections["reference"])
         check_reference(path, gyro_time, gyro, read["reference"], sections["reference"],
-                         reference)
+                        reference, lambda: check_reference_scale(
+                            path, gyro, reference, 1.0 / rate, sections["gyro"],
+                            declaration.get("time_unit", "s")))
         if "accelerometer" in channels:
             check_gravity_up(path, reference, channels["accelerometer"], sections["reference"])
     return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
@@ -270,7 +248,8 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     if unknown:
         refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
                 f"is not a key of the {name}'s section; known: {', '.join(sorted(known))}")
-    times = _column(path, table, f"{key}.time", section.get("time"), origin) * time_scale
+    times = _column(path, table, f"{key}.time", section.get("time"), origin, time=True) \
+        * time_scale
     width = 4 if name == "reference" and "sequence" not in section else 3
     values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
     if len(values) != len(times):
@@ -291,7 +270,7 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
             values = values @ axes_matrix(section["axes"], f"{path.name}: {key}.axes").T
     if name == "gyro":
         _check_clock(path, section.get("time"), times)
-        _check_rates(path, values, section["unit"])
+        check_rates(path, values, section["unit"])
     else:
         _check_increasing(path, f"{key}.time", section.get("time"), times)
     if name == "magnetometer":
@@ -300,10 +279,12 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     return times, values
 
 
-def _column(path: Path, table: dict, key: str, name, origin: int = 0) -> np.ndarray:
+def _column(path: Path, table: dict, key: str, name, origin: int = 0,
+            time: bool = False) -> np.ndarray:
     """Column ``name`` as floats, less ``origin`` (for times: integer epoch
     nanoseconds are counted from a common origin before they become floats,
-    which would keep only a quarter of a microsecond)."""
+    which would keep only a quarter of a microsecond; a counter's roll-over
+    unwrapped, :func:`sensors.clocks.unwrapped`)."""
     if not isinstance(name, str) or name not in table:
         refuse(path, key, name, f"must name a column of the file; it has "
                 f"{_listed(table)}")
@@ -313,7 +294,7 @@ def _column(path: Path, table: dict, key: str, name, origin: int = 0) -> np.ndar
     if column.dtype.kind not in "iuf" or sum(size > 1 for size in column.shape) > 1:
         refuse(path, key, name, f"must be one column of numbers; it holds {_held(column)} "
                 f"of shape {column.shape}")
-    column = column.reshape(-1)
+    column = unwrapped(column.reshape(-1)) if time else column.reshape(-1)
     if column.dtype.kind in "iu":
         return (column.astype(np.int64) - origin).astype(float)
     return column.astype(float) - origin
@@ -388,50 +369,6 @@ def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
     return np.interp(grid, steps, times), rates[np.searchsorted(steps, grid, side="right") - 1]
 
 
-def _check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
-    fastest = float(np.abs(rates).max())
-    if fastest > MAX_MEASURED_RATE_RADPS:
-        hint = (" (were they deg/s? unit = \"deg/s\")" if unit == "rad/s" and
-                fastest * math.pi / 180 <= MAX_MEASURED_RATE_RADPS else "")
-        refuse(path, "recording.gyro.unit", unit, f"gives rates up to {fastest:.4g} rad/s, "
-                f"beyond any gyro's range ({MAX_MEASURED_RATE_RADPS:g} rad/s){hint}")
-
-
-def _check_rate(path: Path, rate: float, unit: str) -> None:
-    """Refuse a gyro rate outside :data:`PLAUSIBLE_RATE_HZ`, naming the
-    times' unit (with the one that would fit): a nanosecond clock declared
-    in seconds reads as a gyro a billion times too fast."""
-    low, high = PLAUSIBLE_RATE_HZ
-    if low <= rate <= high:
-        return
-    fitting = [other for other, seconds in TIME_UNITS.items()
-               if low <= rate * TIME_UNITS[unit] / seconds <= high]
-    hint = f"; time_unit = \"{fitting[0]}\" would fit" if fitting else ""
-    refuse(path, "recording.time_unit", unit, f"makes the gyro read at {rate:.3g} Hz, where "
-            f"an IMU reads at {low:g} Hz to {high / 1e3:g} kHz{hint}")
-
-
-def _check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
-                   unit: str, columns) -> None:
-    """Refuse a gyro whose rates, in the declared unit, turn gravity 57
-    times faster or slower than the accelerometer sees it turn, or the
-    other way (every sensor's columns in a left-handed order)."""
-    found = gravity_turning(rates, specific_force, dt)
-    if found is not None and found[0] <= MIRRORED_CORRELATION:
-        refuse(path, "recording.gyro.columns", columns,
-               f"turn gravity the other way from the accelerometer's readings (correlation "
-               f"{found[0]:.2f}): the sensors' columns as declared make a left-handed frame "
-               "(a logger's z, y, x order?); declare each sensor's columns as x, y, z")
-    scale = turning_scale(rates, specific_force, dt)
-    if scale is None or 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR:
-        return
-    fitting = [other for other, factor in UNITS["gyro"].items()
-               if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]
-    hint = f" (were they {fitting[0]}? unit = \"{fitting[0]}\")" if fitting else ""
-    refuse(path, "recording.gyro.unit", unit, f"turns gravity {1 / scale:.3g} times as fast "
-            f"as the accelerometer sees it turn{hint}")
-
-
 def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, dt: float,
                 section: dict) -> None:
     """Refuse a vector sensor's axes that turn unlike the gyro where
@@ -453,37 +390,6 @@ def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, 
 
 def _listed_axes(names: list) -> str:
     return "[" + ", ".join(f'"{name}"' for name in names) + "]"
-
-
-def _check_norm(path: Path, name: str, values: np.ndarray, unit: str,
-                section_columns=None) -> None:
-    """A vector sensor's median norm, where it read, plausible in its unit;
-    an accelerometer without gravity (:data:`GRAVITY_FREE_RATIO`) refused, or
-    noted where its median is in place."""
-    norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
-    if not len(norms):
-        refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
-                "the gyro's span: no reading at all")
-    median = float(np.median(norms))
-    low, high = PLAUSIBLE_NORMS[name]
-    limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]
-    low_norm, high_norm = np.percentile(norms, [5.0, 95.0])
-    gravity_free = name == "accelerometer" and low_norm < GRAVITY_FREE_RATIO * high_norm
-    no_gravity = (f"hold no gravity: their norm's 5th percentile is {low_norm / high_norm:.0%} "
-                  "of its 95th (a phone's user acceleration?); declare the accelerometer's "
-                  "readings that include gravity")
-    if low <= median <= high and np.abs(values).max() <= limit:
-        if gravity_free:          # or a recording of jumps and falls: said, not refused
-            warnings.warn(f"{path.name}: recording.{name}.columns may {no_gravity}", stacklevel=3)
-        return
-    if gravity_free:              # no unit would make it gravity
-        refuse(path, f"recording.{name}.columns", section_columns, no_gravity)
-    fitting = [other for other, factor in UNITS[name].items() if other != unit and
-               low <= median / UNITS[name][unit] * factor <= high]
-    hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""
-    refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
-            f"{shown}, not within {low:g} to {high:g} {shown} as "
-            f"{'gravity' if name == 'accelerometer' else 'the Earth field'} would be{hint}")
 
 
 def _on_clock(clock: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:

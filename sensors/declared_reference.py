@@ -22,6 +22,8 @@ REFERENCE_GAP_FACTOR = 1.5
 FRAMES = ("ENU", "NED")
 #: The rotation from a North-East-Down world frame to East-North-Up.
 NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+#: The reference's keys that have a default, and it.
+DEFAULTS = {"order": "wxyz", "unit": "deg", "frame": "ENU"}
 
 
 def declared_reference(path: Path, clock: np.ndarray, times: np.ndarray, values: np.ndarray,
@@ -63,24 +65,31 @@ def _on_gyro_times(path: Path, clock: np.ndarray, times: np.ndarray, rotations) 
 
 
 def check_reference(path: Path, clock: np.ndarray, rates: np.ndarray, read: tuple,
-                    section: dict, reference: np.ndarray) -> None:
+                    section: dict, reference: np.ndarray, check_scale=None) -> None:
     """Refuse a reference that turns unlike the gyro (:func:`sensors.turning.
-    reference_fit`) where another declaration of it fits, naming it; warn
-    where none does (the gyro's clock or the reference's axes may be the
-    cause, which no key declares)."""
+    reference_fit`) where another declaration of it fits, naming it; else
+    call ``check_scale`` (which refuses a gyro or a clock in the wrong unit:
+    :func:`sensors.declared_units.check_reference_scale`; a gyro 57 times
+    too slow shows too little turning to fit); warn where still nothing
+    fits (the gyro's clock or the reference's axes may be the cause, which
+    no key declares)."""
     dt = float(np.median(np.diff(clock)))
     fit = reference_fit(rates, reference, dt)
-    if reference_fits(fit):
+    if fit is not None and reference_fits(fit):
         return
     key = "sequence" if "sequence" in section else "order"
-    fitting = first_fitting(rates, ((text, _on_gyro_times(path, clock, read[0], rotations))
-                                    for text, rotations in _reference_candidates(
-                                        path, section, read[1])), dt)
+    fitting = fit and first_fitting(rates, (
+        (text, _on_gyro_times(path, clock, read[0], rotations))
+        for text, rotations in _reference_candidates(path, section, read[1])), dt)
     if fitting:
-        refuse(path, f"recording.reference.{key}", section.get(key, "wxyz"), "makes a "
-               f"reference that {reference_problem(fit)}; {fitting} would fit")
-    warnings.warn(f"{path.name}: recording.reference: it {reference_problem(fit)}: "
-                  f"{reference_advice(fit, rates, reference, dt)}", stacklevel=2)
+        key = fitting.split(" = ")[0] if " = " in fitting else key    # the key it changes
+        refuse(path, f"recording.reference.{key}", section.get(key, DEFAULTS.get(key)),
+               f"makes a reference that {reference_problem(fit)}; {fitting} would fit")
+    if check_scale is not None:
+        check_scale()
+    if fit is not None:
+        warnings.warn(f"{path.name}: recording.reference: it {reference_problem(fit)}: "
+                      f"{reference_advice(fit, rates, reference, dt)}", stacklevel=2)
 
 
 def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarray,
@@ -116,7 +125,7 @@ def _reference_candidates(path: Path, section: dict, values: np.ndarray):
         changes = ({"sequence": sequence.swapcase()}, {"sequence": sequence[::-1]},
                    {"unit": "rad" if section.get("unit", "deg") == "deg" else "deg"})
     else:
-        changes = ({"order": "xyzw" if section.get("order", "wxyz") == "wxyz" else "wxyz"},)
+        changes = ({"order": "xyzw" if section.get("order", DEFAULTS["order"]) == "wxyz" else "wxyz"},)
     for change in changes:
         (key, value), = change.items()
         try:

@@ -26,11 +26,15 @@ _UNITS = {"gyro": "rad/s, deg/s", "accelerometer": "m/s^2, g",
 KEYS = (
     RecordingKey("recording", "file", "path", "the logged file, beside this one or absolute "
                  "(.csv, .parquet with `pip install '.[parquet]'`, .npz, .mat, .h5 or .hdf5 "
-                 "with `'.[hdf5]'`; a CSV's opening lines that begin with `#` are skipped)",
+                 "with `'.[hdf5]'`; a CSV's opening lines that begin with `#` or `//` are "
+                 "skipped, its separator and decimal comma found, and without a header its "
+                 "columns are named 1, 2, …)",
                  "required unless each sensor names its own"),
     RecordingKey("recording", "description", "text", "what the recording is", '""'),
-    RecordingKey("recording", "time_unit", "s, ms, us, ns", "the unit of every time column",
-                 "s"),
+    RecordingKey("recording", "time_unit", "s, ms, us, ns or a number",
+                 "the unit of every time column, or the seconds of one tick (`1e-4` for "
+                 "an Xsens `SampleTimeFine`); a 16- or 32-bit counter's roll-over is "
+                 "unwrapped", "s"),
     *(key for sensor in _SENSORS for key in (
         RecordingKey(f"recording.{sensor}", "file", "path",
                      "its own logged file, where a logger writes one file per sensor (its "

@@ -1,9 +1,20 @@
 """A logger's file read into its columns, whatever its format: CSV or
 Parquet (pandas), ``.npz`` (numpy), ``.mat`` (scipy), HDF5 (h5py, an
 optional extra). What :mod:`sensors.declared` reads a declaration's
-columns from; a file that cannot be read is one line naming it."""
+columns from; a file that cannot be read is one line naming it.
+
+A CSV (or ``.txt``) is read as its logger wrote it (:func:`csv_layout`):
+a preamble of ``#`` or ``//`` lines (Xsens MT Manager's) skipped; the
+separator found in its lines (comma, semicolon, tab, bar, or spaces);
+decimal commas where the separator is not a comma (a European locale's
+``2,5E-03;1,1E-02``, phyphox's); a trailing separator on each line
+(Arduino sketches') no column; and a file without a header (every cell of
+its first line a number) with its columns named ``"1"``, ``"2"``, … in
+their order.
+"""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +29,7 @@ def read_table(data: Path) -> dict:
     try:
         if suffix in (".csv", ".txt", ".parquet"):
             import pandas as pd
-            frame = pd.read_parquet(data) if suffix == ".parquet" else \
-                pd.read_csv(data, skiprows=_comment_lines(data))
+            frame = pd.read_parquet(data) if suffix == ".parquet" else _read_csv(data)
             return {str(name): frame[name].to_numpy() for name in frame.columns}
         if suffix == ".npz":
             with np.load(data, allow_pickle=False) as archive:
@@ -42,16 +52,67 @@ def read_table(data: Path) -> dict:
                                 ".mat, .h5 or .hdf5")
 
 
-def _comment_lines(data: Path) -> int:
-    """How many lines a CSV opens with that begin with ``#`` (a logger's
-    preamble: its device, its settings), skipped before the header."""
-    count = 0
+#: What a CSV's preamble lines begin with (a logger's device and settings).
+COMMENT_PREFIXES = ("#", "//")
+#: The separators a CSV's lines are tried for, in this order; spaces last.
+SEPARATORS = (",", ";", "\t", "|")
+#: Runs of spaces (or tabs) as one separator, pandas' way.
+SPACES = r"\s+"
+#: How many of the first data lines the layout is read from.
+LAYOUT_LINES = 20
+_NUMBER = re.compile(r"^[+-]?(\d+([.,]\d*)?|[.,]\d+)([eE][+-]?\d+)?$")
+
+
+def _read_csv(data: Path):
+    import pandas as pd
+    skip, separator, decimal, header = csv_layout(data)
+    frame = pd.read_csv(data, skiprows=skip, sep=separator, decimal=decimal, index_col=False,
+                        header=0 if header else None, skipinitialspace=True)
+    if not header:            # a trailing separator leaves an empty last column: none
+        if frame.shape[1] > 1 and frame.iloc[:, -1].isna().all():
+            frame = frame.iloc[:, :-1]
+        frame.columns = [str(number) for number in range(1, frame.shape[1] + 1)]
+    return frame
+
+
+def csv_layout(data: Path) -> tuple:
+    """``(preamble lines, separator, decimal mark, whether it has a
+    header)`` of a CSV, read from its first lines."""
     with open(data, encoding="utf-8", errors="replace") as lines:
-        for line in lines:
-            if not line.startswith("#"):
-                break
-            count += 1
-    return count
+        opening = [line.rstrip("\r\n") for _, line in zip(range(1000), lines)]
+    skip = next((index for index, line in enumerate(opening)
+                 if not line.lstrip().startswith(COMMENT_PREFIXES)), len(opening))
+    first = [line for line in opening[skip:skip + LAYOUT_LINES + 1] if line.strip()]
+    if not first:
+        return skip, ",", ".", True
+    separator = _separator(first)
+    cells = _cells(first[-1] if len(first) > 1 else first[0], separator)
+    decimal = "," if separator != "," and any(re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", cell)
+                                              for cell in cells) else "."
+    header = not all(_NUMBER.match(cell) for cell in _cells(first[0], separator) if cell)
+    return skip, separator, decimal, header
+
+
+def _separator(lines: list) -> str:
+    """The first of :data:`SEPARATORS` every line holds as often as the
+    first (one more allowed: a trailing one), quoted text aside, and that
+    leaves the last line's cells numbers (``1,25;-0,5``: the semicolon, not
+    the decimal comma); else runs of spaces."""
+    consistent = []
+    for separator in SEPARATORS:
+        counts = [re.sub(r'"[^"]*"', "", line).count(separator) for line in lines]
+        if counts[0] > 0 and all(count - counts[0] in (0, 1) for count in counts):
+            consistent.append(separator)
+    if len({len(line.split()) for line in lines}) == 1:
+        consistent.append(SPACES)
+    numbers = [separator for separator in consistent
+               if all(_NUMBER.match(cell) for cell in _cells(lines[-1], separator) if cell)]
+    return (numbers or consistent or [SPACES])[0]
+
+
+def _cells(line: str, separator: str) -> list:
+    parts = re.split(separator, line.strip()) if separator == SPACES else line.split(separator)
+    return [part.strip().strip('"') for part in parts]
 
 
 def _read_hdf5(data: Path) -> dict:

@@ -81,14 +81,15 @@ def held_readings(vectors: np.ndarray) -> np.ndarray:
     return vectors[last]
 
 
-def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = False):
+def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = False,
+             window_s: float = TURNING_WINDOW_S):
     """The vectors' change per block of :data:`TURNING_WINDOW_S` (for a
     sensor that reads slower, between its readings), and the change the
     gyro predicts, -ω × v at the block's mean; with ``offset``, -ω × (v - h)
     for the constant ``h`` that fits best (a hard iron: linear in ``h``).
     None where there are too few blocks."""
     read = np.flatnonzero(np.any(vectors != 0.0, axis=1))
-    if len(read) > 1 and np.median(np.diff(read)) * dt > TURNING_WINDOW_S:
+    if len(read) > 1 and np.median(np.diff(read)) * dt > window_s:
         summed = np.concatenate([np.zeros((1, 3)), np.cumsum(rates, axis=0)])
         steps = np.diff(read)[:, None]
         rate = (summed[read[1:]] - summed[read[:-1]]) / steps
@@ -96,7 +97,7 @@ def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = F
         change = np.diff(vector, axis=0) / (steps * dt)
         vector = (vector[1:] + vector[:-1]) / 2
     else:
-        steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+        steps = max(1, int(round(window_s / dt)))
         vector, rate = _block_means(held_readings(vectors), steps), _block_means(rates, steps)
         change = np.diff(vector, axis=0) / (steps * dt)
         rate, vector = (rate[1:] + rate[:-1]) / 2, (vector[1:] + vector[:-1]) / 2
@@ -115,7 +116,8 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float | None:
     return float(np.sum(a * b)) / scale if scale > 0.0 else None
 
 
-def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> tuple | None:
+def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float,
+                    window_s: float = TURNING_WINDOW_S) -> tuple | None:
     """``(correlation, scale)`` of gravity's turning as the accelerometer
     sees it with the turning ``rates`` predict, and the factor by which the
     rates must be multiplied to match it (1 for a gyro in the toolkit's
@@ -124,7 +126,7 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float) ->
     (``ω × v`` changes its sign under a reflection of both)."""
     if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
         return None                       # too few accelerometer readings on the clock
-    turning = _turning(rates, specific_force, dt)
+    turning = _turning(rates, specific_force, dt, window_s=window_s)
     if turning is None:
         return None
     change, predicted = turning
@@ -134,11 +136,12 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float) ->
     return correlation, float(np.sum(change * predicted)) / float(np.sum(predicted * predicted))
 
 
-def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> float | None:
+def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float,
+                  window_s: float = TURNING_WINDOW_S) -> float | None:
     """The factor by which ``rates`` must be multiplied to turn gravity as
     the accelerometer sees it turn (1 for a gyro in the toolkit's rad/s);
     None where the turning is not seen clearly enough to say."""
-    found = gravity_turning(rates, specific_force, dt)
+    found = gravity_turning(rates, specific_force, dt, window_s)
     return None if found is None or found[0] < TURNING_CORRELATION else found[1]
 
 
@@ -211,6 +214,28 @@ def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
                         / np.sum(turned * turned))
     spread = np.linalg.svd(rate - bias, compute_uv=False)
     return unexplained, (rotation if spread[1] >= 0.2 * spread[0] else None)
+
+
+def reference_scale(rates: np.ndarray, reference_quat: np.ndarray, dt: float) -> float | None:
+    """The factor by which ``rates`` must be multiplied to turn as fast as
+    the reference turns (1 for a gyro in rad/s on the reference's clock):
+    the ratio of their RMS rates over blocks of :data:`TURNING_WINDOW_S`;
+    None where neither turns at :data:`MIN_RATE_RADPS` on average, or too
+    few blocks hold a reference."""
+    from scipy.spatial.transform import Rotation
+    steps = max(1, int(round(TURNING_WINDOW_S / dt)))
+    starts = np.arange(len(rates) // steps) * steps
+    quat = reference_quat[starts]
+    paired = ~np.isnan(quat[:-1]).any(axis=1) & ~np.isnan(quat[1:]).any(axis=1)
+    if np.count_nonzero(paired) < MIN_BLOCKS:
+        return None
+    turned = (Rotation.from_quat(quat[:-1][paired], scalar_first=True).inv() * Rotation.from_quat(
+        quat[1:][paired], scalar_first=True)).as_rotvec() / (steps * dt)
+    rate = _block_means(rates, steps)[:len(starts) - 1][paired]
+    turned_rms, rate_rms = (float(np.sqrt(np.mean(np.sum(x * x, axis=1)))) for x in (turned, rate))
+    if max(turned_rms, rate_rms) < MIN_RATE_RADPS or rate_rms == 0.0:
+        return None
+    return turned_rms / rate_rms
 
 
 def reference_fits(fit) -> bool:

@@ -261,8 +261,9 @@ def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tm
 
 @pytest.mark.parametrize("change, message", [
     (dict(gyro_unit="rad/s", scale_gyro=180 / math.pi),
-     'gyro.unit = .rad/s.: turns gravity 5.\\.. times as fast .*unit = "deg/s"'),
-    (dict(gyro_unit="deg/s"), 'gyro.unit = .deg/s.: turns gravity 0.01.. times .*unit = "rad/s"'),
+     'gyro.unit = .rad/s.: makes the gyro turn gravity 5.\\.. times as fast .*unit = "deg/s"'),
+    (dict(gyro_unit="deg/s"),
+     'gyro.unit = .deg/s.: makes the gyro turn gravity 5[0-9.]* times slower .*unit = "rad/s"'),
     (dict(gyro_unit="rad/s", scale_gyro=1e6), "gyro.unit = .rad/s.: gives rates up to"),
     (dict(acc_unit="m/s^2", scale_acc=1 / 9.80665),
      'accelerometer.unit = .m/s\\^2.: makes the median .* unit = "g" would fit'),

@@ -112,7 +112,7 @@ def test_inspect_never_overwrites_a_declaration(phone_csv, capsys, tmp_path):
 def test_inspect_says_what_it_cannot_tell(tmp_path, capsys):
     pd.DataFrame({"when": np.arange(10.0), "u": np.ones(10)}).to_csv(tmp_path / "odd.csv",
                                                                      index=False)
-    assert main(["inspect", str(tmp_path / "odd.csv")]) == 0
+    assert main(["inspect", str(tmp_path / "odd.csv")]) == 2
     err = capsys.readouterr().err
     assert "no columns recognised as gyro" in err and "no time column recognised" in err
     assert "does not load" in err

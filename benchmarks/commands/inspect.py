@@ -68,6 +68,10 @@ def run(args, _scenario):
         print(f"{PROG}: note: {note}", file=sys.stderr)
     if target is not None:
         from benchmarks.output import write_text
-        write_text(target, declaration_toml(declaration, args.file.name))
+        write_text(target, declaration_toml(declaration, args.file.name, parts is not None))
+        if parts is None:     # a skeleton to complete: said, and not a success
+            raise UsageError(f"wrote {target}, which does not load as suggested (the note "
+                             f"above): complete it by hand, then run: {PROG} broad --broad "
+                             f"{target}")
         print(f"wrote {target}: check it, then run: {PROG} broad --broad {target}")
     return None

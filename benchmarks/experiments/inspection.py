@@ -20,35 +20,56 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.clocks import GAP_FACTOR, clock_period
-from sensors.declared import PLAUSIBLE_NORMS, SENSORS, TIME_UNITS, UNITS, declared_recordings
+from sensors.clocks import GAP_FACTOR, clock_period, unwrapped
+from sensors.declared import SENSORS, declared_recordings
+from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
+                                    clock_turning_scale, tick_name, tick_seconds)
 from sensors.recording import reading_interval_s
-from sensors.turning import reference_fit, reference_fits, turning_scale
+from sensors.turning import reference_fit, reference_fits
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
-    "gyro": ("gyr", "gyro", "omega", "angvel", "rate", "g", "w"),
-    "accelerometer": ("acc", "accel", "a", "f"),
+    "gyro": ("gyr", "gyro", "omega", "angvel", "rate", "g", "w", "angular", "gyroscope"),
+    "accelerometer": ("acc", "accel", "a", "f", "linear"),
     "magnetometer": ("mag", "magn", "m", "b", "field", "compass"),
-    "reference": ("q", "quat", "opt", "ref", "orient", "att", "mocap"),
+    "reference": ("q", "quat", "opt", "ref", "orient", "att", "mocap", "orientation",
+                  "attitude"),
 }
-#: Name tokens of a time column.
-TIME_TOKENS = ("t", "time", "times", "timestamp", "ts", "sec", "seconds", "ms")
+#: Name tokens of a column that holds no sensor's readings (a ROS message's
+#: covariances beside its orientation).
+NOT_READINGS = ("covariance", "cov", "std", "var", "sigma")
+#: The first word of a ROS message's fields as ``rostopic echo -p`` writes
+#: them (``field.angular_velocity.x``), which names no sensor.
+MESSAGE_PREFIX = "field"
+#: Name tokens of a time column (``micros``: an Arduino's; ``stamp``: ROS's).
+TIME_TOKENS = ("t", "time", "times", "timestamp", "ts", "sec", "seconds", "ms", "stamp",
+               "micros", "millis", "nanos", "epoch")
 _AXIS = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<axis>[wxyz])$", re.IGNORECASE)
 #: A quaternion's numbered columns, q0 the scalar (Madgwick's q0…q3).
 _NUMBERED = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<index>[0-3])$")
 
 
+def _words(name: str) -> list:
+    """A name's words: split at what is not a letter and where camelCase
+    turns (``SampleTimeFine``: sample, time, fine)."""
+    return [token for token in re.split(r"[^a-z]+", re.sub(
+        r"([a-z])([A-Z])", r"\1 \2", name).lower()) if token]
+
+
 def _tokens(name: str) -> set:
-    return {token for token in re.split(r"[^a-z]+", name.lower()) if token}
+    return set(_words(name))
 
 
 def _sensor_of(prefix: str) -> str | None:
     """The sensor a column prefix names, if exactly one: by its first word
     where that names one (``acc_m_s2``: the unit's ``m`` is no
     magnetometer), else by all its words."""
-    words = [token for token in re.split(r"[^a-z]+", prefix.lower()) if token]
-    for tokens in ({words[0]} if words else set(), _tokens(prefix) | {prefix.lower()}):
+    words = _words(prefix)
+    if len(words) > 1 and words[0] == MESSAGE_PREFIX:
+        words = words[1:]
+    if set(words) & set(NOT_READINGS):
+        return None
+    for tokens in ({words[0]} if words else set(), set(words) | {prefix.lower()}):
         named = [sensor for sensor, names in SENSOR_TOKENS.items()
                  if tokens & set(names) or any(token.startswith(names[0]) for token in tokens)]
         if len(named) == 1:
@@ -97,7 +118,7 @@ def time_columns(table: dict) -> list[str]:
     names = []
     for name, values in table.items():
         raw = np.asarray(values)
-        array = raw.astype(float).reshape(-1) if raw.dtype.kind in "iuf" and \
+        array = unwrapped(raw.reshape(-1)).astype(float) if raw.dtype.kind in "iuf" and \
             sum(size > 1 for size in raw.shape) == 1 else None
         if array is None or not _tokens(name) & set(TIME_TOKENS):
             continue
@@ -142,16 +163,22 @@ def fitting_unit(sensor: str, values: np.ndarray) -> str | None:
     return unit if low <= median * factor <= high else None
 
 
-def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -> str:
-    """rad/s or deg/s: the one that turns gravity as the accelerometer sees
-    it turn (:func:`sensors.turning.turning_scale`), else by the rates'
-    size (a hand-held or vehicle IMU's rates rarely pass 20 rad/s)."""
+def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -> tuple:
+    """``(rad/s or deg/s, power)``: the gyro's unit, and the power of ten
+    by which the times' tick is longer than assumed, that together turn
+    gravity as the accelerometer sees it turn (:func:`sensors.
+    declared_units.clock_turning_scale`; a tick other than assumed only
+    where it fits within :data:`~sensors.declared_units.HINT_FACTOR`);
+    without an accelerometer, by the rates' size (a hand-held or vehicle
+    IMU's rates rarely pass 20 rad/s) and the tick assumed."""
     if specific_force is not None:
-        scale = turning_scale(rates, specific_force, dt)
+        scale, _ = clock_turning_scale(rates, specific_force, dt)
         if scale is not None:
-            return min(UNITS["gyro"], key=lambda unit: abs(math.log(
-                scale / UNITS["gyro"][unit])))
-    return "deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"
+            return min(((unit, power) for unit in UNITS["gyro"] for power in range(-3, 4)),
+                       key=lambda pair: abs(math.log(scale / (UNITS["gyro"][pair[0]]
+                                                              * 10.0 ** pair[1])))
+                       + (math.log(HINT_FACTOR) if pair[1] else 0.0))
+    return ("deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"), 0
 
 
 def rest_periods(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> list:
@@ -268,7 +295,11 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
             force = np.nan_to_num(force)
         rates = np.nan_to_num(_values(table, gyro["columns"]))
         step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
-        gyro["unit"] = gyro_unit(rates, force, step)
+        gyro["unit"], power = gyro_unit(rates, force, step)
+        if power:
+            declaration["time_unit"] = tick_name(seconds * 10.0 ** power)
+            notes.append(f"time: its tick is taken as {seconds * 10.0 ** power:g} s, which "
+                         "turns gravity as the gyro does (check it)")
     return declaration, notes
 
 
@@ -312,10 +343,13 @@ def _told_by_turning(parts) -> bool:
     return any(fit is not None for fit in fits) and all(map(reference_fits, fits))
 
 
-def declaration_toml(declaration: dict, source: str) -> str:
-    """``declaration`` as the ``[recording]`` file a user edits."""
+def declaration_toml(declaration: dict, source: str, loads: bool = True) -> str:
+    """``declaration`` as the ``[recording]`` file a user edits (where it
+    does not ``loads`` yet, a skeleton to complete, and it says so)."""
     lines = [f"# The [recording] that attitude-bench inspect suggests for {source}:",
-             "# check each column and unit, then run: attitude-bench broad --broad THIS_FILE",
+             "# check each column and unit, then run: attitude-bench broad --broad THIS_FILE"
+             if loads else "# it does not load as it is: complete what inspect could not "
+             "tell (its notes), then run: attitude-bench broad --broad THIS_FILE",
              "[recording]"]
     lines += [f"{key} = {_toml(value)}" for key, value in declaration.items()
               if not isinstance(value, dict)]
@@ -328,6 +362,8 @@ def declaration_toml(declaration: dict, source: str) -> str:
 
 def _toml(value) -> str:
     import json
+    if isinstance(value, float):
+        return repr(value)
     if isinstance(value, list):
         return "[" + ", ".join(json.dumps(str(item)) for item in value) + "]"
     return json.dumps(str(value))
@@ -338,14 +374,14 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
     and for each part of the loaded recording (``parts``: split at the
     gyro's gaps) the rest periods, gravity and the field. ``tables``: each
     sensor's table (:func:`sensors.declared.sensor_tables`)."""
-    seconds = TIME_UNITS[declaration.get("time_unit", "s")]
+    seconds = tick_seconds(declaration.get("time_unit", "s"))
     lines = []
     for sensor in ("gyro", "accelerometer", "magnetometer", "reference"):
         if sensor not in declaration:
             continue
         section, table = declaration[sensor], tables[sensor]
         values = _values(table, section["columns"])
-        times = np.asarray(table[section["time"]], dtype=float)
+        times = unwrapped(np.asarray(table[section["time"]]).reshape(-1)).astype(float)
         times = times[~np.isnan(values).all(axis=1)] * seconds
         clock_of = clock(times)
         if "interval" not in clock_of:

@@ -1,0 +1,222 @@
+"""The units of a declared log (:mod:`sensors.declared`) and the checks
+that catch a wrong one: each refusal names the key, the value, the rule
+and, where one fits, the unit that would.
+
+A unit's mistake leaves every reading plausible on its own: a gyro in rad/s
+declared deg/s reads 57 times too slow, a clock in ticks of 100 µs
+declared in µs runs 100 times too fast. The turning the other channels see
+(gravity in the accelerometer, the reference's attitude) against the
+gyro's rates tells both apart: a gyro unit's mistake is a factor of 57.3, a
+clock's a power of ten (:func:`scale_hint`).
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from dynamics.environment import STANDARD_GRAVITY_MPS2
+from dynamics.validation import MAX_MEASURED_RATE_RADPS
+from sensors.recording import VECTOR_LIMITS
+from sensors.recording_keys import choice, refuse
+from sensors.turning import (MIRRORED_CORRELATION, TURNING_FACTOR, TURNING_WINDOW_S,
+                             gravity_turning,
+                             reference_fit, reference_fits, reference_scale, turning_scale)
+
+#: Each time unit in seconds; ``time_unit`` may also be a number, the
+#: seconds of one tick of the times (an Xsens ``SampleTimeFine``: 1e-4).
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: The gyro's plausible rates, Hz: from a logger's slowest (a phone saving
+#: power, 1 Hz) to the fastest MEMS output (tens of kHz). Beyond them the
+#: times' unit is wrong, not the IMU.
+PLAUSIBLE_RATE_HZ = (1.0, 1e5)
+#: Each sensor's units: name → factor to the toolkit's unit (rad/s, m/s², µT).
+UNITS = {
+    "gyro": {"rad/s": 1.0, "deg/s": math.pi / 180.0},
+    "accelerometer": {"m/s^2": 1.0, "g": STANDARD_GRAVITY_MPS2},
+    "magnetometer": {"uT": 1.0, "nT": 1e-3, "gauss": 100.0, "mT": 1e3},
+}
+#: Plausible medians of each vector sensor's norm in its toolkit unit: in
+#: motion an accelerometer's median stays near g; the Earth's field is 25 to
+#: 65 µT, a room's or a vehicle's disturbances allowed for.
+PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: A specific force's norm is near g at rest and stays within a few g of it
+#: in a hand's motion: its 5th percentile below this share of its 95th is
+#: an accelerometer without gravity (or falls and jumps).
+GRAVITY_FREE_RATIO = 0.2
+#: A scale between the turnings is read as a unit's mistake (57.3) or a
+#: clock's (a power of ten) within this factor of it (the two are 1.75 apart).
+HINT_FACTOR = 1.3
+#: A turning scale this far from 1 (or none) is looked at again on the
+#: windows a wrong clock would need (BROAD's 30 trials: 0.45 to 1.14 where
+#: their turning is clear).
+CLOCK_SEARCH_FACTOR = 2.0
+
+
+def seconds_per_tick(path: Path, declared) -> float:
+    """``time_unit`` in seconds: one of :data:`TIME_UNITS`, or a positive
+    number of seconds (a logger's tick); refused otherwise, naming ``path``."""
+    if _is_number(declared):
+        if not (math.isfinite(declared) and declared > 0):
+            refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or "
+                   "the seconds of one tick (a positive number)")
+        return float(declared)
+    return TIME_UNITS[choice(path, "recording.time_unit", declared, TIME_UNITS)]
+
+
+def tick_seconds(declared) -> float:
+    """A checked ``time_unit`` (:func:`seconds_per_tick`) in seconds."""
+    return float(declared) if _is_number(declared) else TIME_UNITS[declared]
+
+
+def tick_name(seconds: float):
+    """A tick of ``seconds`` as ``time_unit``: its name where it has one,
+    else the number."""
+    named = [name for name, tick in TIME_UNITS.items() if math.isclose(tick, seconds)]
+    return named[0] if named else float(f"{seconds:.6g}")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
+    """Refuse rates beyond any gyro's range, naming deg/s where it would fit."""
+    fastest = float(np.abs(rates).max())
+    if fastest > MAX_MEASURED_RATE_RADPS:
+        hint = (" (were they deg/s? unit = \"deg/s\")" if unit == "rad/s" and
+                fastest * math.pi / 180 <= MAX_MEASURED_RATE_RADPS else "")
+        refuse(path, "recording.gyro.unit", unit, f"gives rates up to {fastest:.4g} rad/s, "
+                f"beyond any gyro's range ({MAX_MEASURED_RATE_RADPS:g} rad/s){hint}")
+
+
+def check_rate(path: Path, rate: float, declared) -> None:
+    """Refuse a gyro rate outside :data:`PLAUSIBLE_RATE_HZ`, naming the
+    times' unit (with the one that would fit): a nanosecond clock declared
+    in seconds reads as a gyro a billion times too fast."""
+    low, high = PLAUSIBLE_RATE_HZ
+    if low <= rate <= high:
+        return
+    tick = seconds_per_tick(path, declared)
+    fitting = [other for other, seconds in TIME_UNITS.items()
+               if low <= rate * tick / seconds <= high]
+    hint = f"; time_unit = \"{fitting[0]}\" would fit" if fitting else ""
+    refuse(path, "recording.time_unit", declared, f"makes the gyro read at {rate:.3g} Hz, "
+            f"where an IMU reads at {low:g} Hz to {high / 1e3:g} kHz{hint}")
+
+
+def scale_hint(path: Path, scale: float, unit: str, time_unit) -> tuple:
+    """``(key, value, hint)`` for rates that must be multiplied by ``scale``
+    to turn as another channel sees the body turn: the gyro's unit where
+    another one makes the scale about 1, else the clock's tick where a
+    power of ten does (times in a tick of 100 µs declared in µs turn
+    everything 100 times too fast), else the gyro's unit, with the unit
+    that brings the scale within :data:`~sensors.turning.TURNING_FACTOR`."""
+    for other, factor in UNITS["gyro"].items():
+        if other != unit and abs(math.log(scale * UNITS["gyro"][unit] / factor)) \
+                <= math.log(HINT_FACTOR):
+            return "recording.gyro.unit", unit, f" (were they {other}? unit = \"{other}\")"
+    power = round(math.log10(scale))
+    if power != 0 and abs(math.log10(scale) - power) <= math.log10(HINT_FACTOR):
+        tick = seconds_per_tick(path, time_unit) * 10.0 ** power
+        named = tick_name(tick)
+        shown = f"\"{named}\"" if isinstance(named, str) else f"{named:g}"
+        return ("recording.time_unit", time_unit, f" (is a tick of the times {tick:g} s? "
+                f"time_unit = {shown})")
+    fitting = [other for other, factor in UNITS["gyro"].items()
+               if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]
+    return "recording.gyro.unit", unit, (f" (were they {fitting[0]}? unit = \"{fitting[0]}\")"
+                                         if fitting else "")
+
+
+def check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
+                  section: dict, time_unit) -> None:
+    """Refuse a gyro whose rates, in the declared unit, turn gravity 57
+    times faster or slower than the accelerometer sees it turn (or a clock
+    in the wrong tick, 10ⁿ times), or the other way (every sensor's columns
+    in a left-handed order)."""
+    found = gravity_turning(rates, specific_force, dt)
+    if found is not None and found[0] <= MIRRORED_CORRELATION:
+        refuse(path, "recording.gyro.columns", section["columns"],
+               f"turn gravity the other way from the accelerometer's readings (correlation "
+               f"{found[0]:.2f}): the sensors' columns as declared make a left-handed frame "
+               "(a logger's z, y, x order?); declare each sensor's columns as x, y, z")
+    scale, power = clock_turning_scale(rates, specific_force, dt)
+    if scale is None or (not power and 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR):
+        return
+    key, value, hint = scale_hint(path, scale, section["unit"], time_unit)
+    refuse(path, key, value, f"makes the gyro turn gravity {_as_fast(1 / scale)} the "
+            f"accelerometer sees it turn{hint}")
+
+
+def clock_turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> tuple:
+    """``(scale, power)``: :func:`~sensors.turning.turning_scale`, power 0;
+    or where it sees too little,
+    or a scale :data:`CLOCK_SEARCH_FACTOR` or more from 1, the scale over a
+    window of the usual one's length in a clock 10, 100 or 1000 times
+    faster or slower, where that shows it at about that power of ten (the
+    power then; a clock's mistake, however near 1 the usual window's): a
+    clock in the wrong unit makes the usual window hold a tenth or ten
+    times the real turning, which it then blurs or drowns in noise."""
+    scale = turning_scale(rates, specific_force, dt)
+    if scale is not None and 1 / CLOCK_SEARCH_FACTOR <= scale <= CLOCK_SEARCH_FACTOR:
+        return scale, 0
+    for power in (1, -1, 2, -2, 3, -3):       # the scale 10**power: its window
+        found = turning_scale(rates, specific_force, dt, TURNING_WINDOW_S / 10.0 ** power)
+        if found is not None and abs(math.log10(found) - power) <= math.log10(HINT_FACTOR):
+            return found, power
+    return scale, 0
+
+
+def check_reference_scale(path: Path, rates: np.ndarray, reference: np.ndarray, dt: float,
+                          section: dict, time_unit) -> None:
+    """Refuse a gyro whose rates turn the body :data:`~sensors.turning.
+    TURNING_FACTOR` times faster or slower than the reference turns (its
+    unit's or the clock's mistake: :func:`scale_hint`), where the rates so
+    scaled turn as the reference does (else the reference's own
+    declaration is wrong, which :func:`sensors.declared_reference.
+    check_reference` names)."""
+    scale = reference_scale(rates, reference, dt)
+    if scale is None or 1 / TURNING_FACTOR <= scale <= TURNING_FACTOR or \
+            not reference_fits(reference_fit(rates * scale, reference, dt)):
+        return
+    key, value, hint = scale_hint(path, scale, section["unit"], time_unit)
+    refuse(path, key, value, f"makes the gyro turn {_as_fast(1 / scale)} the reference "
+            f"turns{hint}")
+
+
+def _as_fast(ratio: float) -> str:
+    return f"{ratio:.3g} times as fast as" if ratio >= 1 else f"{1 / ratio:.3g} times slower than"
+
+
+def check_norm(path: Path, name: str, values: np.ndarray, unit: str,
+               section_columns=None) -> None:
+    """A vector sensor's median norm, where it read, plausible in its unit;
+    an accelerometer without gravity (:data:`GRAVITY_FREE_RATIO`) refused, or
+    noted where its median is in place."""
+    norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
+    if not len(norms):
+        refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
+                "the gyro's span: no reading at all")
+    median = float(np.median(norms))
+    low, high = PLAUSIBLE_NORMS[name]
+    limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]
+    low_norm, high_norm = np.percentile(norms, [5.0, 95.0])
+    gravity_free = name == "accelerometer" and low_norm < GRAVITY_FREE_RATIO * high_norm
+    no_gravity = (f"hold no gravity: their norm's 5th percentile is {low_norm / high_norm:.0%} "
+                  "of its 95th (a phone's user acceleration?); declare the accelerometer's "
+                  "readings that include gravity")
+    if low <= median <= high and np.abs(values).max() <= limit:
+        if gravity_free:          # or a recording of jumps and falls: said, not refused
+            warnings.warn(f"{path.name}: recording.{name}.columns may {no_gravity}", stacklevel=3)
+        return
+    if gravity_free:              # no unit would make it gravity
+        refuse(path, f"recording.{name}.columns", section_columns, no_gravity)
+    fitting = [other for other, factor in UNITS[name].items() if other != unit and
+               low <= median / UNITS[name][unit] * factor <= high]
+    hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""
+    refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
+            f"{shown}, not within {low:g} to {high:g} {shown} as "
+            f"{'gravity' if name == 'accelerometer' else 'the Earth field'} would be{hint}")
