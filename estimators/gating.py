@@ -5,9 +5,15 @@ normalised innovation squared (:meth:`InnovationGate.accepts`, with
 ``gate_probability``) and the magnetic disturbance test on a
 magnetometer's magnitude (:meth:`InnovationGate.passes_norm`, with
 ``magnetic_norm_tolerance``). Rejected readings are counted, by sensor and
-step. With ``log_innovations``, every applied update's NIS and ``ln det S``
-are summed (:attr:`InnovationGate.innovation_sums`), the likelihood a tuner
-maximises. The checks of the two settings are here too.
+step. With ``log_innovations``, the NIS and ``ln det S`` of every reading
+that reaches the gate are summed (:attr:`InnovationGate.innovation_sums`),
+the likelihood a tuner maximises: a rejected reading's NIS taken at the
+gate's threshold. Summed over the applied updates alone, the likelihood per
+update rewards settings that reject what fits badly; at the gate, a
+rejected reading costs what the worst accepted one may (a robust,
+Huber-like likelihood of every reading; a tuner also bounds the readings
+refused otherwise: :data:`benchmarks.broad.tuning.REFUSAL_TOLERANCE`). The
+checks of the two settings are here too.
 """
 from __future__ import annotations
 
@@ -69,36 +75,45 @@ class InnovationGate:
         if self.gate_probability is None:
             return True
         nis = float(y @ np.linalg.solve(S, y))
-        if nis <= gate_threshold(self.gate_probability, dof):
+        threshold = gate_threshold(self.gate_probability, dof)
+        if nis <= threshold:
             return True
         self._reject(sensor)
+        if self.log_innovations:
+            self._fold_innovation(threshold, S)
         return False
 
     #: The star tracker update's (y, S) on a step whose vector updates followed it.
     _tracker_innovation = None
-    #: Set True before a run to sum each applied update's innovation terms
+    #: Set True before a run to sum each gated reading's innovation terms
     #: in :attr:`innovation_sums` (the tuner's likelihood objective).
     log_innovations = False
 
     def _restart_count(self) -> None:
         super()._restart_count()
-        #: With :attr:`log_innovations`: the updates applied since the run
-        #: began (star tracker and vector readings alike), the sum of their
-        #: NIS yᵀ S⁻¹ y and of their ln det S. The innovations' negative
-        #: log-likelihood is half the two sums plus a constant.
+        #: With :attr:`log_innovations`: the readings that reached the gate
+        #: since the run began (star tracker and vector readings alike,
+        #: applied or rejected), the sum of their NIS yᵀ S⁻¹ y (a rejected
+        #: one's at the gate's threshold) and of their ln det S. The
+        #: innovations' negative log-likelihood is half the two sums plus a
+        #: constant.
         self.innovation_sums = {"updates": 0, "nis": 0.0, "log_det": 0.0}
 
     def _log_innovation(self, rejections: int) -> None:
         """Fold the update just made into :attr:`innovation_sums`, unless
-        gating rejected it (``rejections``: their count before it)."""
+        gating rejected it (:meth:`accepts` folded it then) (``rejections``: their count before it)."""
         if len(self.rejections) != rejections:
             return
         kept = getattr(self, "filter", self)
         y, S = np.ravel(kept.y), np.atleast_2d(kept.S)
-        sign, log_det = np.linalg.slogdet(S)
+        self._fold_innovation(float(y @ np.linalg.solve(S, y)), S)
+
+    def _fold_innovation(self, nis: float, S: np.ndarray) -> None:
+        """Add a reading's ``nis`` and ln det ``S`` to :attr:`innovation_sums`."""
+        sign, log_det = np.linalg.slogdet(np.atleast_2d(S))
         sums = self.innovation_sums
         sums["updates"] += 1
-        sums["nis"] += float(y @ np.linalg.solve(S, y)) if sign > 0 else math.inf
+        sums["nis"] += nis if sign > 0 else math.inf
         sums["log_det"] += float(log_det) if sign > 0 else math.inf
 
 

@@ -197,8 +197,10 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
                             declaration.get("time_unit", "s")))
         if "accelerometer" in channels:
             check_gravity_up(path, reference, channels["accelerometer"], sections["reference"])
+    referenced = ~np.isnan(reference).any(axis=1)     # without a reference: all movement
     return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
-                     movement=~np.isnan(reference).any(axis=1), rate_hz=rate,
+                     movement=referenced if referenced.any() else np.ones_like(referenced),
+                     rate_hz=rate,
                      info=str(declaration.get("description", "")),
                      accelerometer_mps2=channels.get("accelerometer"),
                      magnetometer_uT=channels.get("magnetometer"))

@@ -432,6 +432,14 @@ def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_p
     settings_of = (lambda _scenario: {"gyro_noise": 3e-6})
     assert LikelihoodScore("mekf", [TrialCase(name, imu_inputs(half))])(settings_of) == \
         LikelihoodScore("mekf", [TrialCase(name, imu_inputs(blind))])(settings_of)
+    # Settings that refuse more readings than the defaults are out of
+    # bounds: the likelihood per reading compares settings over the same
+    # readings (a tight gate refuses what fits worst, and would score better).
+    score = LikelihoodScore("mekf", [TrialCase(name, imu_inputs(half))])
+    tight = (lambda _scenario: {"gate_probability": 0.2})
+    total, updates, refused = score.sums(tight)
+    assert refused > score.sums(lambda _scenario: {})[2] + 0.01 * score.readings
+    assert math.isfinite(total / updates) and score(tight) == math.inf
     out = tmp_path / "out"
     assert main(["broad", "--broad", str(SHIPPED), "--trials", "02", "--estimators",
                  "mekf,madgwick", "--tune", "halves", "--out", str(out), "--quiet"]) == 0
@@ -443,6 +451,7 @@ def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_p
     assert row["held_out_verdict"] in ("better", "not better: keep the defaults")
     assert (row["held_out_verdict"] == "better") == (row["held_out_loss"]
                                                       < row["held_out_loss_default"])
+    assert 0.0 <= row["held_out_refused_share"] <= row["held_out_refused_share_default"] + 0.01
     # Every estimator is scored on the second half only, the tuned MEKF as the table says.
     trials = pd.read_csv(out / "broad_trials.csv")
     second = recording.movement.copy()
@@ -534,3 +543,16 @@ def test_claimed_is_nan_without_a_covariance_or_a_scored_sample():
     assert all(math.isnan(v) for v in claimed_deg(q, None, q, np.ones(5, bool)).values())
     found = claimed_deg(q, np.tile(np.eye(3), (5, 1, 1)), q, np.zeros(5, bool))
     assert set(found) == set(CLAIMED) and all(math.isnan(v) for v in found.values())
+
+
+def test_a_held_out_verdict_is_not_better_where_the_tuning_refuses_more_readings():
+    # 0.32° → 60° on a log whose tuned filter refused 44 % of its field
+    # readings, with a better likelihood per reading used: "better" before.
+    from benchmarks.broad.tuning import held_out_verdict
+    found = {"held_out_loss": -16.65, "held_out_loss_default": -14.48,
+             "held_out_refused_share": 0.44, "held_out_refused_share_default": 0.0}
+    assert held_out_verdict(found) == ("not better: refuses 44% of the readings where the "
+                                       "defaults refuse 0%; keep the defaults")
+    assert held_out_verdict({**found, "held_out_refused_share": 0.005}) == "better"
+    assert held_out_verdict({**found, "held_out_loss": -14.0, "held_out_refused_share": 0.0}) == \
+        "not better: keep the defaults"

@@ -111,6 +111,12 @@ time = "t"
 columns = ["ax", "ay", "az"]
 unit = "m/s^2"
 """
+MAGNETOMETER = """
+[recording.magnetometer]
+time = "t"
+columns = ["mx", "my", "mz"]
+unit = "uT"
+"""
 
 
 def _log(trial, folder: Path, ticks: np.ndarray, time_unit: str, gyro_scale: float = 1.0,
@@ -119,7 +125,8 @@ def _log(trial, folder: Path, ticks: np.ndarray, time_unit: str, gyro_scale: flo
     recording, keep = trial
     columns = {"t": ticks[:keep]}
     for prefix, channel, scale in (("g", recording.gyro_radps, gyro_scale),
-                                   ("a", recording.accelerometer_mps2, 1.0)):
+                                   ("a", recording.accelerometer_mps2, 1.0),
+                                   ("m", recording.magnetometer_uT, 1.0)):
         columns.update({f"{prefix}{axis}": channel[:keep, i] * scale
                         for i, axis in enumerate("xyz")})
     columns.update({f"q{part}": recording.reference_quat[:keep, i]
@@ -248,3 +255,28 @@ def test_inspect_reads_a_ros_export_and_a_tick_of_its_own(trial, tmp_path, capsy
     assert "magnetometer" not in text
     assert load_declared(tmp_path / "imu.toml").rate_hz == pytest.approx(recording.rate_hz,
                                                                          rel=1e-3)
+
+
+def test_a_folder_mixing_referenced_and_unreferenced_logs_says_which_has_none(
+        trial, tmp_path, capsys):
+    # One log with a reference and one without, in one folder: the one
+    # without is left out of the means as having no reference (it was said
+    # to "never move"), its rows scored by agreement with the others.
+    recording, _ = trial
+    ticks = np.rint(recording.time_s * 1e6).astype(np.int64)
+    path = _log(trial, tmp_path, ticks, '"us"')
+    text = path.read_text().replace("[recording.reference]", MAGNETOMETER + "[recording.reference]")
+    path.rename(tmp_path / "with.toml")
+    (tmp_path / "with.toml").write_text(text)
+    (tmp_path / "without.toml").write_text(text[:text.index("[recording.reference]")])
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(tmp_path), "--estimators", "mekf,vqf,madgwick",
+                 "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "left out of the means: without has no reference during its movement" in printed
+    assert "never moves" not in printed
+    import pandas as pd
+    rows = pd.read_csv(out / "broad_trials.csv").set_index(["trial", "estimator"])
+    assert np.isfinite(rows.loc[("with", "mekf"), "total_rmse_deg"])
+    assert np.isnan(rows.loc[("without", "mekf"), "total_rmse_deg"])
+    assert np.isfinite(rows.loc[("without", "mekf"), "agreement_total_deg"])

@@ -231,6 +231,29 @@ def test_the_kernels_innovation_likelihood_is_the_per_run_filters(trial, name):
     assert run_recorded(build_estimator(name, scenario), omega, vectors).likelihood is None
 
 
+@pytest.mark.parametrize("name", ["mekf", pytest.param("usque", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("models", [{}, {"gravity_model": "reading", "magnetometer_model":
+                                         "vector", "hard_iron_fit": False}],
+                         ids=["imu-models", "vector-updates"])
+def test_the_kernels_likelihood_counts_rejected_readings_as_the_per_run_filters(trial, name,
+                                                                                models):
+    # A tight gate (p = 0.5) rejects readings on each path through the
+    # updates (the IMU models' gravity and heading, the plain vector
+    # update): both paths count each at the gate's threshold.
+    scenario, omega, vectors = trial
+    options = {"gate_probability": 0.5, **models}
+    from estimators import resolve_estimator
+    kernel_run = run_recorded(resolve_estimator(name).from_scenario(scenario, **options), omega,
+                              vectors, innovations=True)
+    per_run = resolve_estimator(name).from_scenario(scenario, **options)
+    per_run.log_innovations = True
+    _, rejected = _per_run(per_run, omega, vectors)
+    sums = per_run.innovation_sums
+    assert sum(rejected.values()) > 20, rejected
+    assert kernel_run.path == "kernel" and kernel_run.likelihood[1] == sums["updates"]
+    assert kernel_run.likelihood[0] == pytest.approx(sums["log_det"] + sums["nis"], rel=1e-9)
+
+
 @pytest.mark.parametrize("name", ["mekf", "usque", "mekf-smoother"])
 def test_the_kept_attitude_covariance_is_the_per_run_classs(trial, name):
     """The covariance the kernel path keeps (and the smoother's fusion of

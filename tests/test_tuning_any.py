@@ -96,15 +96,25 @@ def test_tuning_is_deterministic_for_a_fixed_seed_set():
     assert first.evaluations == again.evaluations
 
 
-def test_likelihood_counts_applied_updates_only():
+def test_likelihood_counts_every_gated_reading_a_rejected_one_at_the_gate():
+    # Summed over the applied updates alone, the likelihood per update
+    # rewarded settings that reject what fits badly: every reading that
+    # reaches the gate counts, a rejected one with its NIS at the threshold.
+    from estimators.gating import gate_threshold
     scenario = Scenario.from_toml(SCENARIOS / "smallsat.toml").replace(
         tstop=60.0, estimator_options={"mekf": {"gate_probability": 0.5}})
     case = seed_cases(scenario, [2])[0]
-    mekf = ESTIMATORS["mekf"].from_scenario(scenario)
-    mekf.log_innovations = True
-    mekf.track(*case.sensors.record)
-    applied = case.sensors.available.sum() - mekf.rejected["star_tracker"]
-    assert 0 < mekf.innovation_sums["updates"] == applied
+    sums = {}
+    for probability in (0.5, None):
+        mekf = ESTIMATORS["mekf"].from_scenario(scenario)
+        mekf.gate_probability = probability
+        mekf.log_innovations = True
+        mekf.track(*case.sensors.record)
+        sums[probability] = (dict(mekf.innovation_sums), mekf.rejected.get("star_tracker", 0))
+    (gated, rejected), (ungated, _) = sums[0.5], sums[None]
+    assert 0 < rejected < gated["updates"] == case.sensors.available.sum() == ungated["updates"]
+    # Each rejected reading adds the threshold (3 degrees of freedom).
+    assert gated["nis"] >= rejected * gate_threshold(0.5, 3)
 
 
 def test_objectives_that_need_truth_are_refused_without_a_reference():

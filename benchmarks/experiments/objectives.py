@@ -15,7 +15,8 @@ Objectives (:data:`OBJECTIVES`):
   star tracker's NIS of dimension m, and ``likelihood``, the innovations'
   negative log-likelihood per update,
   :math:`\frac{1}{n}\sum_k (\ln\det S_k + y_k^\mathsf{T} S_k^{-1} y_k)` over
-  every applied update, tracker and vector readings alike (the classical
+  every reading that reaches the gate, tracker and vector readings alike,
+  a rejected one's NIS at the gate's threshold (:mod:`estimators.gating`; the classical
   maximum-likelihood criterion of adaptive filtering: Mehra 1970; twice the
   negative log-likelihood per update, less :math:`m\ln 2\pi`). These two need
   no reference.

@@ -303,8 +303,10 @@ def keep_output(run, k, last_step, q_true_k, out, beta, P, beta_last, P_last, va
 
 @njit(cache=True, inline="always", error_model="numpy")
 def fold_innovation(run, nis, determinant, likelihood):
-    """Add an applied update's ln det S + NIS to the run's likelihood sums
-    (a non-positive det S, a covariance gone bad, makes it infinite)."""
+    """Add a gated reading's ln det S + NIS to the run's likelihood sums
+    (a non-positive det S, a covariance gone bad, makes it infinite): the
+    caller passes the gate's threshold for the NIS of a reading the gate
+    rejected (:meth:`estimators.gating.InnovationGate.accepts`)."""
     likelihood[run, 0] += (math.log(determinant) if determinant > 0.0 else math.inf) + nis
     likelihood[run, 1] += 1.0
 

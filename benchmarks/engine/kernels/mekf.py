@@ -192,7 +192,8 @@ def _star_reading(q, beta, P, z, run, R, gating, gate, scratch, dq, mag_bias, ch
     if streaming and applied:
         nis_sum[run] += nis
         nis_count[run] += 1
-        fold_innovation(run, nis, determinant, likelihood)
+    if streaming:
+        fold_innovation(run, nis if applied else gate, determinant, likelihood)
 
 
 @njit(cache=True, error_model="numpy")
@@ -215,6 +216,8 @@ def _gravity_reading(q, beta, P, run, s, dt, body, models, gating, threshold, ma
         else:
             rejected[run, s] += 1
             kept = False
+            if streaming:                  # at the gate (InnovationGate.accepts)
+                fold_innovation(run, threshold, determinant, likelihood)
     if rest_updates and at_rest:
         last = imu.rest_update(q, beta, P, models[imu.G_RATE_LP][run], densities[2] / interval,
                                scratch, dq)
@@ -242,8 +245,8 @@ def _heading_reading(q, beta, P, run, s, dt, body, reference, known, models, gat
                                                    threshold, scratch, dq)
     if not applied:
         rejected[run, s] += 1
-    elif streaming:
-        fold_innovation(run, nis, determinant, likelihood)
+    if streaming:
+        fold_innovation(run, nis if applied else threshold, determinant, likelihood)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -279,8 +282,9 @@ def _vector_reading(q, beta, P, run, j, s, dt, block, state, rejected, streaming
         nis, applied, determinant = vector_update(
             q, beta, P, body, reference, block.vector_variance[run, j, s], state.gating[run],
             state.gate[run, block.vector_dof[s]], scratch, dq, mag_bias, reads_hard_iron)
-        if streaming and applied:
-            fold_innovation(run, nis, determinant, likelihood)
+        if streaming:
+            fold_innovation(run, nis if applied else state.gate[run, block.vector_dof[s]],
+                            determinant, likelihood)
         if not applied:
             rejected[run, s] += 1
     if check:

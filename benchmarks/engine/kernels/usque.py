@@ -266,8 +266,8 @@ def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, 
     if available:
         nis, applied, determinant = _update(q, x, P, sigmas, z, state.R[run], Wm, Wc, gating,
                                             gate[3], scratch)
-        if streaming and applied:
-            fold_innovation(run, nis, determinant, likelihood)
+        if streaming:
+            fold_innovation(run, nis if applied else gate[3], determinant, likelihood)
         fold_reference(q, x)
         updated = True
     elif not _any_reading(vector_available, run, j):
@@ -295,8 +295,9 @@ def _correct(q, x, P, sigmas, available, z, run, j, dt, Wm, Wc, vectors, state, 
             vector_nis, used, determinant = _vector_update(
                 q, x, P, sigmas, body[run, j, s], reference[j, s], variance[run, j, s], Wm,
                 Wc, gating, gate[dof[s]], scratch, predicted, R_vector)
-            if streaming and used:
-                fold_innovation(run, vector_nis, determinant, likelihood)
+            if streaming:
+                fold_innovation(run, vector_nis if used else gate[dof[s]], determinant,
+                                likelihood)
         if not used:
             rejected[run, s] += 1
         fold_reference(q, x)

@@ -153,6 +153,8 @@ def reading(q, x, P, sigmas, run, j, s, dt, body, reference, gravity, magnetic, 
                 predicted, R)
             if not kept:
                 rejected[run, s] += 1
+                if streaming:              # at the gate (InnovationGate.accepts)
+                    fold_innovation(run, gate[dof[s]], last_det, likelihood)
             fold_reference(q, x)
             updated = True
         if state.imu_rest and at_rest:
@@ -199,8 +201,8 @@ def _field_reading(q, x, P, sigmas, run, field, reference, known, dt, gating, ga
     nis, used, S = heading_update(q, x, P, sigmas, field, psi,
                                   trust * trust * state.imu_densities[run, 1] / interval,
                                   validated, Wm, Wc, gating, gate)
-    if streaming and used:
-        fold_innovation(run, nis, S, likelihood)
+    if streaming:
+        fold_innovation(run, nis if used else gate, S, likelihood)
     if not used:
         rejected[s] += 1
     fold_reference(q, x)
