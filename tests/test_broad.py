@@ -217,8 +217,40 @@ def test_vqf_is_told_its_magnetometers_rate_where_it_reads_slower():
     slower = imu_inputs(replace(recording, magnetometer_uT=field))
     options = slower.scenario.estimator_options["vqf"]
     assert options["magnetometer_interval_s"] == pytest.approx(4 * recording.dt, rel=1e-12)
+    assert "accelerometer_interval_s" not in options
     assert "vqf" not in slower.scenario.estimator_options.get("vqf-offline", {})
+    # An accelerometer read at half the gyro's rate: its accTs too, for both VQFs.
+    force = recording.accelerometer_mps2.copy()
+    force[np.arange(len(force)) % 2 == 1] = 0.0
+    both = imu_inputs(replace(recording, magnetometer_uT=field, accelerometer_mps2=force))
+    for name in ("vqf", "vqf-6d"):
+        told = both.scenario.estimator_options[name]
+        assert told["accelerometer_interval_s"] == pytest.approx(2 * recording.dt, rel=1e-12)
+        assert told["magnetometer_interval_s"] == pytest.approx(4 * recording.dt, rel=1e-12)
     assert reading_interval_s(np.array([True, False, False]), 0.01) == 0.01
+
+
+def _slower_channels(name: str, every: dict, **options):
+    """Estimator ``name`` on 30 s of trial 02's movement whose channels read
+    every ``every[sensor]`` samples: at once and sample by sample (both
+    asserted equal to the bit), and on every sample; and the recording."""
+    from dataclasses import replace
+    dataset = open_broad(SHIPPED)
+    recording = dataset.load(dataset.trial_name("02")).from_sample(11000).until_sample(3000)
+    inputs = imu_inputs(recording)
+    vectors = tuple(replace(v, available=v.available & (np.arange(len(v.available))
+                                                        % every.get(v.sensor, 1) == 0))
+                    for v in inputs.sensors.vectors)
+    estimator = resolve_estimator(name).from_scenario(inputs.scenario, **options)
+    s = inputs.sensors
+    batch = estimator.run_batch(s.omega_meas_radps, vectors)
+    assert batch is not None
+    stepped = estimator.run(s.omega_meas_radps, s.star_tracker_quat, s.available,
+                            vectors=vectors)
+    np.testing.assert_array_equal(batch, stepped)
+    whole = estimator.run(s.omega_meas_radps, s.star_tracker_quat, s.available,
+                          vectors=s.vectors)
+    return stepped, whole, recording
 
 
 def test_vqf_runs_at_once_on_a_magnetometer_that_reads_slower():
@@ -228,20 +260,22 @@ def test_vqf_runs_at_once_on_a_magnetometer_that_reads_slower():
     calls without them: the same estimates to the bit (it took the per-sample
     path, 40 µs a sample against 0.5)."""
     pytest.importorskip("vqf")
-    from dataclasses import replace
-    dataset = open_broad(SHIPPED)
-    recording = dataset.load(dataset.trial_name("02")).from_sample(11000).until_sample(3000)
-    inputs = imu_inputs(recording)
-    vectors = tuple(replace(v, available=v.available & (np.arange(len(v.available)) % 4 == 0))
-                    if v.sensor == "magnetometer" else v for v in inputs.sensors.vectors)
-    estimator = resolve_estimator("vqf").from_scenario(inputs.scenario,
-                                                       magnetometer_interval_s=4 * recording.dt)
-    s = inputs.sensors
-    batch = estimator.run_batch(s.omega_meas_radps, vectors)
-    assert batch is not None
-    stepped = estimator.run(s.omega_meas_radps, s.star_tracker_quat, s.available,
-                            vectors=vectors)
-    np.testing.assert_array_equal(batch, stepped)
+    _slower_channels("vqf", {"magnetometer": 4}, magnetometer_interval_s=0.04)
+
+
+def test_fusion_holds_a_slower_channels_last_reading():
+    """Fusion takes every channel at every sample: where the accelerometer
+    and the magnetometer read slower (here a half and a quarter of the
+    gyro's rate), each is held from its last reading, the same at once as
+    sample by sample, and the gyro is integrated at every sample (a sample
+    without an accelerometer reading was skipped, its rate lost: the
+    estimate then turned half as fast as the body)."""
+    pytest.importorskip("imufusion")
+    stepped, whole, recording = _slower_channels("fusion", {"accelerometer": 2,
+                                                           "magnetometer": 4})
+    slow, full = (rmse_deg(q, recording.reference_quat, recording.movement)["total_rmse_deg"]
+                  for q in (stepped, whole))
+    assert slow < 2 * full + 1.0, (slow, full)
 
 
 @pytest.mark.parametrize("name", ["vqf", pytest.param("fusion", marks=pytest.mark.slow)])

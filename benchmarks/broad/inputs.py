@@ -121,13 +121,22 @@ def usable_readings(recording: Recording) -> dict:
     return {name: np.any(channel != 0.0, axis=1) for name, channel in channels(recording).items()}
 
 
-def _vqf_options(usable: np.ndarray, dt: float) -> dict:
-    """VQF's ``magTs`` (``magnetometer_interval_s``) where the magnetometer
-    reads slower than the gyro: its coefficients are set for it, and at the
-    gyro's step (its default) its heading correction would be that many
-    times too slow. The MEKF reads each reading's interval as it comes."""
-    interval = reading_interval_s(usable, dt)
-    return {"vqf": {"magnetometer_interval_s": interval}} if interval > dt else {}
+#: The VQF estimators told their channels' intervals (the offline one
+#: takes every channel at the gyro's rate, a slower one held).
+TOLD_INTERVALS = ("vqf", "vqf-6d")
+
+
+def _vqf_options(usable: dict, dt: float) -> dict:
+    """VQF's ``accTs`` and ``magTs`` (``accelerometer_interval_s``,
+    ``magnetometer_interval_s``) where the accelerometer or the
+    magnetometer reads slower than the gyro: its coefficients are set for
+    them, and at the gyro's step (its default) its corrections would be
+    that many times too slow. The MEKF reads each reading's interval as it
+    comes."""
+    intervals = {f"{sensor}_interval_s": reading_interval_s(usable[sensor], dt)
+                 for sensor in ("accelerometer", "magnetometer") if sensor in usable}
+    told = {key: interval for key, interval in intervals.items() if interval > dt}
+    return {name: dict(told) for name in TOLD_INTERVALS} if told else {}
 
 
 def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -269,7 +278,7 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         star_tracker_model="rotation", star_tracker_outages_s=((0.0, n * dt),),
         estimator_options={"mekf": {**priors, **IMU_MODELS}, "usque": {**priors, **IMU_MODELS},
                            "ekf": {"gate_probability": GATE_PROBABILITY},
-                           **_vqf_options(usable["magnetometer"], dt)})
+                           **_vqf_options(usable, dt)})
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
                          available=np.zeros(n, dtype=bool), vectors=vectors)
