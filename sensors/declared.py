@@ -61,7 +61,7 @@ from sensors.magnetometer_calibration import calibrated
 from sensors.recording import Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
 from sensors.tables import read_table
-from sensors.turning import axes_fit
+from sensors.turning import AXES_THRESHOLDS, axes_fit
 
 SENSORS = ("gyro", "accelerometer", "magnetometer", "reference")
 def load_declared(path) -> Recording:
@@ -185,7 +185,7 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
         check_norm(path, sensor, values, sections[sensor]["unit"], sections[sensor]["columns"])
     if "accelerometer" in channels:
         check_turning(path, gyro, channels["accelerometer"], 1.0 / rate, sections["gyro"],
-                      declaration.get("time_unit", "s"))
+                      declaration.get("time_unit", "s"), channels.get("magnetometer"))
     for sensor, values in channels.items():
         _check_axes(path, sensor, gyro, values, 1.0 / rate, sections[sensor])
     reference = np.full((len(gyro_time), 4), np.nan)
@@ -374,8 +374,9 @@ def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
 def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, dt: float,
                 section: dict) -> None:
     """Refuse a vector sensor's axes that turn unlike the gyro where
-    another order of them turns as it does (:func:`sensors.turning.axes_fit`)."""
-    fit = axes_fit(rates, values, dt)
+    another order of them turns as it does (:func:`sensors.turning.axes_fit`,
+    with the sensor's :data:`~sensors.turning.AXES_THRESHOLDS`)."""
+    fit = axes_fit(rates, values, dt, AXES_THRESHOLDS[sensor])
     if fit is None:
         return
     declared, better, correlation = fit

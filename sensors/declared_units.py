@@ -21,8 +21,8 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS
 from sensors.recording import VECTOR_LIMITS
 from sensors.recording_keys import choice, refuse
-from sensors.turning import (MIRRORED_CORRELATION, TURNING_FACTOR, TURNING_WINDOW_S,
-                             gravity_turning,
+from sensors.turning import (MIRRORED_CORRELATION, TURNING_CORRELATION, TURNING_FACTOR,
+                             TURNING_WINDOW_S, field_correlation, gravity_turning,
                              reference_fit, reference_fits, reference_scale, turning_scale)
 
 #: Each time unit in seconds; ``time_unit`` may also be a number, the
@@ -132,13 +132,18 @@ def scale_hint(path: Path, scale: float, unit: str, time_unit) -> tuple:
 
 
 def check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
-                  section: dict, time_unit) -> None:
+                  section: dict, time_unit, field: np.ndarray | None = None) -> None:
     """Refuse a gyro whose rates, in the declared unit, turn gravity 57
     times faster or slower than the accelerometer sees it turn (or a clock
     in the wrong tick, 10ⁿ times), or the other way (every sensor's columns
-    in a left-handed order)."""
+    in a left-handed order: where a magnetometer's ``field`` is read, its
+    turning must say so too, as a fast translation's linear acceleration
+    turns the accelerometer's readings against the gyro's prediction, down
+    to -0.54 on BROAD, and no magnetic field's)."""
     found = gravity_turning(rates, specific_force, dt)
-    if found is not None and found[0] <= MIRRORED_CORRELATION:
+    field_turns = field is not None and (field_correlation(rates, field, dt) or 0.0) \
+        >= TURNING_CORRELATION        # with the gyro: a right-handed frame
+    if found is not None and found[0] <= MIRRORED_CORRELATION and not field_turns:
         refuse(path, "recording.gyro.columns", section["columns"],
                f"turn gravity the other way from the accelerometer's readings (correlation "
                f"{found[0]:.2f}): the sensors' columns as declared make a left-handed frame "

@@ -50,6 +50,14 @@ MIRRORED_CORRELATION = -2 * TURNING_CORRELATION
 #: rate), so it is seldom judged. A wrong order that keeps one axis in place
 #: still correlates up to about 0.5.
 AXES_DECLARED_BELOW, AXES_OTHER_ABOVE = 0.6, 0.9
+#: Each sensor's axes thresholds. An accelerometer's turning, its offset
+#: fitted, correlates 0.48–0.87 with the gyro's on BROAD's 30 trials (a
+#: translation's linear acceleration, not gravity, drives its low end;
+#: another order then reaches 0.9): judged only below 0.3, where one of its
+#: axes is swapped (trial 02 with x and z swapped: -0.04, the right order
+#: 0.85), it is refused where another order passes 0.75.
+AXES_THRESHOLDS = {"magnetometer": (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE),
+                   "accelerometer": (0.3, 0.75)}
 #: The reference check: a reference whose turning is left unexplained by
 #: more than this share (by any fixed rotation of the gyro's rates) is not
 #: the attitude of that gyro's body as declared (0.1 % to 1.1 % on BROAD's
@@ -136,6 +144,15 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float,
     return correlation, float(np.sum(change * predicted)) / float(np.sum(predicted * predicted))
 
 
+def field_correlation(rates: np.ndarray, field: np.ndarray, dt: float) -> float | None:
+    """How the field's turning (a hard iron's offset fitted) correlates with
+    the gyro's prediction: near 1 in the gyro's frame, near -1 in its mirror
+    (0.84–0.99 on BROAD's 30 trials, where the accelerometer's, in fast
+    translation, falls to -0.54); None where too little is seen."""
+    turning = _turning(rates, field, dt, offset=True)
+    return None if turning is None or not np.any(turning[1]) else _correlation(*turning)
+
+
 def turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float,
                   window_s: float = TURNING_WINDOW_S) -> float | None:
     """The factor by which ``rates`` must be multiplied to turn gravity as
@@ -161,24 +178,27 @@ def _orders() -> list[np.ndarray]:
 ORDERS = _orders()
 
 
-def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float):
+def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
+             thresholds: tuple = (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE)):
     """``(declared, better, its correlation)``: how the turning of
     ``vectors`` (in the device's axes as declared; rows of zeros where the
     sensor did not read) correlates with the gyro's, and the reordering
     ``better`` (a matrix: device axes = ``better`` @ declared, up to its
     sign, which turning cannot tell) that fits far better; or None where
     the declared axes fit, or where the turning is not seen clearly enough
-    to say. A constant offset (a hard iron) is fitted with each order."""
+    to say; ``thresholds``: (declared below, another order above), a
+    magnetometer's by default (:data:`AXES_THRESHOLDS`). A constant offset
+    (a hard iron) is fitted with each order."""
     turning = _turning(rates, vectors, dt, offset=True)
-    if turning is None or not np.any(turning[1]):
-        return None
+    if turning is None or not np.any(turning[1]) or len(turning[0]) < MIN_BLOCKS:
+        return None                   # too few blocks: a correlation by chance
     declared = _correlation(*turning)
-    if declared is None or declared >= AXES_DECLARED_BELOW:
+    if declared is None or declared >= thresholds[0]:
         return None
     fits = [(_correlation(*_turning(rates, vectors @ order.T, dt, offset=True)) or -1.0, index)
             for index, order in enumerate(ORDERS)]
     best, index = max(fits)
-    return (declared, ORDERS[index], best) if best >= AXES_OTHER_ABOVE else None
+    return (declared, ORDERS[index], best) if best >= thresholds[1] else None
 
 
 def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
