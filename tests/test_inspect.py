@@ -234,7 +234,7 @@ def test_a_clocks_jitter_is_its_spread_between_its_gaps():
 def test_a_quaternion_in_numbered_columns_is_the_reference():
     """q0…q3 (q0 the scalar, as in Madgwick's code) is the reference in the
     order w, x, y, z, whatever the file's order."""
-    from benchmarks.experiments.inspection import sensor_columns
+    from benchmarks.experiments.columns import sensor_columns
     table = {name: np.zeros(10) for name in ("t", "gx", "gy", "gz", "q3", "q1", "q0", "q2")}
     assert sensor_columns(table)["reference"] == ["q0", "q1", "q2", "q3"]
     table = {name: np.zeros(10) for name in ("t", "quat_1", "quat_2", "quat_3", "quat_0")}

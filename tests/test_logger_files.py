@@ -280,3 +280,30 @@ def test_a_folder_mixing_referenced_and_unreferenced_logs_says_which_has_none(
     assert np.isfinite(rows.loc[("with", "mekf"), "total_rmse_deg"])
     assert np.isnan(rows.loc[("without", "mekf"), "total_rmse_deg"])
     assert np.isfinite(rows.loc[("without", "mekf"), "agreement_total_deg"])
+
+
+def test_inspect_tells_a_headerless_files_columns_by_their_values(trial, tmp_path, capsys):
+    # No header (an Arduino sketch's ';'-separated log): the time is the
+    # column that increases, a steady norm near g (in g here) the
+    # accelerometer's, one near the Earth's field (in gauss: also about 1,
+    # but 1 g is exactly g) the magnetometer's, the unsteady one the gyro's,
+    # four of unit norm the reference; the suggestion loads.
+    recording, keep = trial
+    micros = np.rint(recording.time_s[:keep] * 1e6).astype(np.int64) + 1_000_000
+    blocks = [recording.accelerometer_mps2[:keep] / 9.80665,
+              np.degrees(recording.gyro_radps[:keep]),
+              recording.magnetometer_uT[:keep] / 100.0, recording.reference_quat[:keep]]
+    rows = [";".join([str(int(t))] + ["" if math.isnan(x) else repr(x) for x in row])
+            for t, row in zip(micros, np.hstack(blocks).tolist())]
+    (tmp_path / "LOG.csv").write_text("\n".join(rows) + "\n")
+    assert main(["inspect", str(tmp_path / "LOG.csv")]) == 0, capsys.readouterr().err
+    text = (tmp_path / "LOG.toml").read_text()
+    for sensor, columns, unit in (("accelerometer", '["2", "3", "4"]', '"g"'),
+                                  ("gyro", '["5", "6", "7"]', '"deg/s"'),
+                                  ("magnetometer", '["8", "9", "10"]', '"gauss"')):
+        section = text.split(f"[recording.{sensor}]")[1].split("[recording.")[0]
+        assert f"columns = {columns}" in section and f"unit = {unit}" in section, text
+    assert 'columns = ["11", "12", "13", "14"]' in text and 'time_unit = "us"' in text
+    assert "no header: the columns are told by their values" in capsys.readouterr().err
+    assert load_declared(tmp_path / "LOG.toml").rate_hz == pytest.approx(recording.rate_hz,
+                                                                         rel=1e-3)

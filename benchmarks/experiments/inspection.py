@@ -14,10 +14,11 @@ and leaves the section out for the user to write.
 from __future__ import annotations
 
 import math
-import re
 
 import numpy as np
 
+from benchmarks.experiments.columns import (column_values, columns_by_values, headerless,
+                                            sensor_columns, time_columns, time_for)
 from dynamics.validation import InvalidParameterError
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
 from sensors.clocks import GAP_FACTOR, clock_period, unwrapped
@@ -26,107 +27,6 @@ from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UN
                                     clock_turning_scale, tick_name, tick_seconds)
 from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits
-
-#: Name tokens of each sensor's columns (the prefix before the axis letter).
-SENSOR_TOKENS = {
-    "gyro": ("gyr", "gyro", "omega", "angvel", "rate", "g", "w", "angular", "gyroscope"),
-    "accelerometer": ("acc", "accel", "a", "f", "linear"),
-    "magnetometer": ("mag", "magn", "m", "b", "field", "compass"),
-    "reference": ("q", "quat", "opt", "ref", "orient", "att", "mocap", "orientation",
-                  "attitude"),
-}
-#: Name tokens of a column that holds no sensor's readings (a ROS message's
-#: covariances beside its orientation).
-NOT_READINGS = ("covariance", "cov", "std", "var", "sigma")
-#: The first word of a ROS message's fields as ``rostopic echo -p`` writes
-#: them (``field.angular_velocity.x``), which names no sensor.
-MESSAGE_PREFIX = "field"
-#: Name tokens of a time column (``micros``: an Arduino's; ``stamp``: ROS's).
-TIME_TOKENS = ("t", "time", "times", "timestamp", "ts", "sec", "seconds", "ms", "stamp",
-               "micros", "millis", "nanos", "epoch")
-_AXIS = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<axis>[wxyz])$", re.IGNORECASE)
-#: A quaternion's numbered columns, q0 the scalar (Madgwick's q0…q3).
-_NUMBERED = re.compile(r"^(?P<prefix>.*?)[\s._-]*(?P<index>[0-3])$")
-
-
-def _words(name: str) -> list:
-    """A name's words: split at what is not a letter and where camelCase
-    turns (``SampleTimeFine``: sample, time, fine)."""
-    return [token for token in re.split(r"[^a-z]+", re.sub(
-        r"([a-z])([A-Z])", r"\1 \2", name).lower()) if token]
-
-
-def _tokens(name: str) -> set:
-    return set(_words(name))
-
-
-def _sensor_of(prefix: str) -> str | None:
-    """The sensor a column prefix names, if exactly one: by its first word
-    where that names one (``acc_m_s2``: the unit's ``m`` is no
-    magnetometer), else by all its words."""
-    words = _words(prefix)
-    if len(words) > 1 and words[0] == MESSAGE_PREFIX:
-        words = words[1:]
-    if set(words) & set(NOT_READINGS):
-        return None
-    for tokens in ({words[0]} if words else set(), set(words) | {prefix.lower()}):
-        named = [sensor for sensor, names in SENSOR_TOKENS.items()
-                 if tokens & set(names) or any(token.startswith(names[0]) for token in tokens)]
-        if len(named) == 1:
-            return named[0]
-    return None
-
-
-def sensor_columns(table: dict) -> dict:
-    """Sensor → its columns (a list of 3, or 4 for the reference, in the
-    file's order; or one array's name) as the names suggest."""
-    groups = {}
-    for name, values in table.items():
-        array = np.asarray(values)
-        if array.dtype.kind not in "iuf":
-            continue                       # text or mixed cells: no sensor's column
-        if sum(size > 1 for size in array.shape) == 1:
-            array = array.reshape(-1)      # MATLAB keeps a vector as (1, N)
-        if array.ndim == 2 and (3 in array.shape or 4 in array.shape):
-            width = 4 if 4 in array.shape else 3
-            sensor = _sensor_of(name)
-            if sensor and (sensor == "reference") == (width == 4):
-                groups.setdefault(sensor, name)
-            continue
-        match = _AXIS.match(name)
-        if match and array.ndim == 1:
-            groups.setdefault(match["prefix"], {})[match["axis"].lower()] = name
-        numbered = _NUMBERED.match(name)
-        if not match and numbered and array.ndim == 1 and numbered["prefix"] \
-                and _sensor_of(numbered["prefix"]) == "reference":
-            groups.setdefault(numbered["prefix"], {})["wxyz"[int(numbered["index"])]] = name
-    found = {}
-    for prefix, axes in groups.items():
-        if isinstance(axes, str):
-            found.setdefault(prefix, axes)
-            continue
-        sensor = _sensor_of(prefix)
-        wanted = "wxyz" if sensor == "reference" else "xyz"
-        lengths = {np.asarray(table[axes[axis]]).size for axis in wanted if axis in axes}
-        if sensor and set(axes) >= set(wanted) and sensor not in found and len(lengths) == 1:
-            found[sensor] = [axes[axis] for axis in wanted]
-    return found
-
-
-def time_columns(table: dict) -> list[str]:
-    """The columns named as times whose readings increase."""
-    names = []
-    for name, values in table.items():
-        raw = np.asarray(values)
-        array = unwrapped(raw.reshape(-1)).astype(float) if raw.dtype.kind in "iuf" and \
-            sum(size > 1 for size in raw.shape) == 1 else None
-        if array is None or not _tokens(name) & set(TIME_TOKENS):
-            continue
-        present = array[~np.isnan(array)]
-        if len(present) > 1 and np.all(np.diff(present) > 0):
-            names.append(name)
-    return names
-
 
 def time_unit(intervals: np.ndarray) -> str:
     """The unit that makes an IMU's sample interval most like one: the
@@ -220,41 +120,17 @@ def clipped(values: np.ndarray) -> tuple[int, float]:
     return (count, extreme) if run.any() and extreme > 0 else (0, extreme)
 
 
-def _values(table: dict, columns) -> np.ndarray:
-    if isinstance(columns, str):
-        array = np.asarray(table[columns], dtype=float)
-        return array.T if array.shape[0] in (3, 4) and array.shape[1] not in (3, 4) else array
-    return np.column_stack([np.asarray(table[name], dtype=float).reshape(-1)
-                            for name in columns])
-
-
-def _time_for(sensor: str, columns, times: list, table: dict) -> str:
-    """The sensor's time column: one whose name names it (its columns'
-    prefix, ``t_acc`` beside ``acc_x``, or a word of the sensor's,
-    ``t_mag_ms`` beside ``mx``), else one that holds a time exactly where
-    its columns hold a reading (a merged table's own clock), else the first."""
-    names = [columns] if isinstance(columns, str) else columns
-    words = set().union(*(_tokens(name) for name in names)) - set("wxyz")
-    unread = np.isnan(_values(table, columns)).any(axis=1)
-
-    def names_it(time: str) -> bool:
-        rest = _tokens(time) - set(TIME_TOKENS)
-        return bool(rest & words) or any(_sensor_of(token) == sensor for token in rest)
-
-    def reads_with_it(time: str) -> bool:
-        stamps = np.asarray(table[time], dtype=float)
-        return stamps.shape == unread.shape and np.array_equal(np.isnan(stamps), unread)
-
-    return ([time for time in times if names_it(time)]
-            or [time for time in times if reads_with_it(time)] or times)[0]
-
-
 def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
     """``(declaration, notes)``: the ``[recording]`` section the columns
     suggest (units by size, :func:`fitting_unit`, :func:`gyro_unit`) and
     what could not be told, one line each."""
     columns, times = sensor_columns(table), time_columns(table)
     notes, declaration = [], {"file": file_name}
+    if headerless(table):
+        columns, times = columns_by_values(table)
+        notes.append("no header: the columns are told by their values (" + ", ".join(
+            f"{sensor} {', '.join(chosen)}" for sensor, chosen in
+            [("time", times), *columns.items()] if chosen) + "): check them")
     missing = [sensor for sensor in ("gyro", "accelerometer", "magnetometer", "reference")
                if sensor not in columns]
     if missing:
@@ -265,13 +141,13 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
                      "values increase): declare each sensor's time by hand")
         return declaration, notes
     if "gyro" in columns:
-        gyro_time = np.asarray(table[_time_for("gyro", columns["gyro"], times, table)],
+        gyro_time = np.asarray(table[time_for("gyro", columns["gyro"], times, table)],
                                dtype=float)
         declaration["time_unit"] = time_unit(np.diff(gyro_time[~np.isnan(gyro_time)]))
     seconds = TIME_UNITS[declaration.get("time_unit", "s")]
     for sensor, chosen in columns.items():
-        section = {"time": _time_for(sensor, chosen, times, table), "columns": chosen}
-        values = _values(table, chosen)
+        section = {"time": time_for(sensor, chosen, times, table), "columns": chosen}
+        values = column_values(table, chosen)
         if sensor in ("accelerometer", "magnetometer"):
             unit = fitting_unit(sensor, values)
             if unit is None:
@@ -290,10 +166,10 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
         force = None
         accelerometer = declaration.get("accelerometer")
         if accelerometer and accelerometer["time"] == gyro["time"]:
-            force = _values(table, accelerometer["columns"]) * \
+            force = column_values(table, accelerometer["columns"]) * \
                 UNITS["accelerometer"][accelerometer["unit"]]
             force = np.nan_to_num(force)
-        rates = np.nan_to_num(_values(table, gyro["columns"]))
+        rates = np.nan_to_num(column_values(table, gyro["columns"]))
         step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
         gyro["unit"], power = gyro_unit(rates, force, step)
         if power:
@@ -380,7 +256,7 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
         if sensor not in declaration:
             continue
         section, table = declaration[sensor], tables[sensor]
-        values = _values(table, section["columns"])
+        values = column_values(table, section["columns"])
         times = unwrapped(np.asarray(table[section["time"]]).reshape(-1)).astype(float)
         times = times[~np.isnan(values).all(axis=1)] * seconds
         clock_of = clock(times)
