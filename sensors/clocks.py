@@ -55,6 +55,49 @@ def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
     return best[1], best[2]
 
 
+#: Rows a logger repeated or wrote out of turn are mended (:func:`mended`)
+#: where they are at most this share of the steps, and each goes back by
+#: at most :data:`GAP_FACTOR` typical steps (else the clock restarted: named).
+MENDED_SHARE = 0.01
+
+
+def mended(times: np.ndarray, values: np.ndarray) -> tuple:
+    """``(times, values, rows dropped, rows moved)``: a row that repeats the
+    one before it (time and values) dropped, and rows written out of turn
+    put in their time's order, where they are few (:data:`MENDED_SHARE`) and
+    near; otherwise as they are (the check that times increase names them)."""
+    steps = np.diff(times)
+    back = steps <= 0
+    if not back.any() or back.mean() > MENDED_SHARE or len(times) < 3:
+        return times, values, 0, 0
+    typical = np.median(steps[~back])
+    if np.any(steps < -GAP_FACTOR * typical):
+        return times, values, 0, 0
+    repeated = np.concatenate([[False], (steps == 0) & np.all(values[1:] == values[:-1], axis=1)])
+    kept_times, kept = times[~repeated], values[~repeated]
+    order = np.argsort(kept_times, kind="stable")
+    if np.any(np.diff(kept_times[order]) <= 0):      # a time read twice apart: not mended
+        return times, values, 0, 0
+    moved = int(np.count_nonzero(order != np.arange(len(order))))
+    return kept_times[order], kept[order], int(np.count_nonzero(repeated)), moved
+
+
+#: Times off the uniform clock fitted through them (:func:`clock_steps`) by
+#: more than this share of its period (RMS) keep no steady clock: rounding
+#: to whole milliseconds at 256 Hz is 0.07 of it, intervals of 4 to 8 ms
+#: drift by many periods.
+IRREGULAR_SHARE = 0.25
+
+
+def irregular(times: np.ndarray) -> bool:
+    """Whether ``times`` keep no steady clock, dropped samples aside: the
+    RMS of their distance to the uniform clock :func:`clock_steps` fits is
+    over :data:`IRREGULAR_SHARE` of its period."""
+    steps, period = clock_steps(times)
+    fitted = np.polyval(np.polyfit(steps, times, 1), steps)
+    return float(np.sqrt(np.mean((times - fitted) ** 2))) > IRREGULAR_SHARE * period
+
+
 def clock_period(times: np.ndarray) -> float:
     """A sensor's period: the median interval where the fitted one
     (:func:`clock_steps`) agrees with it to 1 ppm (a clock without drops or

@@ -52,11 +52,13 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
-from sensors.clocks import clock_period, clock_steps, part_starts, unwrapped
-from sensors.declared_reference import (check_gravity_up, check_reference,
+from sensors.clocks import (GAP_FACTOR, clock_period, clock_steps, irregular, mended,
+                            part_starts, unwrapped)
+from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
-from sensors.declared_units import (UNITS, check_norm, check_rate, check_rates,
-                                    check_reference_scale, check_turning, seconds_per_tick)
+from sensors.declared_units import (UNITS, canonical_unit, check_norm, check_rate,
+                                    check_rates, check_reference_scale, check_turning,
+                                    reading_scale, seconds_per_tick)
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
@@ -134,7 +136,8 @@ def declared_recordings(declaration: dict, tables: dict, path: Path) -> list[Rec
     ``tables`` (sensor → the table its columns are in: :func:`sensor_tables`),
     split at the gyro's gaps; errors name ``path``, the declaration."""
     tick = seconds_per_tick(path, declaration.get("time_unit", "s"))
-    sections = {name: declaration[name] for name in SENSORS if name in declaration}
+    sections = {name: canonical_unit(declaration[name]) for name in SENSORS
+                if name in declaration}
     if "gyro" not in sections:
         refuse(path, "recording.gyro", None, "is required: the gyro's samples are the "
                 "recording's clock")
@@ -173,13 +176,14 @@ def _time_origin(tables: dict, sections: dict) -> int:
 def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
           span: slice) -> Recording:
     """One unbroken stretch ``span`` of the gyro's clock as a recording."""
-    gyro_time, gyro = _gyro_on_grid(path, *(column[span] for column in read["gyro"]))
+    logged = read["gyro"][0][span]
+    gyro_time, gyro = _gyro_on_grid(path, logged, read["gyro"][1][span])
     rate = 1.0 / clock_period(gyro_time)
     check_rate(path, rate, declaration.get("time_unit", "s"))
     if not np.any(gyro != 0.0):
         refuse(path, "recording.gyro.columns", sections["gyro"]["columns"], "hold only zeros: "
                 "the gyro recorded no rate (a channel not logged, or a dead sensor)")
-    channels = {sensor: _on_clock(gyro_time, *read[sensor])
+    channels = {sensor: _with_gyro(gyro_time, logged, *read[sensor])
                 for sensor in ("accelerometer", "magnetometer") if sensor in read}
     for sensor, values in channels.items():
         check_norm(path, sensor, values, sections[sensor]["unit"], sections[sensor]["columns"])
@@ -197,6 +201,8 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
                             declaration.get("time_unit", "s")))
         if "accelerometer" in channels:
             check_gravity_up(path, reference, channels["accelerometer"], sections["reference"])
+        if "magnetometer" in channels:
+            check_field_north(path, reference, channels["magnetometer"])
     referenced = ~np.isnan(reference).any(axis=1)     # without a reference: all movement
     return Recording(name=name, gyro_radps=gyro, reference_quat=reference,
                      movement=referenced if referenced.any() else np.ones_like(referenced),
@@ -257,17 +263,32 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     if len(values) != len(times):
         refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
                 f"its time column {section.get('time')!r} holds {len(times)}")
+    if width == 4:            # a quaternion of zeros: a frame the markers were not seen
+        values[np.all(values == 0.0, axis=1)] = np.nan
+    infinite = np.flatnonzero(np.isinf(values).any(axis=1) | np.isinf(times))
+    if len(infinite):
+        refuse(path, f"{key}.columns", section.get("columns"), f"row {infinite[0]} holds an "
+                f"infinite value ({values[infinite[0]].tolist()}); a reading is finite")
     empty = np.isnan(values).all(axis=1) | np.isnan(times)
     partly = np.flatnonzero(np.isnan(values).any(axis=1) & ~empty)
+    if list(partly) == [len(values) - 1]:   # the last line cut short (power lost): left out
+        warnings.warn(f"{path.name}: {key}: its last row is cut short "
+                      f"({values[-1].tolist()}): left out", stacklevel=3)
+        empty[-1], partly = True, partly[:0]
     if len(partly):
         refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
                 f"empty ({values[partly[0]].tolist()}); a row is a reading or empty")
     times, values = times[~empty], values[~empty]
+    times, values, dropped, moved = mended(times, values)
+    if dropped or moved:
+        said = [f"{dropped} row(s) repeating the one before dropped"] * bool(dropped) + \
+            [f"{moved} row(s) out of their time's order put in it"] * bool(moved)
+        warnings.warn(f"{path.name}: {key}: {'; '.join(said)}", stacklevel=4)
     if not len(times):
         refuse(path, f"{key}.columns", section.get("columns"), "hold no reading")
     if name != "reference":
         unit = choice(path, f"{key}.unit", section.get("unit"), UNITS[name])
-        values = values * UNITS[name][unit]
+        values = values * (reading_scale(path, key, section) * UNITS[name][unit])
         if "axes" in section:
             values = values @ axes_matrix(section["axes"], f"{path.name}: {key}.axes").T
     if name == "gyro":
@@ -344,8 +365,10 @@ def _check_increasing(path: Path, key: str, column, times: np.ndarray) -> None:
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         row = int(back[0]) + 1
+        restart = times[row] < times[row - 1] - GAP_FACTOR * np.median(np.abs(np.diff(times)))
         refuse(path, key, column, f"goes back or repeats at reading {row} ({times[row]:.9g} s "
-               f"after {times[row - 1]:.9g} s); times must increase")
+               f"after {times[row - 1]:.9g} s); times must increase" + (
+                   " (the logger's clock restarted there: split the file)" if restart else ""))
 
 
 def _check_clock(path: Path, column, times: np.ndarray) -> None:
@@ -359,7 +382,11 @@ def _check_clock(path: Path, column, times: np.ndarray) -> None:
 def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
     """The gyro's times and rates with each dropped sample (:func:`clock_steps`)
     put back, its rate held from the sample before and its time between its
-    neighbours'; a warning says how many."""
+    neighbours'; a warning says how many. Times that keep no steady clock
+    (:func:`sensors.clocks.irregular`: an Arduino ``loop()``'s, a rate that
+    changes) are resampled instead, said too."""
+    if len(times) > 2 and irregular(times):
+        return _resampled(path, times, rates)
     steps, _ = clock_steps(times) if len(times) > 1 else (np.arange(len(times)), 0.0)
     missing = int(steps[-1]) + 1 - len(times)
     if missing == 0:
@@ -393,6 +420,34 @@ def _check_axes(path: Path, sensor: str, rates: np.ndarray, values: np.ndarray, 
 
 def _listed_axes(names: list) -> str:
     return "[" + ", ".join(f'"{name}"' for name in names) + "]"
+
+
+def _resampled(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
+    """The gyro's rates on a uniform clock of its mean interval, linear
+    between its readings (the filters integrate each step's rate over one
+    step, which a rate read at uneven intervals would break: 2.1° for
+    0.45° on intervals of 4 to 8 ms, 44° where the rate halved midway)."""
+    period = (times[-1] - times[0]) / (len(times) - 1)
+    grid = times[0] + period * np.arange(len(times))
+    intervals = np.diff(times)
+    warnings.warn(f"{path.name}: the gyro's times keep no steady clock (intervals "
+                  f"{intervals.min() * 1e3:.3g} to {intervals.max() * 1e3:.3g} ms): its rates "
+                  f"are resampled at {1 / period:.4g} Hz, linearly between readings",
+                  stacklevel=4)
+    return grid, np.column_stack([np.interp(grid, times, rates[:, i]) for i in range(3)])
+
+
+def _with_gyro(clock: np.ndarray, logged: np.ndarray, times: np.ndarray,
+               values: np.ndarray) -> np.ndarray:
+    """``values`` on the gyro's ``clock``: resampled with the gyro's rates
+    where they were read on the gyro's ``logged`` times and the clock is not
+    those (:func:`_resampled`), else as :func:`_on_clock` places them."""
+    if len(clock) == len(logged) and not np.array_equal(clock, logged) and \
+            np.array_equal(times[np.searchsorted(times, logged[0]):][:len(logged)], logged):
+        start = np.searchsorted(times, logged[0])
+        part = values[start:start + len(logged)]
+        return np.column_stack([np.interp(clock, logged, part[:, i]) for i in range(3)])
+    return _on_clock(clock, times, values)
 
 
 def _on_clock(clock: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -18,10 +18,19 @@ from sensors.turning import (first_fitting, reference_advice, reference_fit, ref
 #: The reference is interpolated between readings at most this many of its
 #: typical intervals apart (a longer one is a gap: the markers were not seen).
 REFERENCE_GAP_FACTOR = 1.5
-#: Frames of the reference's world frame, as rotations to East-North-Up.
-FRAMES = ("ENU", "NED")
-#: The rotation from a North-East-Down world frame to East-North-Up.
-NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+#: The rotation to East-North-Up from each world frame a reference may be
+#: declared in: ENU, North-East-Down, and a motion-capture room's Y-up
+#: (OptiTrack Motive's default: x, y up, z; its heading is the room's, as
+#: every motion-capture frame's: :func:`check_field_north` says how far).
+FRAME_ROTATIONS = {"ENU": np.eye(3),
+                   "NED": np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
+                   "Y-up": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])}
+FRAMES = tuple(FRAME_ROTATIONS)
+NED_TO_ENU = FRAME_ROTATIONS["NED"]
+#: The field's azimuth in the reference's world beyond which its north is
+#: said not to be the field's, deg: the magnetic declination is within it
+#: almost everywhere people record.
+NORTH_TOLERANCE_DEG = 20.0
 #: The reference's keys that have a default, and it.
 DEFAULTS = {"order": "wxyz", "unit": "deg", "frame": "ENU"}
 
@@ -40,7 +49,8 @@ def _in_enu(path: Path, rotations, section: dict):
     """``rotations`` (body → the declared frame) as body → ENU."""
     from scipy.spatial.transform import Rotation
     frame = choice(path, "recording.reference.frame", section.get("frame", "ENU"), FRAMES)
-    return Rotation.from_matrix(NED_TO_ENU) * rotations if frame == "NED" else rotations
+    return rotations if frame == "ENU" else Rotation.from_matrix(FRAME_ROTATIONS[frame]) \
+        * rotations
 
 
 def _on_gyro_times(path: Path, clock: np.ndarray, times: np.ndarray, rotations) -> np.ndarray:
@@ -105,7 +115,17 @@ def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarr
     if not seen.any():
         return
     from dynamics.quaternion import to_rotation
-    up = float(np.median(to_rotation(reference[seen]).apply(specific_force[seen])[:, 2]))
+    world = np.median(to_rotation(reference[seen]).apply(specific_force[seen]), axis=0)
+    up = float(world[2])
+    if abs(up) < 0.5 * np.linalg.norm(world):        # gravity along another axis
+        axis = int(np.argmax(np.abs(world)))
+        named = ("-" if world[axis] < 0 else "") + "xyz"[axis]
+        hint = ('declare frame = "Y-up" (a motion-capture room\'s, OptiTrack Motive\'s '
+                'default)' if named == "y" and section.get("frame", "ENU") == "ENU" else
+                "turn it into ENU or NED before declaring it")
+        refuse(path, "recording.reference.frame", section.get("frame", "ENU"), "puts gravity "
+               f"along the world's {named} axis (the accelerometer's median "
+               f"{np.round(world, 2).tolist()} m/s² in it): it is not this frame; {hint}")
     if up < 0.0:
         frame = section.get("frame", "ENU")
         refuse(path, "recording.reference.frame", frame, "puts the accelerometer's gravity down "
@@ -113,6 +133,25 @@ def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarr
                f"\"{'ENU' if frame == 'NED' else 'NED'}\", or, if the reference is right, "
                "the accelerometer's axes = [\"-x\", \"-y\", \"-z\"] (a log of acceleration, "
                "not of specific force)")
+
+
+def check_field_north(path: Path, reference: np.ndarray, field: np.ndarray) -> None:
+    """Say where the reference's north is not the field's: the field turned
+    into the world by the reference points, horizontally, more than
+    :data:`NORTH_TOLERANCE_DEG` from north (a motion-capture room's axes),
+    and every heading score includes that offset (30° of a 30.3° score)."""
+    seen = np.isfinite(reference).all(axis=1) & np.any(field != 0.0, axis=1)
+    if np.count_nonzero(seen) < 2:
+        return
+    from dynamics.quaternion import to_rotation
+    east, north = np.median(to_rotation(reference[seen]).apply(field[seen])[:, :2], axis=0)
+    azimuth = float(np.degrees(np.arctan2(east, north)))
+    if abs(azimuth) > NORTH_TOLERANCE_DEG:
+        warnings.warn(f"{path.name}: recording.reference: the field points {azimuth:.0f}° "
+                      "from its world's north (the magnetic declination, within "
+                      f"±{NORTH_TOLERANCE_DEG:.0f}° almost everywhere, aside): its heading is "
+                      "a room's, not north's, and every heading score includes the offset",
+                      stacklevel=3)
 
 
 def _reference_candidates(path: Path, section: dict, values: np.ndarray):
@@ -123,6 +162,7 @@ def _reference_candidates(path: Path, section: dict, values: np.ndarray):
     if "sequence" in section:
         sequence = section["sequence"]
         changes = ({"sequence": sequence.swapcase()}, {"sequence": sequence[::-1]},
+                   {"sequence": sequence.swapcase()[::-1]},   # roll, pitch, yaw listed
                    {"unit": "rad" if section.get("unit", "deg") == "deg" else "deg"})
     else:
         changes = ({"order": "xyzw" if section.get("order", DEFAULTS["order"]) == "wxyz" else "wxyz"},)

@@ -38,26 +38,50 @@ UNITS = {
     "accelerometer": {"m/s^2": 1.0, "g": STANDARD_GRAVITY_MPS2},
     "magnetometer": {"uT": 1.0, "nT": 1e-3, "gauss": 100.0, "mT": 1e3},
 }
+#: How else a unit is written: the same unit (µ as the micro sign or the
+#: Greek letter, a superscript, a logger's abbreviation).
+UNIT_ALIASES = {"µT": "uT", "μT": "uT", "m/s²": "m/s^2", "m/s2": "m/s^2", "°/s": "deg/s",
+                "dps": "deg/s", "rad/sec": "rad/s"}
+#: How else ``time_unit`` is written: a named unit, or a tick of seconds.
+TIME_ALIASES = {"µs": "us", "μs": "us", "sec": "s", "msec": "ms", "usec": "us", "nsec": "ns",
+                "min": 60.0}
 #: Plausible medians of each vector sensor's norm in its toolkit unit: in
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: A middle Earth's field, µT (25 to 65), that raw counts' scale is hinted to.
+EARTH_FIELD_UT = 45.0
 #: A specific force's norm is near g at rest and stays within a few g of it
 #: in a hand's motion: its 5th percentile below this share of its 95th is
 #: an accelerometer without gravity (or falls and jumps).
 GRAVITY_FREE_RATIO = 0.2
 #: A scale between the turnings is read as a unit's mistake (57.3) or a
-#: clock's (a power of ten) within this factor of it (the two are 1.75 apart).
-HINT_FACTOR = 1.3
+#: clock's (a power of ten) within this factor of it: the scale is found
+#: within 0.9 to 1.14 of the truth on BROAD's trials, and raw counts of an
+#: MPU-6050 (131 per °/s) are 1.31 from 100.
+HINT_FACTOR = 1.2
 #: A turning scale this far from 1 (or none) is looked at again on the
 #: windows a wrong clock would need (BROAD's 30 trials: 0.45 to 1.14 where
 #: their turning is clear).
 CLOCK_SEARCH_FACTOR = 2.0
 
 
+def canonical_unit(section):
+    """A sensor's section with its ``unit`` as the toolkit names it
+    (:data:`UNIT_ALIASES`); anything else as it is."""
+    if isinstance(section, dict) and section.get("unit") in UNIT_ALIASES:
+        return {**section, "unit": UNIT_ALIASES[section["unit"]]}
+    return section
+
+
 def seconds_per_tick(path: Path, declared) -> float:
-    """``time_unit`` in seconds: one of :data:`TIME_UNITS`, or a positive
-    number of seconds (a logger's tick); refused otherwise, naming ``path``."""
+    """``time_unit`` in seconds: one of :data:`TIME_UNITS` (or
+    :data:`TIME_ALIASES`), or a positive number of seconds (a logger's
+    tick); refused otherwise, naming ``path``."""
+    declared = TIME_ALIASES.get(declared, declared) if isinstance(declared, str) else declared
+    if isinstance(declared, str) and declared not in TIME_UNITS or isinstance(declared, bool):
+        refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or the "
+               "seconds of one tick (a positive number: 1e-4, 60 for minutes)")
     if _is_number(declared):
         if not (math.isfinite(declared) and declared > 0):
             refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or "
@@ -68,6 +92,7 @@ def seconds_per_tick(path: Path, declared) -> float:
 
 def tick_seconds(declared) -> float:
     """A checked ``time_unit`` (:func:`seconds_per_tick`) in seconds."""
+    declared = TIME_ALIASES.get(declared, declared) if isinstance(declared, str) else declared
     return float(declared) if _is_number(declared) else TIME_UNITS[declared]
 
 
@@ -80,6 +105,15 @@ def tick_name(seconds: float):
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def reading_scale(path: Path, key: str, section: dict) -> float:
+    """A sensor's ``scale`` (1 if none): a finite number, not zero."""
+    scale = section.get("scale", 1.0)
+    if not _is_number(scale) or not math.isfinite(scale) or scale == 0:
+        refuse(path, f"{key}.scale", scale, "must be a finite number, not zero (raw counts: "
+               "the unit's share of one count, 1/131 for an MPU-6050's gyro in deg/s)")
+    return float(scale)
 
 
 def check_rates(path: Path, rates: np.ndarray, unit: str) -> None:
@@ -128,7 +162,8 @@ def scale_hint(path: Path, scale: float, unit: str, time_unit) -> tuple:
     fitting = [other for other, factor in UNITS["gyro"].items()
                if 1 / TURNING_FACTOR <= scale * UNITS["gyro"][unit] / factor <= TURNING_FACTOR]
     return "recording.gyro.unit", unit, (f" (were they {fitting[0]}? unit = \"{fitting[0]}\")"
-                                         if fitting else "")
+                                         if fitting else f" (raw counts? scale = {scale:.3g} "
+                                         "fits, times any scale declared)")
 
 
 def check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt: float,
@@ -221,7 +256,10 @@ def check_norm(path: Path, name: str, values: np.ndarray, unit: str,
         refuse(path, f"recording.{name}.columns", section_columns, no_gravity)
     fitting = [other for other, factor in UNITS[name].items() if other != unit and
                low <= median / UNITS[name][unit] * factor <= high]
-    hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else ""
+    typical = STANDARD_GRAVITY_MPS2 if name == "accelerometer" else EARTH_FIELD_UT
+    hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else (
+        f"; raw counts? scale = {typical / median:.3g} would put it at {typical:.3g} {shown}, "
+        "times any scale declared")
     refuse(path, f"recording.{name}.unit", unit, f"makes the median reading {median:.4g} "
             f"{shown}, not within {low:g} to {high:g} {shown} as "
             f"{'gravity' if name == 'accelerometer' else 'the Earth field'} would be{hint}")

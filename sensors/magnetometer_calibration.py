@@ -67,6 +67,13 @@ MAX_RESIDUAL = 0.05
 MAX_RELATIVE_ERROR = 0.02
 #: The fewest readings of a fit (nine unknowns and room to judge them).
 MIN_READINGS = 50
+#: The most readings the geometric refinement iterates on (evenly spaced
+#: among them; its residuals and checks are over all): nine unknowns are
+#: determined by far fewer, and an hour at 1 kHz took minutes.
+MAX_FIT_READINGS = 20_000
+#: The algebraic fit's coverage this far below :data:`MIN_COVERAGE` is
+#: refused before the refinement (which moves it by a few cells).
+COVERAGE_MARGIN = 0.1
 #: The keys of a [recording.magnetometer] section that declare a calibration.
 DECLARED = ("hard_iron", "soft_iron")
 
@@ -116,7 +123,12 @@ def fit_ellipsoid(readings: np.ndarray, field_norm: float | None = None,
     if len(readings) < MIN_READINGS:
         raise InvalidParameterError(name, f"{len(readings)} readings",
                                     f"an ellipsoid fit needs at least {MIN_READINGS}")
-    hard, inverse = _refined(readings, *_algebraic(readings, name))
+    hard, inverse = _algebraic(readings, name)
+    covered = coverage((readings - hard) @ inverse)
+    if covered < MIN_COVERAGE - COVERAGE_MARGIN:
+        raise InvalidParameterError(name, f"{covered:.0%} of the directions", _TURN_MORE)
+    stride = -(-len(readings) // MAX_FIT_READINGS)
+    hard, inverse = _refined(readings[::stride], hard, inverse)
     unit_field = (readings - hard) @ inverse
     unit_residual = np.linalg.norm(unit_field, axis=1) - 1.0
     covered = coverage(unit_field)

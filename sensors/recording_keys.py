@@ -51,6 +51,13 @@ KEYS = (
                    "the device's x, y, z as this sensor's columns (a magnetometer mounted "
                    "apart from the gyro: [\"y\", \"x\", \"-z\"])", '["x", "y", "z"]')
       for sensor in ("gyro", "accelerometer", "magnetometer")),
+    *(RecordingKey(f"recording.{sensor}", "scale", "a number",
+                   "each reading is multiplied by it before its unit applies (raw counts: "
+                   f"{example}); a unit that fits no unit's refusal names the scale that fits",
+                   "1")
+      for sensor, example in (("gyro", "1/131 for an MPU-6050 at ±250 °/s, unit deg/s"),
+                              ("accelerometer", "1/16384 for an MPU-6050 at ±2 g, unit g"),
+                              ("magnetometer", "0.15 for an AK8963 in 16-bit mode, unit uT"))),
     RecordingKey("recording.magnetometer", "calibrate", "true, false",
                  "fit its hard and soft iron to the recording (an ellipsoid fit)", "false"),
     RecordingKey("recording.magnetometer", "hard_iron", "its unit",
@@ -63,7 +70,7 @@ KEYS = (
                  "wxyz"),
     RecordingKey("recording.reference", "sequence", "e.g. ZYX",
                  "Euler angles instead of a quaternion, in scipy's sequence", "none"),
-    RecordingKey("recording.reference", "frame", "ENU, NED",
+    RecordingKey("recording.reference", "frame", "ENU, NED, Y-up",
                  "the world frame the reference turns into", "ENU"),
 )
 

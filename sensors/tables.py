@@ -7,8 +7,9 @@ A CSV (or ``.txt``) is read as its logger wrote it (:func:`csv_layout`):
 a preamble of ``#`` or ``//`` lines (Xsens MT Manager's) skipped; the
 separator found in its lines (comma, semicolon, tab, bar, or spaces);
 decimal commas where the separator is not a comma (a European locale's
-``2,5E-03;1,1E-02``, phyphox's); a trailing separator on each line
-(Arduino sketches') no column; and a file without a header (every cell of
+``2,5E-03;1,1E-02``, phyphox's); a row of units under the header
+(``s, rad/s, …``) skipped; a trailing separator on each line (Arduino
+sketches') no column; and a file without a header (every cell of
 its first line a number) with its columns named ``"1"``, ``"2"``, … in
 their order.
 """
@@ -26,6 +27,8 @@ def read_table(data: Path) -> dict:
     """The file's columns, name → array (a CSV's or Parquet's columns, an
     archive's arrays, a MATLAB file's variables, an HDF5 file's datasets)."""
     suffix = data.suffix.lower()
+    if suffix == ".gz" and data.with_suffix("").suffix.lower() in (".csv", ".txt"):
+        suffix = ".csv"               # compressed: pandas and gzip read it as it is
     try:
         if suffix in (".csv", ".txt", ".parquet"):
             import pandas as pd
@@ -48,8 +51,9 @@ def read_table(data: Path) -> dict:
     except Exception as err:     # a corrupt or foreign file: one line, whatever the reader
         raise InvalidParameterError("recording.file", str(data), f"cannot be read "
                                     f"({type(err).__name__}: {err})") from None
-    raise InvalidParameterError("recording.file", str(data), "must be .csv, .parquet, .npz, "
-                                ".mat, .h5 or .hdf5")
+    spreadsheet = " (save a spreadsheet as CSV)" if suffix in (".xlsx", ".xls", ".ods") else ""
+    raise InvalidParameterError("recording.file", str(data), "must be .csv (or .csv.gz), "
+                                f".parquet, .npz, .mat, .h5 or .hdf5{spreadsheet}")
 
 
 #: What a CSV's preamble lines begin with (a logger's device and settings).
@@ -58,16 +62,34 @@ COMMENT_PREFIXES = ("#", "//")
 SEPARATORS = (",", ";", "\t", "|")
 #: Runs of spaces (or tabs) as one separator, pandas' way.
 SPACES = r"\s+"
+#: The encodings a CSV is read in, in turn: UTF-8 (its byte-order mark
+#: too), then Windows' Western one (Excel's "CSV" on Windows: µ as 0xB5).
+ENCODINGS = ("utf-8-sig", "cp1252")
 #: How many of the first data lines the layout is read from.
 LAYOUT_LINES = 20
+#: A cell holding an ISO 8601 date and time (``2024-05-01T12:00:00.005Z``),
+#: read as integer nanoseconds since 1970 (UTC): ``time_unit = "ns"``.
+_ISO_TIME = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
 _NUMBER = re.compile(r"^[+-]?(\d+([.,]\d*)?|[.,]\d+)([eE][+-]?\d+)?$")
 
 
 def _read_csv(data: Path):
     import pandas as pd
     skip, separator, decimal, header = csv_layout(data)
-    frame = pd.read_csv(data, skiprows=skip, sep=separator, decimal=decimal, index_col=False,
-                        header=0 if header else None, skipinitialspace=True)
+    for encoding in ENCODINGS:
+        try:
+            frame = pd.read_csv(data, skiprows=skip, sep=separator, decimal=decimal,
+                                index_col=False, header=0 if header else None,
+                                skipinitialspace=True, encoding=encoding)
+            break
+        except UnicodeDecodeError:
+            if encoding == ENCODINGS[-1]:
+                raise
+    for name in frame.columns:            # ISO 8601 times: integer nanoseconds (UTC)
+        if frame[name].dtype.kind not in "iufb" and _ISO_TIME.match(str(frame[name].dropna().iloc[0])
+                                                           if frame[name].notna().any() else ""):
+            frame[name] = pd.to_datetime(frame[name], format="ISO8601", utc=True
+                                         ).dt.as_unit("ns").astype("int64")
     if not header:            # a trailing separator leaves an empty last column: none
         if frame.shape[1] > 1 and frame.iloc[:, -1].isna().all():
             frame = frame.iloc[:, :-1]
@@ -76,9 +98,12 @@ def _read_csv(data: Path):
 
 
 def csv_layout(data: Path) -> tuple:
-    """``(preamble lines, separator, decimal mark, whether it has a
-    header)`` of a CSV, read from its first lines."""
-    with open(data, encoding="utf-8", errors="replace") as lines:
+    """``(lines skipped, separator, decimal mark, whether it has a header)``
+    of a CSV, read from its first lines: the preamble's count, or with a
+    row of units under the header (every cell text), the list of both."""
+    import gzip
+    opened = gzip.open if data.suffix.lower() == ".gz" else open
+    with opened(data, "rt", encoding="utf-8", errors="replace") as lines:
         opening = [line.rstrip("\r\n") for _, line in zip(range(1000), lines)]
     skip = next((index for index, line in enumerate(opening)
                  if not line.lstrip().startswith(COMMENT_PREFIXES)), len(opening))
@@ -90,6 +115,12 @@ def csv_layout(data: Path) -> tuple:
     decimal = "," if separator != "," and any(re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", cell)
                                               for cell in cells) else "."
     header = not all(_NUMBER.match(cell) for cell in _cells(first[0], separator) if cell)
+    if header:                # a row of units under the names (s, rad/s, …): skipped
+        at = opening.index(first[0], skip) + 1
+        units = [index for index in range(at, len(opening)) if opening[index].strip()][:1]
+        if units and not any(_NUMBER.match(cell) for cell in _cells(opening[units[0]],
+                                                                     separator)):
+            skip = [*range(skip), units[0]]
     return skip, separator, decimal, header
 
 

@@ -508,7 +508,7 @@ def test_replay_finds_the_rest_a_declared_recording_begins_with(trial, tmp_path)
 
 def test_read_table_names_a_file_it_cannot_read(tmp_path):
     (tmp_path / "log.xlsx").write_text("not a table")
-    with pytest.raises(InvalidParameterError, match="must be .csv, .parquet, .npz"):
+    with pytest.raises(InvalidParameterError, match=r"must be .csv \(or .csv.gz\), .parquet, .npz"):
         read_table(tmp_path / "log.xlsx")
     (tmp_path / "log.npz").write_text("not an archive")
     with pytest.raises(InvalidParameterError, match="cannot be read"):

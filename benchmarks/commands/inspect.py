@@ -5,6 +5,7 @@ with no declaration yet, the ``[recording]`` file its columns suggest
 from __future__ import annotations
 
 import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -72,6 +73,7 @@ def run(args, _scenario):
         if parts is None:     # a skeleton to complete: said, and not a success
             raise UsageError(f"wrote {target}, which does not load as suggested (the note "
                              f"above): complete it by hand, then run: {PROG} broad --broad "
-                             f"{target}")
-        print(f"wrote {target}: check it, then run: {PROG} broad --broad {target}")
+                             f"{shlex.quote(str(target))}")
+        print(f"wrote {target}: check it, then run: {PROG} broad --broad "
+              f"{shlex.quote(str(target))}")
     return None

@@ -43,6 +43,12 @@ def _words(name: str) -> list:
         r"([a-z])([A-Z])", r"\1 \2", name).lower()) if token]
 
 
+def _bare(name: str) -> str:
+    """A column's name without the unit in brackets after it (phyphox's
+    ``Gyroscope x (rad/s)``, ``Magnetic field x (µT)``)."""
+    return re.sub(r"\s*[(\[][^)\]]*[)\]]\s*$", "", name).strip() or name
+
+
 def _tokens(name: str) -> set:
     return set(_words(name))
 
@@ -80,10 +86,10 @@ def sensor_columns(table: dict) -> dict:
             if sensor and (sensor == "reference") == (width == 4):
                 groups.setdefault(sensor, name)
             continue
-        match = _AXIS.match(name)
+        match = _AXIS.match(_bare(name))
         if match and array.ndim == 1:
             groups.setdefault(match["prefix"], {})[match["axis"].lower()] = name
-        numbered = _NUMBERED.match(name)
+        numbered = _NUMBERED.match(_bare(name))
         if not match and numbered and array.ndim == 1 and numbered["prefix"] \
                 and _sensor_of(numbered["prefix"]) == "reference":
             groups.setdefault(numbered["prefix"], {})["wxyz"[int(numbered["index"])]] = name
@@ -100,9 +106,16 @@ def sensor_columns(table: dict) -> dict:
     return found
 
 
+#: A time column may go back or repeat at this share of its steps at most
+#: (a duplicated row, two rows swapped), which the declaration's loading
+#: then mends or names: it is still the time column.
+TIME_BACK_SHARE = 0.01
+
+
 def time_columns(table: dict) -> list[str]:
-    """The columns named as times whose readings increase."""
-    names = []
+    """The columns named as times whose readings increase (but for
+    :data:`TIME_BACK_SHARE` of their steps), those that always do first."""
+    names, nearly = [], []
     for name, values in table.items():
         raw = np.asarray(values)
         array = unwrapped(raw.reshape(-1)).astype(float) if raw.dtype.kind in "iuf" and \
@@ -110,9 +123,12 @@ def time_columns(table: dict) -> list[str]:
         if array is None or not _tokens(name) & set(TIME_TOKENS):
             continue
         present = array[~np.isnan(array)]
-        if len(present) > 1 and np.all(np.diff(present) > 0):
+        steps = np.diff(present)
+        if len(present) > 1 and np.all(steps > 0):
             names.append(name)
-    return names
+        elif len(present) > 1 and np.mean(steps <= 0) <= TIME_BACK_SHARE:
+            nearly.append(name)
+    return names + nearly
 
 
 def column_values(table: dict, columns) -> np.ndarray:

@@ -74,10 +74,14 @@ def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -
     if specific_force is not None:
         scale, _ = clock_turning_scale(rates, specific_force, dt)
         if scale is not None:
-            return min(((unit, power) for unit in UNITS["gyro"] for power in range(-3, 4)),
-                       key=lambda pair: abs(math.log(scale / (UNITS["gyro"][pair[0]]
-                                                              * 10.0 ** pair[1])))
-                       + (math.log(HINT_FACTOR) if pair[1] else 0.0))
+            def misfit(pair):
+                return abs(math.log(scale / (UNITS["gyro"][pair[0]] * 10.0 ** pair[1])))
+            unit, power = min(((unit, power) for unit in UNITS["gyro"] for power in
+                               range(-3, 4)), key=lambda pair: misfit(pair)
+                              + (math.log(HINT_FACTOR) if pair[1] else 0.0))
+            if power == 0 or misfit((unit, power)) <= math.log(HINT_FACTOR):
+                return unit, power   # a tick only where it fits (raw counts fit none)
+            return min(UNITS["gyro"], key=lambda unit: misfit((unit, 0))), 0
     return ("deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"), 0
 
 
