@@ -69,7 +69,8 @@ CLOCK_SEARCH_FACTOR = 2.0
 def canonical_unit(section):
     """A sensor's section with its ``unit`` as the toolkit names it
     (:data:`UNIT_ALIASES`); anything else as it is."""
-    if isinstance(section, dict) and section.get("unit") in UNIT_ALIASES:
+    if isinstance(section, dict) and isinstance(section.get("unit"), str) and \
+            section["unit"] in UNIT_ALIASES:
         return {**section, "unit": UNIT_ALIASES[section["unit"]]}
     return section
 

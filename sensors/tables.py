@@ -65,6 +65,9 @@ SPACES = r"\s+"
 #: The encodings a CSV is read in, in turn: UTF-8 (its byte-order mark
 #: too), then Windows' Western one (Excel's "CSV" on Windows: µ as 0xB5).
 ENCODINGS = ("utf-8-sig", "cp1252")
+#: A separator is the file's where its count is the same on this share of
+#: the data lines (a row cut short, a trailing one on some, aside).
+STEADY_SHARE = 0.8
 #: How many of the first data lines the layout is read from.
 LAYOUT_LINES = 20
 #: A cell holding an ISO 8601 date and time (``2024-05-01T12:00:00.005Z``),
@@ -85,16 +88,32 @@ def _read_csv(data: Path):
         except UnicodeDecodeError:
             if encoding == ENCODINGS[-1]:
                 raise
-    for name in frame.columns:            # ISO 8601 times: integer nanoseconds (UTC)
-        if frame[name].dtype.kind not in "iufb" and _ISO_TIME.match(str(frame[name].dropna().iloc[0])
-                                                           if frame[name].notna().any() else ""):
-            frame[name] = pd.to_datetime(frame[name], format="ISO8601", utc=True
-                                         ).dt.as_unit("ns").astype("int64")
+    for name in frame.columns:
+        if frame[name].dtype.kind not in "iufb":
+            frame[name] = _text_column(frame[name])
     if not header:            # a trailing separator leaves an empty last column: none
         if frame.shape[1] > 1 and frame.iloc[:, -1].isna().all():
             frame = frame.iloc[:, :-1]
         frame.columns = [str(number) for number in range(1, frame.shape[1] + 1)]
     return frame
+
+
+def _text_column(column):
+    """A column pandas read as text: ISO 8601 times as integer nanoseconds
+    (UTC; floats with NaN where a cell is empty), numbers whose last cell
+    alone is not one (a line cut short mid-number: ``-``, ``1.2e``) with
+    that cell empty; else as it is."""
+    import pandas as pd
+    present = column.dropna()
+    if len(present) and _ISO_TIME.match(str(present.iloc[0])):
+        times = pd.to_datetime(column, format="ISO8601", utc=True).dt.as_unit("ns")
+        return times.astype("int64") if times.notna().all() else \
+            times.astype("int64").where(times.notna()).astype(float)
+    numbers = pd.to_numeric(column, errors="coerce")
+    failed = numbers.isna() & column.notna()
+    if len(column) > 1 and failed.any() and list(failed[failed].index) == [column.index[-1]]:
+        return numbers
+    return column
 
 
 def csv_layout(data: Path) -> tuple:
@@ -103,7 +122,7 @@ def csv_layout(data: Path) -> tuple:
     row of units under the header (every cell text), the list of both."""
     import gzip
     opened = gzip.open if data.suffix.lower() == ".gz" else open
-    with opened(data, "rt", encoding="utf-8", errors="replace") as lines:
+    with opened(data, "rt", encoding="utf-8-sig", errors="replace") as lines:
         opening = [line.rstrip("\r\n") for _, line in zip(range(1000), lines)]
     skip = next((index for index, line in enumerate(opening)
                  if not line.lstrip().startswith(COMMENT_PREFIXES)), len(opening))
@@ -111,34 +130,52 @@ def csv_layout(data: Path) -> tuple:
     if not first:
         return skip, ",", ".", True
     separator = _separator(first)
-    cells = _cells(first[-1] if len(first) > 1 else first[0], separator)
+    data_cells = [cell for line in first[1:] or first for cell in _cells(line, separator)]
     decimal = "," if separator != "," and any(re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", cell)
-                                              for cell in cells) else "."
-    header = not all(_NUMBER.match(cell) for cell in _cells(first[0], separator) if cell)
+                                              for cell in data_cells) else "."
+    names = [cell for cell in _cells(first[0], separator) if cell]
+    header = not all(_NUMBER.match(cell) for cell in names) or _index_like(names)
     if header:                # a row of units under the names (s, rad/s, …): skipped
         at = opening.index(first[0], skip) + 1
         units = [index for index in range(at, len(opening)) if opening[index].strip()][:1]
-        if units and not any(_NUMBER.match(cell) for cell in _cells(opening[units[0]],
-                                                                     separator)):
+        cells = _cells(opening[units[0]], separator) if units else []
+        if cells and all(re.search(r"[A-Za-z°µ%/]", cell) and not _NUMBER.match(cell)
+                         and cell.lower() != "nan" for cell in cells if cell) and any(cells):
             skip = [*range(skip), units[0]]
     return skip, separator, decimal, header
 
 
+def _index_like(cells: list) -> bool:
+    """Whether a first line of whole numbers counts its columns (0, 1, 2 …
+    or 1, 2, 3 …: pandas' ``to_csv`` of an unnamed frame): a header."""
+    try:
+        numbers = [float(cell) for cell in cells]
+    except ValueError:
+        return False
+    return numbers in (list(range(len(cells))), list(range(1, len(cells) + 1))) and \
+        len(cells) > 1
+
+
 def _separator(lines: list) -> str:
-    """The first of :data:`SEPARATORS` every line holds as often as the
-    first (one more allowed: a trailing one), quoted text aside, and that
-    leaves the last line's cells numbers (``1,25;-0,5``: the semicolon, not
-    the decimal comma); else runs of spaces."""
-    consistent = []
+    """The first of :data:`SEPARATORS` that the data lines (the header
+    aside) hold at a steady count in most of them (quoted text aside), and
+    that leaves the last line's cells numbers (``1,25;-0,5``: the
+    semicolon, not the decimal comma), runs of spaces counting too where
+    every line splits at them alike into more than one cell; else a comma
+    (one column)."""
+    body = lines[1:] or lines
+    steady = []
     for separator in SEPARATORS:
-        counts = [re.sub(r'"[^"]*"', "", line).count(separator) for line in lines]
-        if counts[0] > 0 and all(count - counts[0] in (0, 1) for count in counts):
-            consistent.append(separator)
-    if len({len(line.split()) for line in lines}) == 1:
-        consistent.append(SPACES)
-    numbers = [separator for separator in consistent
-               if all(_NUMBER.match(cell) for cell in _cells(lines[-1], separator) if cell)]
-    return (numbers or consistent or [SPACES])[0]
+        counts = [re.sub(r'"[^"]*"', "", line).count(separator) for line in body]
+        common = max(set(counts), key=counts.count)
+        if common > 0 and counts.count(common) >= STEADY_SHARE * len(counts):
+            steady.append(separator)
+    widths = {len(line.split()) for line in lines}
+    if len(widths) == 1 and widths.pop() > 1:
+        steady.append(SPACES)
+    numbers = [separator for separator in steady
+               if all(_NUMBER.match(cell) for cell in _cells(body[-1], separator) if cell)]
+    return (numbers or steady or [","])[0]
 
 
 def _cells(line: str, separator: str) -> list:

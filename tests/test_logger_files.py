@@ -593,3 +593,32 @@ def test_raw_counts_are_declared_by_a_scale_and_hinted_where_no_unit_fits(trial,
     path.write_text(text.replace('unit = "deg/s"', 'unit = "deg/s"\nscale = 0'))
     with pytest.raises(InvalidParameterError, match=r"gyro\.scale = 0: must be a finite number"):
         load_declared(path)
+
+
+@pytest.mark.parametrize("text, columns, first", [
+    # a header with a trailing separator, the data lines without
+    ("t,gx,gy,\n0.0,0.1,0.2\n0.01,0.3,0.4\n", ["t", "gx", "gy"], [0.1, 0.3]),
+    # rows that leave out their empty last cells
+    ("t,ax,mx\n0.0,0.1\n0.01,0.3\n0.02,0.5,40.0\n0.03,0.7,41.0\n0.04,0.9,42.0\n0.05,1.1,43.0\n",
+     ["t", "ax", "mx"], [0.1, 0.3]),
+    # pandas' to_csv of an unnamed frame: a header 0, 1, 2 (kept, not data)
+    ("0,1,2\n0.0,0.1,0.2\n0.01,0.3,0.4\n", ["0", "1", "2"], [0.1, 0.3]),
+    # a ';' file with decimal commas whose last sampled line has none
+    ("t;ax\n" + "".join(f"{i};0,5\n" for i in range(19)) + "19;0\n", ["t", "ax"], [0.5, 0.5]),
+    # a byte-order mark before a headerless file
+    ("\ufeff0.0,0.1\n0.01,0.3\n", ["1", "2"], [0.1, 0.3]),
+    # a last line cut short mid-number
+    ("t,gx\n0.0,0.1\n0.01,0.3\n0.02,-\n", ["t", "gx"], [0.1, 0.3]),
+    # one column
+    ("time s\n0.0\n0.01\n", ["time s"], None)],
+    ids=["trailing-header", "short-rows", "numbered-header", "decimal-comma", "bom", "cut",
+         "one-column"])
+def test_csv_layouts_pandas_read_are_still_read(tmp_path, text, columns, first):
+    # A review of the layout sniffing found each of these misread (one text
+    # column, a header read as data, text where numbers were).
+    path = tmp_path / "log.csv"
+    path.write_text(text, encoding="utf-8")
+    table = read_table(path)
+    assert [name for name in table if not name.startswith("Unnamed")] == columns
+    if first is not None:
+        assert np.allclose(table[columns[1]][:2], first)
