@@ -325,6 +325,8 @@ def test_a_folder_mixing_referenced_and_unreferenced_logs_says_which_has_none(
     assert np.isfinite(rows.loc[("with", "mekf"), "total_rmse_deg"])
     assert np.isnan(rows.loc[("without", "mekf"), "total_rmse_deg"])
     assert np.isfinite(rows.loc[("without", "mekf"), "agreement_total_deg"])
+    assert rows.loc[("with", "mekf"), "scored_against"] == "reference"
+    assert rows.loc[("without", "mekf"), "scored_against"] == "none"
 
 
 def test_inspect_tells_a_headerless_files_columns_by_their_values(trial, tmp_path, capsys):

@@ -301,10 +301,15 @@ SCORED_AGAINST = {REFERENCE: "reference", AGAINST: "others' median"}
 def with_scored_against(frame: pd.DataFrame, result: BroadResult) -> pd.DataFrame:
     """``frame`` (trials or groups) with a ``scored_against`` column beside
     its estimator: ``reference``, or ``others' median`` where no trial has
-    a reference and every score under the RMSE columns is agreement."""
+    a reference and every score under the RMSE columns is agreement; in a
+    folder mixing trials with and without one, ``none`` on the rows of a
+    trial with nothing scored (its RMSE columns NaN, its agreement columns
+    filled where it has no reference)."""
     marked = frame.copy()
-    marked.insert(marked.columns.get_loc("estimator") + 1, "scored_against",
-                  SCORED_AGAINST[result.against])
+    against = np.full(len(marked), SCORED_AGAINST[result.against], dtype=object)
+    if result.against == REFERENCE and "scored_samples" in marked:
+        against[marked["scored_samples"].to_numpy() == 0] = "none"
+    marked.insert(marked.columns.get_loc("estimator") + 1, "scored_against", against)
     return marked
 
 
