@@ -55,6 +55,35 @@ def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
     return best[1], best[2]
 
 
+#: Times that repeat at this share of their steps or more (never going
+#: back) were printed coarser than the clock ticks (an Arduino's
+#: ``Serial.print(t, 2)`` at 200 Hz: each time twice): :func:`dequantized`.
+QUANTISED_SHARE = 0.05
+
+
+def dequantized(times: np.ndarray) -> np.ndarray:
+    """``times`` printed coarser than their clock (:data:`QUANTISED_SHARE`
+    of the steps repeat, none goes back) spread evenly: each run of ``k``
+    equal times over the interval to the next time, ``k`` parts of it (the
+    last run over its own typical interval); other times as they are. The
+    same times give the same spread, so sensors logged on one time column
+    stay on one row each."""
+    steps = np.diff(times)
+    if len(times) < 3 or np.any(steps < 0) or np.mean(steps == 0) < QUANTISED_SHARE:
+        return times
+    times = times.astype(float)
+    starts = np.concatenate([[0], np.flatnonzero(steps > 0) + 1])
+    ends = np.concatenate([starts[1:], [len(times)]])
+    nexts = np.concatenate([times[starts[1:]], [np.nan]])
+    quantum = np.median(np.diff(times[starts])) if len(starts) > 1 else 0.0
+    nexts[-1] = times[starts[-1]] + quantum
+    spread = times.copy()
+    for start, end, after in zip(starts, ends, nexts):
+        spread[start:end] = times[start] + (after - times[start]) * np.arange(end - start) \
+            / (end - start)
+    return spread
+
+
 #: Rows a logger repeated or wrote out of turn are mended (:func:`mended`)
 #: where they are at most this share of the steps, and each goes back by
 #: at most :data:`GAP_FACTOR` typical steps (else the clock restarted: named).

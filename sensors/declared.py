@@ -52,8 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
-from sensors.clocks import (GAP_FACTOR, clock_period, clock_steps, irregular, mended,
-                            part_starts, unwrapped)
+from sensors.clocks import (GAP_FACTOR, clock_period, clock_steps, dequantized, irregular,
+                            mended, part_starts, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
 from sensors.declared_units import (UNITS, canonical_unit, check_norm, check_rate,
@@ -256,8 +256,13 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     if unknown:
         refuse(path, f"{key}.{unknown[0]}", section[unknown[0]],
                 f"is not a key of the {name}'s section; known: {', '.join(sorted(known))}")
-    times = _column(path, table, f"{key}.time", section.get("time"), origin, time=True) \
-        * time_scale
+    printed = _column(path, table, f"{key}.time", section.get("time"), origin,
+                      time=True) * time_scale
+    times = dequantized(printed)
+    if name == "gyro" and times is not printed:
+        warnings.warn(f"{path.name}: {key}.time: {np.mean(np.diff(printed) == 0):.0%} of its "
+                      "times repeat the one before (printed coarser than the clock ticks): "
+                      "each run of equal times is spread evenly to the next", stacklevel=3)
     width = 4 if name == "reference" and "sequence" not in section else 3
     values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
     if len(values) != len(times):

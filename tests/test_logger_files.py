@@ -624,3 +624,22 @@ def test_csv_layouts_pandas_read_are_still_read(tmp_path, text, columns, first):
     assert [name for name in table if not name.startswith("Unnamed")] == columns
     if first is not None:
         assert np.allclose(table[columns[1]][:2], first)
+
+
+def test_times_printed_coarser_than_the_clock_are_spread(trial, tmp_path):
+    # An Arduino's Serial.print(t, 2): the trial's 285 Hz times to 10 ms,
+    # each repeated about three times (refused as going back or repeating):
+    # spread evenly, said, and scored as the exact times are.
+    recording, keep = trial
+    exact = _log(trial, tmp_path, np.rint(recording.time_s * 1e6).astype(np.int64), '"us"')
+    exact.write_text(exact.read_text().replace("[recording.reference]", MAGNETOMETER
+                                               + "[recording.reference]"))
+    whole = _score(exact)
+    lines = (tmp_path / "log.csv").read_text().splitlines()
+    printed = [lines[0]] + [f"{round(int(line.split(',')[0]) * 1e-6, 2):.2f},"
+                            + line.split(",", 1)[1] for line in lines[1:]]
+    (tmp_path / "log.csv").write_text("\n".join(printed) + "\n")
+    exact.write_text(exact.read_text().replace('time_unit = "us"', 'time_unit = "s"'))
+    with pytest.warns(UserWarning, match="times repeat the one before"):
+        coarse = _score(exact)
+    assert coarse < 1.5 * whole + 0.2, (coarse, whole)
