@@ -37,14 +37,15 @@ def unwrapped(times: np.ndarray) -> np.ndarray:
     return times
 
 
-def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
-    """Each sample's step on a uniform clock, and the clock's period:
-    the least-squares line through the samples' times against their steps,
-    an interval of about k periods counting k steps (k - 1 samples dropped).
-    The steps are counted in the median interval and in the mean one, and
-    the count whose line fits the times better is taken: the median is the
-    period where samples were dropped, the mean where the times are rounded
-    (integer milliseconds at 256 Hz: intervals of 3 and 4 ms, median 4)."""
+def clock_fit(times: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Each sample's step on a uniform clock, the clock's period, and the
+    RMS distance of the times to it: the least-squares line through the
+    samples' times against their steps, an interval of about k periods
+    counting k steps (k - 1 samples dropped). The steps are counted in the
+    median interval and in the mean one, and the count whose line fits the
+    times better is taken: the median is the period where samples were
+    dropped, the mean where the times are rounded (integer milliseconds at
+    256 Hz: intervals of 3 and 4 ms, median 4)."""
     intervals, best = np.diff(times), None
     for guess in (np.median(intervals), (times[-1] - times[0]) / (len(times) - 1)):
         steps = np.concatenate([[0], np.cumsum(np.maximum(1.0, np.rint(intervals / guess)))])
@@ -52,7 +53,12 @@ def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
         misfit = float(np.mean((times - origin - period * steps) ** 2))
         if best is None or misfit < best[0]:
             best = (misfit, steps.astype(np.int64), float(period))
-    return best[1], best[2]
+    return best[1], best[2], float(np.sqrt(best[0]))
+
+
+def clock_steps(times: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each sample's step on a uniform clock, and its period (:func:`clock_fit`)."""
+    return clock_fit(times)[:2]
 
 
 #: Times that repeat at this share of their steps or more (never going
@@ -111,20 +117,11 @@ def mended(times: np.ndarray, values: np.ndarray) -> tuple:
     return kept_times[order], kept[order], int(np.count_nonzero(repeated)), moved
 
 
-#: Times off the uniform clock fitted through them (:func:`clock_steps`) by
-#: more than this share of its period (RMS) keep no steady clock: rounding
-#: to whole milliseconds at 256 Hz is 0.07 of it, intervals of 4 to 8 ms
-#: drift by many periods.
+#: Times off the uniform clock fitted through them (:func:`clock_fit`) by
+#: more than this share of its period (RMS) keep no steady clock, dropped
+#: samples aside: rounding to whole milliseconds at 256 Hz is 0.07 of it,
+#: intervals of 4 to 8 ms drift by many periods.
 IRREGULAR_SHARE = 0.25
-
-
-def irregular(times: np.ndarray) -> bool:
-    """Whether ``times`` keep no steady clock, dropped samples aside: the
-    RMS of their distance to the uniform clock :func:`clock_steps` fits is
-    over :data:`IRREGULAR_SHARE` of its period."""
-    steps, period = clock_steps(times)
-    fitted = np.polyval(np.polyfit(steps, times, 1), steps)
-    return float(np.sqrt(np.mean((times - fitted) ** 2))) > IRREGULAR_SHARE * period
 
 
 def clock_period(times: np.ndarray) -> float:

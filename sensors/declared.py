@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
-from sensors.clocks import (GAP_FACTOR, clock_period, clock_steps, dequantized, irregular,
+from sensors.clocks import (GAP_FACTOR, IRREGULAR_SHARE, clock_fit, clock_period, dequantized,
                             mended, part_starts, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
@@ -385,14 +385,16 @@ def _check_clock(path: Path, column, times: np.ndarray) -> None:
 
 
 def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
-    """The gyro's times and rates with each dropped sample (:func:`clock_steps`)
-    put back, its rate held from the sample before and its time between its
-    neighbours'; a warning says how many. Times that keep no steady clock
-    (:func:`sensors.clocks.irregular`: an Arduino ``loop()``'s, a rate that
-    changes) are resampled instead, said too."""
-    if len(times) > 2 and irregular(times):
+    """The gyro's times and rates with each dropped sample
+    (:func:`sensors.clocks.clock_fit`) put back, its rate held from the
+    sample before and its time between its neighbours'; a warning says how
+    many. Times that keep no steady clock (off the fitted one by more than
+    :data:`~sensors.clocks.IRREGULAR_SHARE` of its period: an Arduino
+    ``loop()``'s, a rate that changes) are resampled instead, said too."""
+    steps, period, misfit = clock_fit(times) if len(times) > 1 else \
+        (np.arange(len(times)), 0.0, 0.0)
+    if len(times) > 2 and misfit > IRREGULAR_SHARE * period:
         return _resampled(path, times, rates)
-    steps, _ = clock_steps(times) if len(times) > 1 else (np.arange(len(times)), 0.0)
     missing = int(steps[-1]) + 1 - len(times)
     if missing == 0:
         return times, rates
@@ -439,7 +441,12 @@ def _resampled(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
                   f"{intervals.min() * 1e3:.3g} to {intervals.max() * 1e3:.3g} ms): its rates "
                   f"are resampled at {1 / period:.4g} Hz, linearly between readings",
                   stacklevel=4)
-    return grid, np.column_stack([np.interp(grid, times, rates[:, i]) for i in range(3)])
+    return grid, _interpolated(grid, times, rates)
+
+
+def _interpolated(clock: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` ``values`` read at ``times``, linear between them, at ``clock``."""
+    return np.column_stack([np.interp(clock, times, values[:, i]) for i in range(3)])
 
 
 def _with_gyro(clock: np.ndarray, logged: np.ndarray, times: np.ndarray,
@@ -447,11 +454,11 @@ def _with_gyro(clock: np.ndarray, logged: np.ndarray, times: np.ndarray,
     """``values`` on the gyro's ``clock``: resampled with the gyro's rates
     where they were read on the gyro's ``logged`` times and the clock is not
     those (:func:`_resampled`), else as :func:`_on_clock` places them."""
+    start = int(np.searchsorted(times, logged[0]))
+    read = slice(start, start + len(logged))
     if len(clock) == len(logged) and not np.array_equal(clock, logged) and \
-            np.array_equal(times[np.searchsorted(times, logged[0]):][:len(logged)], logged):
-        start = np.searchsorted(times, logged[0])
-        part = values[start:start + len(logged)]
-        return np.column_stack([np.interp(clock, logged, part[:, i]) for i in range(3)])
+            np.array_equal(times[read], logged):
+        return _interpolated(clock, logged, values[read])
     return _on_clock(clock, times, values)
 
 

@@ -165,7 +165,8 @@ def _reference_candidates(path: Path, section: dict, values: np.ndarray):
                    {"sequence": sequence.swapcase()[::-1]},   # roll, pitch, yaw listed
                    {"unit": "rad" if section.get("unit", "deg") == "deg" else "deg"})
     else:
-        changes = ({"order": "xyzw" if section.get("order", DEFAULTS["order"]) == "wxyz" else "wxyz"},)
+        changes = ({"order": "xyzw" if section.get("order", DEFAULTS["order"]) == "wxyz"
+                    else "wxyz"},)
     for change in changes:
         (key, value), = change.items()
         try:

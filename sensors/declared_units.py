@@ -20,7 +20,7 @@ import numpy as np
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS
 from sensors.recording import VECTOR_LIMITS
-from sensors.recording_keys import choice, refuse
+from sensors.recording_keys import refuse
 from sensors.turning import (MIRRORED_CORRELATION, TURNING_CORRELATION, TURNING_FACTOR,
                              TURNING_WINDOW_S, field_correlation, gravity_turning,
                              reference_fit, reference_fits, reference_scale, turning_scale)
@@ -49,8 +49,11 @@ TIME_ALIASES = {"µs": "us", "μs": "us", "sec": "s", "msec": "ms", "usec": "us"
 #: motion an accelerometer's median stays near g; the Earth's field is 25 to
 #: 65 µT, a room's or a vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
-#: A middle Earth's field, µT (25 to 65), that raw counts' scale is hinted to.
-EARTH_FIELD_UT = 45.0
+#: Each vector sensor's typical norm in its toolkit unit: g, and a middle
+#: Earth's field (25 to 65 µT). Raw counts' scale is hinted to it, and
+#: ``inspect`` tells a headerless file's accelerometer from its
+#: magnetometer by it.
+TYPICAL_NORMS = {"accelerometer": STANDARD_GRAVITY_MPS2, "magnetometer": 45.0}
 #: A specific force's norm is near g at rest and stays within a few g of it
 #: in a hand's motion: its 5th percentile below this share of its 95th is
 #: an accelerometer without gravity (or falls and jumps).
@@ -79,22 +82,23 @@ def seconds_per_tick(path: Path, declared) -> float:
     """``time_unit`` in seconds: one of :data:`TIME_UNITS` (or
     :data:`TIME_ALIASES`), or a positive number of seconds (a logger's
     tick); refused otherwise, naming ``path``."""
-    declared = TIME_ALIASES.get(declared, declared) if isinstance(declared, str) else declared
-    if isinstance(declared, str) and declared not in TIME_UNITS or isinstance(declared, bool):
-        refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or the "
-               "seconds of one tick (a positive number: 1e-4, 60 for minutes)")
-    if _is_number(declared):
-        if not (math.isfinite(declared) and declared > 0):
-            refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or "
-                   "the seconds of one tick (a positive number)")
-        return float(declared)
-    return TIME_UNITS[choice(path, "recording.time_unit", declared, TIME_UNITS)]
+    tick = _aliased(declared)
+    if (isinstance(tick, str) and tick in TIME_UNITS) or \
+            (_is_number(tick) and math.isfinite(tick) and tick > 0):
+        return tick_seconds(declared)
+    refuse(path, "recording.time_unit", declared, "must be one of s, ms, us, ns, or the "
+           "seconds of one tick (a positive number: 1e-4, 60 for minutes)")
 
 
 def tick_seconds(declared) -> float:
     """A checked ``time_unit`` (:func:`seconds_per_tick`) in seconds."""
-    declared = TIME_ALIASES.get(declared, declared) if isinstance(declared, str) else declared
-    return float(declared) if _is_number(declared) else TIME_UNITS[declared]
+    tick = _aliased(declared)
+    return float(tick) if _is_number(tick) else TIME_UNITS[tick]
+
+
+def _aliased(declared):
+    """``time_unit`` as :data:`TIME_UNITS` names it, or its number."""
+    return TIME_ALIASES.get(declared, declared) if isinstance(declared, str) else declared
 
 
 def tick_name(seconds: float):
@@ -257,7 +261,7 @@ def check_norm(path: Path, name: str, values: np.ndarray, unit: str,
         refuse(path, f"recording.{name}.columns", section_columns, no_gravity)
     fitting = [other for other, factor in UNITS[name].items() if other != unit and
                low <= median / UNITS[name][unit] * factor <= high]
-    typical = STANDARD_GRAVITY_MPS2 if name == "accelerometer" else EARTH_FIELD_UT
+    typical = TYPICAL_NORMS[name]
     hint = f"; unit = \"{fitting[0]}\" would fit" if fitting else (
         f"; raw counts? scale = {typical / median:.3g} would put it at {typical:.3g} {shown}, "
         "times any scale declared")

@@ -117,18 +117,26 @@ def time_columns(table: dict) -> list[str]:
     :data:`TIME_BACK_SHARE` of their steps), those that always do first."""
     names, nearly = [], []
     for name, values in table.items():
-        raw = np.asarray(values)
-        array = unwrapped(raw.reshape(-1)).astype(float) if raw.dtype.kind in "iuf" and \
-            sum(size > 1 for size in raw.shape) == 1 else None
-        if array is None or not _tokens(name) & set(TIME_TOKENS):
+        steps = _time_steps(values)
+        if steps is None or not _tokens(name) & set(TIME_TOKENS):
             continue
-        present = array[~np.isnan(array)]
-        steps = np.diff(present)
-        if len(present) > 1 and np.all(steps > 0):
+        if np.all(steps > 0):
             names.append(name)
-        elif len(present) > 1 and np.mean(steps <= 0) <= TIME_BACK_SHARE:
+        elif np.mean(steps <= 0) <= TIME_BACK_SHARE:
             nearly.append(name)
     return names + nearly
+
+
+def _time_steps(values) -> np.ndarray | None:
+    """A column's steps as times (a counter's roll-over unwrapped, empty
+    cells left out); None where it is not one column of numbers, or holds
+    fewer than two."""
+    raw = np.asarray(values)
+    if raw.dtype.kind not in "iuf" or sum(size > 1 for size in raw.shape) != 1:
+        return None
+    times = unwrapped(raw.reshape(-1)).astype(float)
+    times = times[~np.isnan(times)]
+    return np.diff(times) if len(times) > 1 else None
 
 
 def column_values(table: dict, columns) -> np.ndarray:
@@ -160,10 +168,6 @@ def time_for(sensor: str, columns, times: list, table: dict) -> str:
             or [time for time in times if reads_with_it(time)] or times)[0]
 
 
-#: What a steady vector's norm is, in the toolkit's units (m/s², µT), to
-#: tell an accelerometer's columns from a magnetometer's by their values: g,
-#: and the middle of the Earth's field.
-TYPICAL_NORMS = {"accelerometer": 9.81, "magnetometer": 45.0}
 #: A vector sensor's norm is steady (gravity, the field: its 10th percentile
 #: at least this share of its median); a gyro's is not (near 0 at rest).
 STEADY_SHARE = 0.5
@@ -181,12 +185,13 @@ def columns_by_values(table: dict) -> tuple[dict, list]:
     the time; the others, in the file's order, make triples (or a
     quadruple of unit norm, a quaternion, scalar first assumed): a steady
     norm is the accelerometer's or the magnetometer's, whichever unit puts
-    it nearer :data:`TYPICAL_NORMS` (an accelerometer in g and a field in
-    gauss both read about 1: 1 g is exactly g), and an unsteady one the
-    gyro's. What is not told is left out (the caller says so)."""
-    from sensors.declared_units import UNITS
+    it nearer its :data:`~sensors.declared_units.TYPICAL_NORMS` (an
+    accelerometer in g and a field in gauss both read about 1: 1 g is
+    exactly g), and an unsteady one the gyro's. What is not told is left out (the caller says so)."""
+    from sensors.declared_units import TYPICAL_NORMS, UNITS
     names = [name for name in table if np.asarray(table[name]).dtype.kind in "iuf"]
-    times = [name for name in names if _increasing(np.asarray(table[name]).reshape(-1))][:1]
+    times = [name for name in names
+             if (steps := _time_steps(table[name])) is not None and np.all(steps > 0)][:1]
     rest, found, i = [name for name in names if name not in times], {}, 0
     while i + 3 <= len(rest):
         four = rest[i:i + 4]
@@ -208,8 +213,3 @@ def columns_by_values(table: dict) -> tuple[dict, list]:
         i += 3
     return found, times
 
-
-def _increasing(column: np.ndarray) -> bool:
-    present = unwrapped(column)
-    present = present[~np.isnan(present)] if present.dtype.kind == "f" else present
-    return len(present) > 1 and bool(np.all(np.diff(present) > 0))
