@@ -89,6 +89,7 @@ def _run(args):
     scenario = scenario_from_args(args)
     if getattr(args, "estimators", "") is None:
         args.estimators = default_estimators(args.command, scenario)
+        args.estimators_by_default = True
     check_sensors(args, scenario)
     check_effects(args, scenario)
     chosen = command(args.command)

@@ -25,7 +25,10 @@ a few degrees that would otherwise be scored as their error).
 
 Timing, as their C code: step ``k`` integrates rate ``k`` over the sample
 interval that ends at ``k``, corrects with the acc/mag readings of ``k``,
-and outputs the result. The acc and mag readings come as vector readings
+and outputs the result. As there, a step without a field reading corrects
+with gravity alone (``MadgwickAHRSupdateIMU``, ``MahonyAHRSupdateIMU``: a
+6-axis IMU, or the samples between a slower magnetometer's readings), and
+a step without an accelerometer reading integrates the rate alone. The acc and mag readings come as vector readings
 (:class:`sensors.vector.VectorObservation`, sensors ``"accelerometer"`` and
 ``"magnetometer"``); their reference vectors are not used — these filters
 define their own earth frame by the field's measured inclination.
@@ -52,31 +55,37 @@ NO_READING = (0.0, 0.0, 0.0)
 
 
 def madgwick_step(q, gyro, acc, mag, beta: float, dt: float, halved_field: bool):
-    """One MARG step of Madgwick's C code (tuples of floats in, a tuple ``q``
-    out; an absent reading is :data:`NO_READING`); ``halved_field``: the
-    BROAD authors' variant (module docstring). Written out element by
-    element as the C code is (it runs every sample), and in plain scalar
-    arithmetic, so that the engine compiles this very function
-    (:mod:`benchmarks.engine.kernels.complementary`)."""
+    """One step of Madgwick's C code, its MARG or IMU update (module
+    docstring; the IMU's gradient is the MARG's gravity terms, which the C
+    code expands), tuples of floats in and out; ``halved_field``: the BROAD
+    authors' variant. Plain scalar arithmetic, element by element as the C
+    code, so that the engine compiles this very function."""
     q0, q1, q2, q3 = q
-    gx, gy, gz = gyro
-    ax, ay, az = acc
-    mx, my, mz = mag
+    (gx, gy, gz), (ax, ay, az), (mx, my, mz) = gyro, acc, mag
     d0 = 0.5 * (-q1 * gx - q2 * gy - q3 * gz)
     d1 = 0.5 * (q0 * gx + q2 * gz - q3 * gy)
     d2 = 0.5 * (q0 * gy - q1 * gz + q3 * gx)
     d3 = 0.5 * (q0 * gz + q1 * gy - q2 * gx)
-    if (ax != 0.0 or ay != 0.0 or az != 0.0) and (mx != 0.0 or my != 0.0 or mz != 0.0):
+    s0 = s1 = s2 = s3 = 0.0
+    gravity = ax != 0.0 or ay != 0.0 or az != 0.0
+    if gravity:
         norm = math.sqrt(ax * ax + ay * ay + az * az)
         ax, ay, az = ax / norm, ay / norm, az / norm
-        norm = math.sqrt(mx * mx + my * my + mz * mz)
-        mx, my, mz = mx / norm, my / norm, mz / norm
-        _2q0mx, _2q0my, _2q0mz, _2q1mx = 2 * q0 * mx, 2 * q0 * my, 2 * q0 * mz, 2 * q1 * mx
         _2q0, _2q1, _2q2, _2q3 = 2 * q0, 2 * q1, 2 * q2, 2 * q3
-        _2q0q2, _2q2q3 = 2 * q0 * q2, 2 * q2 * q3
         q0q0, q0q1, q0q2, q0q3 = q0 * q0, q0 * q1, q0 * q2, q0 * q3
         q1q1, q1q2, q1q3 = q1 * q1, q1 * q2, q1 * q3
         q2q2, q2q3, q3q3 = q2 * q2, q2 * q3, q3 * q3
+        g1 = 2 * q1q3 - 2 * q0 * q2 - ax
+        g2 = 2 * q0q1 + 2 * q2 * q3 - ay
+        g3 = 1 - 2 * q1q1 - 2 * q2q2 - az
+        s0 = -_2q2 * g1 + _2q1 * g2
+        s1 = _2q3 * g1 + _2q0 * g2 - 4 * q1 * g3
+        s2 = -_2q0 * g1 + _2q3 * g2 - 4 * q2 * g3
+        s3 = _2q1 * g1 + _2q2 * g2
+    if gravity and (mx != 0.0 or my != 0.0 or mz != 0.0):
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        mx, my, mz = mx / norm, my / norm, mz / norm
+        _2q0mx, _2q0my, _2q0mz, _2q1mx = 2 * q0 * mx, 2 * q0 * my, 2 * q0 * mz, 2 * q1 * mx
         hx = (mx * q0q0 - _2q0my * q3 + _2q0mz * q2 + mx * q1q1 + _2q1 * my * q2
               + _2q1 * mz * q3 - mx * q2q2 - mx * q3q3)
         hy = (_2q0mx * q3 + my * q0q0 - _2q0mz * q1 + _2q1mx * q2 - my * q1q1 + my * q2q2
@@ -90,31 +99,26 @@ def madgwick_step(q, gyro, acc, mag, beta: float, dt: float, halved_field: bool)
         fx = _2bx * (0.5 - q2q2 - q3q3) + _2bz * (q1q3 - q0q2) - mx
         fy = _2bx * (q1q2 - q0q3) + _2bz * (q0q1 + q2q3) - my
         fz = _2bx * (q0q2 + q1q3) + _2bz * (0.5 - q1q1 - q2q2) - mz
-        g1 = 2 * q1q3 - _2q0q2 - ax
-        g2 = 2 * q0q1 + _2q2q3 - ay
-        g3 = 1 - 2 * q1q1 - 2 * q2q2 - az
-        s0 = -_2q2 * g1 + _2q1 * g2 - _2bz * q2 * fx + (-_2bx * q3 + _2bz * q1) * fy \
-            + _2bx * q2 * fz
-        s1 = _2q3 * g1 + _2q0 * g2 - 4 * q1 * g3 + _2bz * q3 * fx \
-            + (_2bx * q2 + _2bz * q0) * fy + (_2bx * q3 - _4bz * q1) * fz
-        s2 = -_2q0 * g1 + _2q3 * g2 - 4 * q2 * g3 + (-_4bx * q2 - _2bz * q0) * fx \
-            + (_2bx * q1 + _2bz * q3) * fy + (_2bx * q0 - _4bz * q2) * fz
-        s3 = _2q1 * g1 + _2q2 * g2 + (-_4bx * q3 + _2bz * q1) * fx \
-            + (-_2bx * q0 + _2bz * q2) * fy + _2bx * q1 * fz
-        norm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2 + s3 * s3)
-        if norm > 0.0:
-            d0 -= beta * s0 / norm
-            d1 -= beta * s1 / norm
-            d2 -= beta * s2 / norm
-            d3 -= beta * s3 / norm
+        s0 = s0 - _2bz * q2 * fx + (-_2bx * q3 + _2bz * q1) * fy + _2bx * q2 * fz
+        s1 = s1 + _2bz * q3 * fx + (_2bx * q2 + _2bz * q0) * fy + (_2bx * q3 - _4bz * q1) * fz
+        s2 = s2 + (-_4bx * q2 - _2bz * q0) * fx + (_2bx * q1 + _2bz * q3) * fy \
+            + (_2bx * q0 - _4bz * q2) * fz
+        s3 = s3 + (-_4bx * q3 + _2bz * q1) * fx + (-_2bx * q0 + _2bz * q2) * fy + _2bx * q1 * fz
+    norm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2 + s3 * s3)
+    if norm > 0.0:
+        d0 -= beta * s0 / norm
+        d1 -= beta * s1 / norm
+        d2 -= beta * s2 / norm
+        d3 -= beta * s3 / norm
     q0, q1, q2, q3 = q0 + d0 * dt, q1 + d1 * dt, q2 + d2 * dt, q3 + d3 * dt
     norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     return q0 / norm, q1 / norm, q2 / norm, q3 / norm
 
 
 def mahony_step(q, integral, gyro, acc, mag, kp: float, ki: float, dt: float):
-    """One MARG step of Mahony's filter as Madgwick's C code writes it;
-    returns ``(q, integral)`` (the integral of :math:`K_i e`, rad/s). Plain
+    """One step of Mahony's filter as Madgwick's C code writes it
+    (``MahonyAHRSupdate``, or ``MahonyAHRSupdateIMU`` without a field
+    reading, as :func:`madgwick_step`); returns ``(q, integral)`` (the integral of :math:`K_i e`, rad/s). Plain
     scalar arithmetic, as :func:`madgwick_step`."""
     q0, q1, q2, q3 = q
     gx, gy, gz = gyro
@@ -140,6 +144,18 @@ def mahony_step(q, integral, gyro, acc, mag, kp: float, ki: float, dt: float):
         ex = (ay * vz - az * vy) + (my * wz - mz * wy)
         ey = (az * vx - ax * vz) + (mz * wx - mx * wz)
         ez = (ax * vy - ay * vx) + (mx * wy - my * wx)
+        feedback = True
+    elif ax != 0.0 or ay != 0.0 or az != 0.0:
+        # MahonyAHRSupdateIMU: the gravity's cross product alone
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / norm, ay / norm, az / norm
+        vx, vy, vz = q1 * q3 - q0 * q2, q0 * q1 + q2 * q3, q0 * q0 - 0.5 + q3 * q3
+        ex, ey, ez = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx
+        feedback = True
+    else:
+        ex = ey = ez = 0.0
+        feedback = False
+    if feedback:
         if ki > 0.0:
             ix, iy, iz = ix + 2 * ki * ex * dt, iy + 2 * ki * ey * dt, iz + 2 * ki * ez * dt
             gx, gy, gz = gx + ix, gy + iy, gz + iz
@@ -212,9 +228,10 @@ class ComplementaryFilter(MagneticFrame, AttitudeEstimator):
     :class:`MagneticFrame`)."""
 
     uses_vector_readings = True
-    #: Their step corrects only with both readings (the MARG update).
+    #: Their step corrects with both readings (the MARG update), or with the
+    #: accelerometer's alone (the IMU update: the inclination, no heading).
     reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
-    needs = (reads,)
+    needs = (frozenset({sensing.ACCELEROMETER}),)
 
     def reset(self) -> None:
         self._turn, self._turn_learnt = None, False

@@ -95,21 +95,27 @@ class PeerFilter(MagneticFrame, AttitudeEstimator):
 
     def run_batch(self, omega_meas_radps, vectors) -> np.ndarray | None:
         """``run``'s estimates at once when every sample has both the
-        accelerometer and the magnetometer (or the peer skips zero readings,
-        :attr:`skips_zero_readings`) and nothing else (:meth:`run_readings`);
+        accelerometer and the magnetometer, or the accelerometer alone (a
+        6-axis IMU; or the peer skips zero readings, :attr:`skips_zero_readings`)
+        and nothing else (:meth:`run_readings`);
         None otherwise (the per-run path then)."""
         found = {v.sensor: v for v in vectors}
-        if set(found) != {"accelerometer", "magnetometer"} or len(vectors) != 2 or not (
-                self.skips_zero_readings or self.holds_readings
-                or all(np.all(v.available) for v in vectors)):
+        if set(found) not in ({"accelerometer", "magnetometer"}, {"accelerometer"}) or \
+                len(vectors) != len(found) or not (
+                    self.skips_zero_readings or self.holds_readings
+                    or all(np.all(v.available) for v in vectors)):
             return None
-        read = {name: np.asarray(found[name].available, dtype=bool)
-                for name in ("accelerometer", "magnetometer")}
-        acc, mag = (held_from_first(found[name].body, read[name]) if self.holds_readings
+        n = len(omega_meas_radps)
+        # a 6-axis IMU: no field reading at any sample, the zeros the peers ignore
+        read = {name: (np.asarray(found[name].available, dtype=bool) if name in found
+                       else np.zeros(n, dtype=bool)) for name in ("accelerometer", "magnetometer")}
+        acc, mag = (np.zeros((n, 3)) if name not in found
+                    else held_from_first(found[name].body, read[name]) if self.holds_readings
                     else np.where(read[name][:, None], found[name].body, 0.0)
                     for name in ("accelerometer", "magnetometer"))
         estimates = np.asarray(self.run_readings(omega_meas_radps, acc, mag), dtype=float)
-        self.learn_frame(found["magnetometer"].reference[0])
+        if "magnetometer" in found:
+            self.learn_frame(found["magnetometer"].reference[0])
         return self.in_reference_frame(estimates)
 
     @property

@@ -361,7 +361,8 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, 
 
 
 @pytest.mark.parametrize("change, message", [
-    ("no magnetometer", "declares no .recording.magnetometer.; the IMU filters scored here need both"),
+    ("no accelerometer", "declares no .recording.accelerometer.; the IMU filters scored here "
+     "need it at least"),
     ("time unit list", "time_unit = \\['s'\\]: must be one of s, ms, us, ns"),
     ("zeros", "accelerometer.columns = None: hold only zeros"),
     ("header only", "gyro.time = 't': holds no rows"),
@@ -397,9 +398,9 @@ def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, ch
     text = declared.read_text()
     if change == "calibrate":
         text = text.replace('unit = "uT"', 'unit = "uT"\ncalibrate = true')
-    if change == "no magnetometer":
-        text = text.split("[recording.magnetometer]")[0] + "[recording.reference]" + \
-            text.split("[recording.reference]")[1]
+    if change == "no accelerometer":
+        text = text.split("[recording.accelerometer]")[0] + "[recording.magnetometer]" + \
+            text.split("[recording.magnetometer]")[1]
     if change == "time unit list":
         text = text.replace('time_unit = "s"', 'time_unit = ["s"]')
     if change == "frame on gyro":

@@ -43,7 +43,8 @@ def test_every_registry_estimator_declares_what_it_reads_and_needs():
 
 @pytest.mark.parametrize("name, present, usable", [
     ("madgwick", {"star_tracker"}, False),
-    ("mahony", {"accelerometer"}, False),                  # the MARG update needs both
+    ("mahony", {"accelerometer"}, True),                   # the IMU update: gravity alone
+    ("mahony", {"magnetometer"}, False),                   # a field alone: neither update
     ("madgwick", {"accelerometer", "magnetometer"}, True),
     ("vqf", {"star_tracker"}, False),
     ("vqf", {"accelerometer"}, True),

@@ -26,14 +26,14 @@ import pandas as pd
 
 from benchmarks.broad.agreement import AGAINST, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
-from benchmarks.broad.inputs import imu_inputs
+from benchmarks.broad.inputs import imu_inputs, scored_metric
 from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
     scored_samples, unscored_reason
 from dynamics.validation import InvalidParameterError
 from benchmarks.engine.recorded import path_of, run_recorded
 from benchmarks.output import progress
-from estimators import resolve_estimator, sensing
+from estimators import resolve_estimator
 
 #: ``broad`` without ``--estimators``: the textbook filter and its smoother
 #: (offline), a static solution, dead reckoning and the complementary
@@ -83,6 +83,18 @@ class BroadResult:
         return self.against != REFERENCE
 
     @property
+    def headless(self) -> bool:
+        """Whether no estimator has a heading reference (no trial has a
+        magnetometer: a 6-axis IMU): every score is then the inclination's."""
+        return len(inclination_only(self)) == len(self.labels)
+
+    @property
+    def metric(self) -> str:
+        """The score the group table ranks by: the total RMSE, or the
+        inclination's where :attr:`headless`."""
+        return "inclination_rmse_deg" if self.headless else "total_rmse_deg"
+
+    @property
     def dt(self) -> float:
         """The first trial's sample interval, s (for the divergence report)."""
         time_s = next(iter(self.curves.values()))[0]
@@ -118,8 +130,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
         seconds = time.perf_counter() - start
         errors = errors_deg(run.estimates, recording.reference_quat)
-        scores = _scores(errors, run, recording.reference_quat, movement,
-                         sensing.heading_observed(type(estimator), readings))
+        heading = scored_metric(type(estimator), recording) == "total_rmse_deg"
+        scores = _scores(errors, run, recording.reference_quat, movement, heading)
         rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,
                      "samples": recording.n_samples,
@@ -127,9 +139,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
                      "scored_samples": scored, **_rejections(estimator, run, readings),
                      "diverged_step": -1 if run.diverged_step is None else run.diverged_step,
                      "path": run.path})
-        heading = sensing.heading_observed(type(estimator), readings)
         curves[name] = (recording.time_s, errors["total" if heading else "inclination"])
-        labels[name] = estimator.label + ("" if heading else " [inclination only]") + (
+        labels[name] = estimator.label + ("" if heading else f" {INCLINATION_ONLY}") + (
             " [offline]" if estimator.mode == "offline" else "")
         estimates[name] = run.estimates[judged]
         if heading:
@@ -137,6 +148,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             if run.diverged_step is None:
                 members.append(name)
     unreferenced = not recording.has_reference.any()
+    if not observers:       # a 6-axis IMU: the inclinations agree or not
+        members = [row["estimator"] for row in rows if row["diverged_step"] == -1]
     if unreferenced or agreement:
         scores, agreement_curves = agreement_scores(estimates, members, observers)
         for row in rows:
@@ -145,6 +158,28 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             curves = {name: (recording.time_s[judged], curve)
                       for name, curve in agreement_curves.items()}
     return rows, curves, labels
+
+
+#: A label's mark for an estimator scored on its inclination alone.
+INCLINATION_ONLY = "[inclination only]"
+#: The notes' one line where no estimator has a heading reference.
+HEADLESS = ("no magnetometer: every filter is scored on its inclination alone (its heading is "
+            "its gyro's, from an arbitrary start); the total and heading RMSE are NaN")
+
+
+def shown_labels(result) -> dict:
+    """Estimator → its label in figures: :attr:`BroadResult.labels`, less
+    the inclination mark where every estimator carries it (:data:`HEADLESS`
+    says so once)."""
+    if not result.headless:
+        return dict(result.labels)
+    return {name: label.replace(f" {INCLINATION_ONLY}", "") for name, label in
+            result.labels.items()}
+
+
+def inclination_only(result) -> set:
+    """The estimators of ``result`` scored on their inclination alone."""
+    return {name for name, label in result.labels.items() if INCLINATION_ONLY in label}
 
 
 def _scores(errors: dict, run, reference: np.ndarray, movement: np.ndarray,
@@ -163,12 +198,13 @@ def _scores(errors: dict, run, reference: np.ndarray, movement: np.ndarray,
 
 def _rejections(estimator, run, readings: dict) -> dict:
     """Per sensor, the readings ``run`` rejected and their share of the
-    ``readings`` (NaN for a sensor the estimator does not test)."""
+    ``readings`` (NaN for a sensor the estimator does not test, or that the
+    recording has not)."""
     tested = tests_readings(estimator)
     return {**{f"rejected_{sensor}": run.rejected.get(sensor, 0) for sensor in SENSORS},
             **{f"rejected_{sensor}_share":
                run.rejected.get(sensor, 0) / readings[sensor]
-               if tested[sensor] and readings[sensor] else math.nan
+               if tested[sensor] and readings.get(sensor) else math.nan
                for sensor in SENSORS}}
 
 
@@ -280,7 +316,7 @@ def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> 
     sample of every trial scored against the others' median, said as such;
     an error if no total could be scored (fewer than two estimators that
     observe the heading ran through)."""
-    if not np.isfinite(frame[AGREEMENT[0]].to_numpy(dtype=float)).any():
+    if not np.isfinite(frame[list(AGREEMENT)].to_numpy(dtype=float)).any():
         raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
                                     "score: " + "; ".join(f"{t} {why}"
                                                           for t, why in unscored.items()) +
@@ -325,11 +361,11 @@ def group_notes(result: BroadResult) -> list[str]:
              for trial, why in unscored_trials(result.trials).items()]
     failed = result.groups.drop_duplicates(["estimator", "nan_on"])
     failed = failed[failed["nan_on"].astype(str).str.len() > 0]
-    blind = {name for name, label in result.labels.items()
-             if label.endswith("[inclination only]")}
-    notes += [f"NaN: {name} has no total or heading score (no heading reference); its "
-              "inclination RMSE is scored (broad_groups.csv; broad.png's inclination panel)"
-              for name in sorted(blind)]
+    blind = inclination_only(result)
+    notes += [HEADLESS] if result.headless else [
+        f"NaN: {name} has no total or heading score (no heading reference); its "
+        "inclination RMSE is scored (broad_groups.csv; broad.png's inclination panel)"
+        for name in sorted(blind)]
     failed = failed[~failed["estimator"].isin(blind)]
     for row in failed.drop_duplicates("estimator").itertuples():
         trials = sorted(set(",".join(failed[failed.estimator == row.estimator]["nan_on"])
@@ -379,9 +415,9 @@ def format_trials(result: BroadResult) -> str:
     text = shown.to_string(index=False, float_format=lambda v: f"{v:.3f}", na_rep="NaN")
     notes = [f"trial {trial} {why}: nothing scored, its scores are NaN"
              for trial, why in unscored_trials(trials).items()]
-    notes += [f"{name}: scored on its inclination only (it has no heading reference): its "
-              "total and heading RMSE are NaN, never ranked" for name, label in
-              result.labels.items() if label.endswith("[inclination only]")]
+    notes += [HEADLESS] if result.headless else [
+        f"{name}: scored on its inclination only (it has no heading reference): its total "
+        "and heading RMSE are NaN, never ranked" for name in inclination_only(result)]
     return "\n".join([text, *notes, *rejection_notes(trials)])
 
 

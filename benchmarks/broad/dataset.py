@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.broad.inputs import runnable_rule, start_sample, usable_readings
+from benchmarks.broad.inputs import (heading_reference, runnable_rule, start_sample,
+                                     usable_readings)
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
@@ -80,7 +81,7 @@ class BroadDataset:
     def title(self) -> str:
         """The name figures give the data: BROAD where the attribution is
         BROAD's, else the folder's own name."""
-        return "BROAD" if self.attribution == ATTRIBUTION else self.folder.name
+        return "BROAD" if self.attribution == ATTRIBUTION else self.folder.resolve().name
 
     @property
     def available(self) -> list[str]:
@@ -97,6 +98,18 @@ class BroadDataset:
             return matches[0]
         raise InvalidParameterError("trials", text, f"is not a trial of {self.folder} (present: "
                                     f"{', '.join(trial_label(n) for n in self.available)})")
+
+    def sensors(self, trials) -> frozenset:
+        """The vector sensors every one of ``trials`` reads: the
+        accelerometer, and the magnetometer unless one of them has none (a
+        6-axis IMU's declaration or ``.npz``; a published trial holds every
+        channel, and a trial without an accelerometer is refused)."""
+        present = {"accelerometer", "magnetometer"}
+        for trial in trials:
+            if self.files[trial].suffix in (".toml", ".npz") and \
+                    self.load(trial).magnetometer_uT is None:
+                present.discard("magnetometer")
+        return frozenset(present)
 
     def selected(self, names=None) -> list[str]:
         """The trials ``names`` (numbers or full names, :meth:`trial_name`;
@@ -144,8 +157,9 @@ class BroadDataset:
         return [name for name in self.available if group in self.trials[name]["groups"]]
 
     def load(self, name: str) -> Recording:
-        """Trial ``name`` as a checked recording with its accelerometer and
-        magnetometer, and a rest the estimators can be configured and
+        """Trial ``name`` as a checked recording with its accelerometer (and
+        its magnetometer, where it has one: a 6-axis IMU's heading is its
+        gyro's, :func:`~benchmarks.broad.inputs.heading_reference`), and a rest the estimators can be configured and
         started from (:func:`~benchmarks.broad.inputs.runnable_rule`); a note
         (a warning) says how many readings are dropouts (exactly zero,
         left out) and where the start was taken if not at the first sample."""
@@ -183,9 +197,9 @@ class BroadDataset:
             if info.size and info.dtype.kind in "USO":
                 data["info"] = np.asarray(str(info[0]))
             recording = checked_recording(data, name, refuse)
-        if not recording.has_vectors:
-            refuse(f"has no {_missing_channels(recording, ('imu_acc', 'imu_mag'))} channel; "
-                   "the IMU filters scored here need both")
+        if recording.accelerometer_mps2 is None:
+            refuse("has no imu_acc channel; the IMU filters scored here need the "
+                   "accelerometer at least (the gyro alone: attitude-bench replay)")
         rule = runnable_rule(recording)
         if rule:
             refuse(rule)
@@ -193,15 +207,6 @@ class BroadDataset:
             _note_dropouts(recording, path)
         _note_clipping(recording, path)
         return recording
-
-
-def _missing_channels(recording: Recording, names: tuple) -> str:
-    """The names (accelerometer's, magnetometer's) of the channels
-    ``recording`` lacks, joined by "and"."""
-    lacking = [name for name, channel in zip(names, (recording.accelerometer_mps2,
-                                                      recording.magnetometer_uT))
-               if channel is None]
-    return " and ".join(lacking)
 
 
 def broad_folder(given: Path | None = None) -> Path:
@@ -314,12 +319,11 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
                               f"{part.name} ({part.n_samples / part.rate_hz:.1f} s)"
                               for part in parts), stacklevel=2)
         for part in parts:
-            if not part.has_vectors:
-                missing = _missing_channels(part, ("[recording.accelerometer]",
-                                                   "[recording.magnetometer]"))
+            if part.accelerometer_mps2 is None:
                 raise InvalidParameterError(
-                    parameter, str(path), f"declares no {missing}; the IMU filters scored "
-                    "here need both")
+                    parameter, str(path), "declares no [recording.accelerometer]; the IMU "
+                    "filters scored here need it at least (the gyro alone: attitude-bench "
+                    "replay --dataset)")
             rule = runnable_rule(part)
             if rule:
                 warnings.warn(f"{path.name}: part {part.name} left out: {rule}", stacklevel=2)
@@ -456,7 +460,8 @@ def _note_dropouts(recording: Recording, path: Path) -> None:
         parts = [f"{dropped} exactly zero (dropouts), left out"] if dropped else []
         if start:
             parts.append(f"the start attitude is taken at sample {start}, the first where "
-                         "both sensors have read and their latest readings are not parallel")
+                         + ("both sensors have read and their latest readings are not parallel"
+                            if heading_reference(recording) else "the accelerometer has read"))
         _note_once(path, f"trial {recording.name}: {'; '.join(parts)}")
 
 

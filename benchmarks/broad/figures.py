@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from benchmarks.broad.benchmark import BroadResult, group_header, group_notes
+from benchmarks.broad.benchmark import BroadResult, group_header, group_notes, shown_labels
 from benchmarks.broad.metric import METRICS
 
 #: The trial figure's curves: the total error's RMS over windows this long, s.
@@ -38,11 +38,12 @@ def groups_figure(result: BroadResult):
     groups["label"] = [group_header(g, int(n), int(k)).replace(" (", "\n(") for g, n, k in
                        zip(groups["group"], groups["trials"], groups["scored_trials"])]
     names = list(dict.fromkeys(groups["estimator"]))
-    styles = estimator_styles(names)
-    palette = {result.labels[name]: styles[name]["color"] for name in names}
-    tidy = groups.melt(id_vars=["label", "estimator"], value_vars=list(METRICS),
+    styles, shown = estimator_styles(names), shown_labels(result)
+    palette = {shown[name]: styles[name]["color"] for name in names}
+    metrics = (result.metric,) if result.headless else METRICS
+    tidy = groups.melt(id_vars=["label", "estimator"], value_vars=list(metrics),
                        var_name="metric", value_name="rmse_deg")
-    tidy["estimator"] = tidy["estimator"].map(result.labels)
+    tidy["estimator"] = tidy["estimator"].map(shown)
     values = tidy["rmse_deg"].to_numpy(dtype=float)
     positive = values[np.isfinite(values) & (values > 0)]
     # The axis from the round value (1, 2 or 5 × 10ⁿ) just below the smallest bar.
@@ -51,21 +52,17 @@ def groups_figure(result: BroadResult):
     high = 1.3 * positive.max() if positive.size else 10.0
     n_groups = groups["label"].nunique()
     with sns.axes_style("whitegrid"):
-        figure = Figure(figsize=(max(11.0, 0.9 * n_groups + 3.0), 10.0), layout="constrained")
-        axes = figure.subplots(len(METRICS), 1, sharex=True, squeeze=False)[:, 0]
+        figure = Figure(figsize=(max(11.0, 0.9 * n_groups + 3.0), 2.0 + 8.0 * len(metrics) / 3),
+                        layout="constrained")
+        axes = figure.subplots(len(metrics), 1, sharex=True, squeeze=False)[:, 0]
     labels = list(dict.fromkeys(tidy["label"]))
-    hues = [result.labels[name] for name in names]
-    for ax, metric in zip(axes, METRICS):
+    hues = [shown[name] for name in names]
+    for ax, metric in zip(axes, metrics):
         part = tidy[tidy["metric"] == metric]
         sns.barplot(data=part, x="label", y="rmse_deg", hue="estimator", order=labels,
                     hue_order=hues, palette=palette, ax=ax, errorbar=None, width=BAR_WIDTH,
                     legend=ax is axes[0])
-        # A missing bar is a NaN mean (module docstring): say so where it would stand.
-        for row in part[part["rmse_deg"].isna()].itertuples():
-            x = labels.index(row.label) - BAR_WIDTH / 2 + \
-                (hues.index(row.estimator) + 0.5) * BAR_WIDTH / len(hues)
-            ax.text(x, low * 1.15, "NaN", rotation=90, ha="center", va="bottom",
-                    fontsize="x-small", color="0.35")
+        _mark_nan(ax, part, labels, hues, low)
         ax.set_yscale("log")
         ax.set_ylim(low, high)
         ax.yaxis.set_major_locator(FixedLocator(round_values(low, high)))
@@ -83,6 +80,16 @@ def groups_figure(result: BroadResult):
     legend_outside(figure, axes[:1], columns=min(len(names), 5),
                    note="; ".join(group_notes(result)))
     return figure
+
+
+def _mark_nan(ax, part, labels: list, hues: list, low: float) -> None:
+    """A missing bar is a NaN mean (:func:`benchmarks.broad.benchmark.group_means`):
+    say so where it would stand."""
+    for row in part[part["rmse_deg"].isna()].itertuples():
+        x = labels.index(row.label) - BAR_WIDTH / 2 + \
+            (hues.index(row.estimator) + 0.5) * BAR_WIDTH / len(hues)
+        ax.text(x, low * 1.15, "NaN", rotation=90, ha="center", va="bottom",
+                fontsize="x-small", color="0.35")
 
 
 def curve_windows(time_s: np.ndarray, error_deg: np.ndarray, window_s: float):
@@ -141,8 +148,9 @@ def trial_figure(result: BroadResult):
         for i, (start, stop) in enumerate(_runs(np.asarray(result.curve_movement, dtype=bool))):
             axis.axvspan(time_s[start], time_s[stop - 1], color="0.85", alpha=0.6, linewidth=0,
                          label=None if i else "movement (scored where the reference is)")
+    shown, part = shown_labels(result), result.metric.split("_")[0]
     for name, (centres, rms) in windows.items():
-        axis.plot(centres, rms, label=result.labels[name], **{"linewidth": 1.3, **styles[name]})
+        axis.plot(centres, rms, label=shown[name], **{"linewidth": 1.3, **styles[name]})
     axis.set_yscale("log")
     axis.set_ylim(low, high)
     ticks = round_values(low, high)
@@ -152,9 +160,10 @@ def trial_figure(result: BroadResult):
     axis.yaxis.set_minor_locator(NullLocator())
     axis.set_xlim(time_s[0], time_s[-1])
     axis.set_xlabel("time (s)")
-    axis.set_ylabel("total error (°, RMS per window, log)")
-    axis.set_title(f"{result.dataset_title} {result.curve_trial}: total error, RMS over {CURVE_WINDOW_S:g} s "
+    axis.set_ylabel(f"{part} error (°, RMS per window, log)")
+    axis.set_title(f"{result.dataset_title} {result.curve_trial}: {part} error, RMS over "
+                   f"{CURVE_WINDOW_S:g} s "
                    "windows" + ("" if result.by_agreement else " (the reference's gaps "
                                 "blank)") + _against(result))
-    legend_outside(figure, [axis], columns=6, note=coincidence_note(under, result.labels, "°"))
+    legend_outside(figure, [axis], columns=6, note=coincidence_note(under, shown, "°"))
     return figure

@@ -41,13 +41,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from benchmarks.experiments.replay import checked_gyro_delay, delayed_gyro
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import SensorData
 from dynamics.environment import STANDARD_GRAVITY_MPS2
+from dynamics.quaternion import from_rotation
 from dynamics.validation import InvalidParameterError, standard_deviation
-from estimators import wahba
+from estimators import sensing, wahba
 from estimators.imu import GYRO_NOISE_DENSITY
 from sensors.recording import Recording, reading_interval_s
 from sensors.turning import held_readings
@@ -109,10 +111,23 @@ def checked_sigmas(sigmas=None) -> dict:
             for name, value in {**MOTION_SIGMAS, **sigmas}.items()}
 
 
+#: Each vector channel's unit, as the estimators take it.
+UNITS = {"accelerometer": "m/s^2", "magnetometer": "uT"}
+
+
 def channels(recording: Recording) -> dict:
-    """``sensor → (N, 3)`` readings: the accelerometer's, m/s², and the magnetometer's, µT."""
-    return {"accelerometer": recording.accelerometer_mps2,
-            "magnetometer": recording.magnetometer_uT}
+    """``sensor → (N, 3)`` readings: the accelerometer's, m/s², and the
+    magnetometer's, µT, where the recording has one (a 6-axis IMU has not)."""
+    return {name: channel for name, channel in (("accelerometer", recording.accelerometer_mps2),
+                                                ("magnetometer", recording.magnetometer_uT))
+            if channel is not None}
+
+
+def heading_reference(recording: Recording) -> bool:
+    """Whether ``recording`` reads a heading reference (a magnetometer): a
+    6-axis IMU's heading is its gyro's, and every filter is scored on its
+    inclination (:func:`estimators.sensing.heading_observed`)."""
+    return recording.magnetometer_uT is not None
 
 
 def usable_readings(recording: Recording) -> dict:
@@ -146,15 +161,27 @@ def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
+def scored_metric(cls, recording: Recording) -> str:
+    """The RMSE that scores estimator class ``cls`` on ``recording``: the
+    total, or the inclination's where it has no heading reference there
+    (:func:`heading_reference`, :func:`estimators.sensing.heading_observed`)."""
+    heading = heading_reference(recording) and sensing.heading_observed(cls, channels(recording))
+    return "total_rmse_deg" if heading else "inclination_rmse_deg"
+
+
 def start_pair(recording: Recording) -> tuple | None:
     """``(sample, accelerometer, magnetometer)``: the first sample where both
     sensors have read and their latest readings are at least
     :data:`MIN_SEPARATION_DEG` apart, and those readings, the start
     attitude's (None if the trial has none). Sensors that read on the same
     samples start on one sample's pair; sensors on their own clocks on the
-    later one's reading and the other's last before it."""
-    acc, mag = (held_readings(channel) for channel in (recording.accelerometer_mps2,
-                                                        recording.magnetometer_uT))
+    later one's reading and the other's last before it. Without a
+    magnetometer, the first accelerometer reading, and None for the field."""
+    acc = held_readings(recording.accelerometer_mps2)
+    if not heading_reference(recording):
+        found = np.flatnonzero(np.any(acc != 0.0, axis=1))
+        return (int(found[0]), acc[found[0]], None) if len(found) else None
+    mag = held_readings(recording.magnetometer_uT)
     found = np.flatnonzero(_sine_between(acc, mag) >= math.sin(math.radians(MIN_SEPARATION_DEG)))
     return (int(found[0]), acc[found[0]], mag[found[0]]) if len(found) else None
 
@@ -173,6 +200,9 @@ def runnable_rule(recording: Recording) -> str | None:
     if recording.n_samples < MIN_SAMPLES:
         return (f"has {recording.n_samples} sample{'s' * (recording.n_samples != 1)}; a trial "
                 f"needs at least {MIN_SAMPLES} to be run and scored")
+    if start_sample(recording) is None and not heading_reference(recording):
+        return "has no accelerometer reading that is not zero, which the start attitude's " \
+            "inclination is taken from"
     if start_sample(recording) is None:
         return ("no accelerometer reading and magnetometer reading, the latest of each at a "
                 f"sample, are both non-zero and at least {MIN_SEPARATION_DEG:g}° apart, which "
@@ -213,15 +243,20 @@ def references_and_variances(recording: Recording, sigmas=None) -> tuple[dict, d
     (:data:`MOTION_SIGMAS`, or ``sigmas`` over them: :func:`checked_sigmas`)."""
     sigmas = checked_sigmas(sigmas)
     _checked_runnable(recording)
-    references = {"accelerometer": np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2]),
-                  "magnetometer": field_reference(recording)}
+    references = {"accelerometer": np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])}
+    if heading_reference(recording):
+        references["magnetometer"] = field_reference(recording)
     return references, {name: sigma ** 2 for name, sigma in sigmas.items()}
 
 
-def initial_attitude(acc: np.ndarray, mag: np.ndarray, references: dict) -> np.ndarray:
+def initial_attitude(acc: np.ndarray, mag: np.ndarray | None, references: dict) -> np.ndarray:
     """Body → ENU from one accelerometer and magnetometer sample (TRIAD,
     gravity first); the two readings must be non-zero and not parallel
-    (:func:`start_sample` finds such a sample)."""
+    (:func:`start_sample` finds such a sample). Without a field (``mag``
+    None), the smallest rotation that turns the accelerometer's reading
+    up: its heading is arbitrary, as a 6-axis IMU's is."""
+    if mag is None:
+        return from_rotation(Rotation.align_vectors([references["accelerometer"]], [acc])[0])
     body = np.array([acc / np.linalg.norm(acc), mag / np.linalg.norm(mag)])
     reference = np.array([references[name] / np.linalg.norm(references[name])
                           for name in ("accelerometer", "magnetometer")])
@@ -230,30 +265,42 @@ def initial_attitude(acc: np.ndarray, mag: np.ndarray, references: dict) -> np.n
 
 def assumptions(recording: Recording, references: dict) -> tuple:
     """What :func:`imu_inputs` assumed for ``recording``, one line each."""
-    field = references["magnetometer"]
-    dip = math.degrees(-math.asin(field[2] / np.linalg.norm(field)))
+    field = references.get("magnetometer")
+    if field is None:
+        field_line = ("no magnetometer: the heading is the gyro's alone, from an arbitrary "
+                      "start; every filter is scored on its inclination")
+        start = "the smallest rotation that turns the accelerometer's reading up"
+    else:
+        dip = math.degrees(-math.asin(field[2] / np.linalg.norm(field)))
+        field_line = (f"the field for the vector filters: {np.linalg.norm(field):.1f} µT, dip "
+                      f"{dip:.1f}°, the medians of the first {FIELD_WINDOW_S:g} s; the MEKF "
+                      "learns its own online")
+        start = "TRIAD"
     return (f"gravity: the standard {STANDARD_GRAVITY_MPS2} m/s², up (no site given)",
-            f"the field for the vector filters: {np.linalg.norm(field):.1f} µT, dip {dip:.1f}°, "
-            f"the medians of the first {FIELD_WINDOW_S:g} s; the MEKF learns its own online",
-            f"the start: TRIAD on sample {start_sample(recording)}; noise: the defaults "
+            field_line,
+            f"the start: {start} on sample {start_sample(recording)}; noise: the defaults "
             f"(gyro {GYRO_NOISE_DENSITY:g} rad/√s, accelerometer "
             f"{MOTION_SIGMAS['accelerometer']:g} m/s², magnetometer "
             f"{MOTION_SIGMAS['magnetometer']:g} µT)")
 
 
-def assumed() -> str:
+def assumed(heading: bool = True) -> str:
     """What every trial's inputs assume, in one line (:func:`assumptions`
-    has one trial's numbers)."""
+    has one trial's numbers); ``heading``: whether the trials have a
+    magnetometer (a 6-axis IMU's have not)."""
+    start = ("each trial starts on TRIAD of its first usable sample; the vector filters' "
+             f"field is the median of its first {FIELD_WINDOW_S:g} s, the MEKF learns its own "
+             "online" if heading else "each trial starts level with its first accelerometer "
+             "reading, its heading arbitrary (no magnetometer)")
     return (f"nothing is taken from a rest: gravity is the standard {STANDARD_GRAVITY_MPS2} "
-            f"m/s² (no site given); each trial starts on TRIAD of its first usable sample; "
-            f"the vector filters' field is the median of its first {FIELD_WINDOW_S:g} s, the "
-            f"MEKF learns its own online; the noise is the defaults (gyro "
+            f"m/s² (no site given); {start}; the noise is the defaults (gyro "
             f"{GYRO_NOISE_DENSITY:g} rad/√s, accelerometer {MOTION_SIGMAS['accelerometer']:g} "
-            f"m/s², magnetometer {MOTION_SIGMAS['magnetometer']:g} µT)")
+            f"m/s²" + (f", magnetometer {MOTION_SIGMAS['magnetometer']:g} µT)" if heading
+                       else ")"))
 
 
 def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> ImuInputs:
-    """``recording`` (with its accelerometer and magnetometer) as an
+    """``recording`` (with its accelerometer, and its magnetometer if it has one) as an
     :class:`ImuInputs`; ``gyro_delay_s``: how late the gyro's samples are
     (:func:`benchmarks.experiments.replay.delayed_gyro`); ``sigmas``:
     sensor → the σ the vector filters take (:func:`checked_sigmas`)."""
@@ -264,9 +311,9 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
     usable = usable_readings(recording)
     vectors = tuple(
         VectorReadings(sensor=name, body=channel, reference=np.tile(references[name], (n, 1)),
-                       available=usable[name], variance=np.full(n, variances[name]), unit=unit,
+                       available=usable[name], variance=np.full(n, variances[name]), unit=UNITS[name],
                        reference_known=name == "accelerometer")
-        for (name, channel), unit in zip(channels(recording).items(), ("m/s^2", "uT")))
+        for name, channel in channels(recording).items())
     priors = {"initial_attitude_sigma_rad": INITIAL_ATTITUDE_SIGMA_RAD,
               "initial_bias_sigma_radps": INITIAL_BIAS_SIGMA_RADPS}
     scenario = Scenario(

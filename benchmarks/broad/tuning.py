@@ -60,7 +60,7 @@ import pandas as pd
 
 from benchmarks.broad.case_study import MADGWICK_BETAS
 from benchmarks.broad.dataset import trial_label
-from benchmarks.broad.inputs import ImuInputs, imu_inputs
+from benchmarks.broad.inputs import ImuInputs, imu_inputs, scored_metric
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
 from benchmarks.experiments.estimator_tuning import keyword_values
@@ -124,7 +124,9 @@ class TrialCase:
 
 class TrialsScore:
     """The mean total RMSE (degrees) of estimator ``name`` over ``cases``
-    with the settings asked (infinite if a run diverges): the tuner's loss."""
+    with the settings asked (infinite if a run diverges): the tuner's loss;
+    the inclination's where it has no heading reference (a 6-axis IMU:
+    :func:`~benchmarks.broad.inputs.scored_metric`)."""
 
     def __init__(self, name: str, cases, second_half: bool = False):
         self.cls, self.cases = resolve_estimator(name), list(cases)
@@ -137,7 +139,8 @@ class TrialsScore:
             sensors, recording = case.inputs.sensors, case.inputs.recording
             run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
             movement = recording.movement & judged_samples(recording, self.second_half)
-            total = rmse_deg(run.estimates, recording.reference_quat, movement)["total_rmse_deg"]
+            total = rmse_deg(run.estimates, recording.reference_quat,
+                             movement)[scored_metric(self.cls, recording)]
             if not math.isfinite(total):
                 return math.inf
             totals.append(total)
@@ -214,13 +217,26 @@ def tune_on(name: str, cases, quiet: bool = True, mode: str = "all-trials") -> d
                 "method": f"the authors' grid ({len(points)} points)",
                 "evaluations": len(points) + 1}
     from benchmarks.experiments.estimator_tuning import tune_estimator
-    parameters = (HALVES_PARAMETERS if mode == "halves" else PARAMETERS).get(name)
+    parameters = _acting((HALVES_PARAMETERS if mode == "halves" else PARAMETERS).get(name),
+                         name, cases)
     tuning = tune_estimator(name, cases, name_of_loss, parameters=parameters,
                             max_evaluations=MAX_EVALUATIONS, quiet=quiet, score=score)
     return {"values": dict(tuning.tuned), "loss": tuning.loss,
             "loss_default": tuning.loss_default, "method": tuning.method,
             "evaluations": len(tuning.evaluations),
             "objective": "likelihood" if mode == "halves" else "rmse"}
+
+
+def _acting(parameters, name: str, cases):
+    """``parameters`` less those acting on a sensor none of ``cases`` has
+    (the heading's density on a 6-axis IMU); None stays None (the defaults)."""
+    if parameters is None:
+        return None
+    from benchmarks.experiments.estimator_tuning import cases_sensors
+    from estimators.tunable import tunables
+    declared, present = tunables(resolve_estimator(name)), cases_sensors(cases)
+    return tuple(p for p in parameters if present is None or declared[p].sensor is None
+                 or declared[p].sensor in present)
 
 
 def training_sets(trials, mode: str) -> list[tuple[list, list]]:
@@ -400,7 +416,7 @@ def _whole_runs(name: str, wholes, values: dict) -> tuple[float, int, int, float
         if recording.has_reference.any():
             movement = recording.movement & judged_samples(recording)
             totals.append(rmse_deg(run.estimates, recording.reference_quat,
-                                   movement)["total_rmse_deg"])
+                                   movement)[scored_metric(cls, recording)])
     if len(totals) < len(wholes):
         return total, updates, refused, None
     return total, updates, refused, (float(np.mean(totals)) if np.all(np.isfinite(totals))

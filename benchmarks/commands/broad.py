@@ -87,6 +87,7 @@ def run(args, _scenario):
         raise UsageError("--grid is the case study's grid search: give --case-study with it")
     if args.case_study:
         return _case_study(args, dataset, trials)
+    args.estimators = _runnable(args, dataset.sensors(trials))
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
     sigmas = {sensor: value for sensor, value in (("accelerometer", args.accelerometer_sigma),
@@ -105,7 +106,7 @@ def run(args, _scenario):
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
                                  quiet=args.quiet, workers=args.workers, options=options,
                                  tuning=mode, agreement=args.agreement)
-    print(f"{PROG}: note: {inputs.assumed()}", file=sys.stderr)
+    print(f"{PROG}: note: {inputs.assumed(heading=not result.headless)}", file=sys.stderr)
     against = " against the others' median" if result.by_agreement else ""
     if against:
         print(f"No trial has a reference: every score below is the RMS angle to "
@@ -115,14 +116,35 @@ def run(args, _scenario):
     if len(tunings):
         print("\ntuned (training loss: " + ("the innovations' ln det S + NIS per update over "
               "the trial's first half, no reference read" if mode == "halves" else
-              "mean total RMSE over the training trials, °") + "):")
+              f"mean {result.metric.split('_')[0]} RMSE over the training trials, °") + "):")
         print(tunings.to_string(index=False, float_format=lambda v: f"{v:.6g}"))
-    print(f"\ntotal RMSE (°){against} per group, mean over its trials (trials run), "
-          f"{tuning.MODE_LABELS[mode]}:")
-    print(benchmark.format_groups(result))
+    print(f"\n{result.metric.split('_')[0]} RMSE (°){against} per group, mean over its trials "
+          f"(trials run), {tuning.MODE_LABELS[mode]}:")
+    print(benchmark.format_groups(result, result.metric))
     _write(args, result, tunings, dataset, train)
     return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
                                  in result.trials.groupby("estimator", sort=False)})
+
+
+def _runnable(args, present) -> tuple:
+    """``--estimators`` on trials whose vector sensors are ``present``:
+    where a trial has no magnetometer (a 6-axis IMU), an estimator that
+    needs one is refused if named, and left out of the default list with
+    a note."""
+    from benchmarks.sensor_use import refuse_unreadable, usable_estimators
+    if present == BROAD_SENSORS:
+        return args.estimators
+    where = "these trials (no magnetometer)"
+    if not getattr(args, "estimators_by_default", False):
+        refuse_unreadable(args.estimators, present, where)
+        return args.estimators
+    usable = usable_estimators(args.estimators, present)
+    left_out = [name for name in args.estimators if name not in usable]
+    if left_out:
+        print(f"{PROG}: note: no magnetometer in these trials: left out {', '.join(left_out)} "
+              "(each needs one); every other filter is scored on its inclination, its "
+              "heading being the gyro's", file=sys.stderr)
+    return usable
 
 
 def _training(args, dataset, trials):

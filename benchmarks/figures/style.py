@@ -67,10 +67,10 @@ def with_coincidences(styles: dict, under: dict) -> dict:
 
 def coincidence_note(under: dict, labels: dict, unit: str) -> str:
     """One line naming the curves drawn under others, and by how much at most
-    they differ (rounded up to one significant digit)."""
-    return "; ".join(f"{labels[later]} under {labels[earlier]}: differ by < "
-                     f"{_round_up(difference):g}{unit}"
-                     for later, (earlier, difference) in under.items())
+    they differ (rounded up to one significant digit), or that they are the same."""
+    return "; ".join(f"{labels[later]} under {labels[earlier]}: " + (
+        f"differ by < {_round_up(difference):g}{unit}" if difference > 0 else "the same")
+        for later, (earlier, difference) in under.items())
 
 
 def _round_up(value: float) -> float:
