@@ -270,25 +270,7 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
                 f"its time column {section.get('time')!r} holds {len(times)}")
     if width == 4:            # a quaternion of zeros: a frame the markers were not seen
         values[np.all(values == 0.0, axis=1)] = np.nan
-    infinite = np.flatnonzero(np.isinf(values).any(axis=1) | np.isinf(times))
-    if len(infinite):
-        refuse(path, f"{key}.columns", section.get("columns"), f"row {infinite[0]} holds an "
-                f"infinite value ({values[infinite[0]].tolist()}); a reading is finite")
-    empty = np.isnan(values).all(axis=1) | np.isnan(times)
-    partly = np.flatnonzero(np.isnan(values).any(axis=1) & ~empty)
-    if list(partly) == [len(values) - 1]:   # the last line cut short (power lost): left out
-        warnings.warn(f"{path.name}: {key}: its last row is cut short "
-                      f"({values[-1].tolist()}): left out", stacklevel=3)
-        empty[-1], partly = True, partly[:0]
-    if len(partly):
-        refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
-                f"empty ({values[partly[0]].tolist()}); a row is a reading or empty")
-    times, values = times[~empty], values[~empty]
-    times, values, dropped, moved = mended(times, values)
-    if dropped or moved:
-        said = [f"{dropped} row(s) repeating the one before dropped"] * bool(dropped) + \
-            [f"{moved} row(s) out of their time's order put in it"] * bool(moved)
-        warnings.warn(f"{path.name}: {key}: {'; '.join(said)}", stacklevel=4)
+    times, values = _readings(path, key, section, times, values)
     if not len(times):
         refuse(path, f"{key}.columns", section.get("columns"), "hold no reading")
     if name != "reference":
@@ -304,6 +286,33 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
     if name == "magnetometer":
         values = calibrated(values, section, UNITS[name][section["unit"]],
                             f"{path.name}: {key}")
+    return times, values
+
+
+def _readings(path: Path, key: str, section: dict, times: np.ndarray, values: np.ndarray):
+    """``(times, values)`` of a sensor's rows that hold a reading (a row of
+    empty cells holds none), a logger's everyday slips mended and said: its
+    last row cut short left out, rows repeated or out of order
+    (:func:`sensors.clocks.mended`); an infinite or a partly empty row refused."""
+    infinite = np.flatnonzero(np.isinf(values).any(axis=1) | np.isinf(times))
+    if len(infinite):
+        refuse(path, f"{key}.columns", section.get("columns"), f"row {infinite[0]} holds an "
+                f"infinite value ({values[infinite[0]].tolist()}); a reading is finite")
+    empty = np.isnan(values).all(axis=1) | np.isnan(times)
+    partly = np.flatnonzero(np.isnan(values).any(axis=1) & ~empty)
+    if list(partly) == [len(values) - 1]:   # the last line cut short (power lost): left out
+        warnings.warn(f"{path.name}: {key}: its last row is cut short "
+                      f"({values[-1].tolist()}): left out", stacklevel=4)
+        empty[-1], partly = True, partly[:0]
+    if len(partly):
+        refuse(path, f"{key}.columns", section.get("columns"), f"row {partly[0]} is partly "
+                f"empty ({values[partly[0]].tolist()}); a row is a reading or empty")
+    times, values = times[~empty], values[~empty]
+    times, values, dropped, moved = mended(times, values)
+    if dropped or moved:
+        said = [f"{dropped} row(s) repeating the one before dropped"] * bool(dropped) + \
+            [f"{moved} row(s) out of their time's order put in it"] * bool(moved)
+        warnings.warn(f"{path.name}: {key}: {'; '.join(said)}", stacklevel=5)
     return times, values
 
 
