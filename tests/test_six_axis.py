@@ -13,6 +13,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from benchmarks.broad.inputs import initial_attitude
+from benchmarks.broad.metric import errors_deg, without_heading
 from benchmarks.cli import main
 from benchmarks.engine.recorded import run_recorded
 from dynamics.handheld import HandheldMotion
@@ -188,6 +189,8 @@ def test_broad_scores_a_six_axis_log_on_its_inclination(broad_runs):
     # which need a field, are left out of the default list.
     six = broad_runs[False]
     assert {"triad", "vqf-offline"}.isdisjoint(six.index)
+    # and the twins that are, without a field, the same filter under two labels
+    assert {"madgwick-broad", "vqf-6d"}.isdisjoint(six.index)
     assert {"dead-reckoning", "mekf", "mekf-smoother", "usque", "madgwick",
             "mahony"} <= set(six.index)
     assert six[["total_rmse_deg", "heading_rmse_deg"]].isna().all().all()
@@ -244,3 +247,39 @@ def test_without_a_reference_six_axis_filters_are_ranked_by_their_inclinations(t
     agreement = table["inclination_rmse_deg"]
     assert np.isfinite(agreement).all()
     assert agreement["mekf"] < agreement["dead-reckoning"] / 2
+
+
+@settings(max_examples=50, deadline=None)
+@given(rotations=st.lists(st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+                          min_size=2, max_size=2))
+def test_taking_the_heading_off_keeps_every_inclination_error(rotations):
+    # The agreement of 6-axis filters is taken on their attitudes without
+    # their heading (each is its gyro's): the body's up is unchanged, so the
+    # inclination error between any two is (1e-9°), and the heading is gone.
+    a, b = (np.array([quat_from_rotvec(np.asarray(r))]) for r in rotations)
+    before = errors_deg(a, b)["inclination"]
+    level_a, level_b = without_heading(a), without_heading(b)
+    assert abs(errors_deg(level_a, level_b)["inclination"][0] - before[0]) < 1e-9
+    assert abs(level_a[0, 3]) < 1e-12 and abs(level_b[0, 3]) < 1e-12
+
+
+def test_a_folder_mixing_six_and_nine_axis_logs_is_refused(tmp_path, capsys):
+    # The ones are scored on their total error, the others on their
+    # inclination: no group mean may mix them; each kind runs alone.
+    recording = simulated_recording(3, MOTION)
+    folder = tmp_path / "mixed"
+    for name, magnetometer in (("a6", False), ("b9", True)):
+        toml = _declared_log(tmp_path / name, recording, magnetometer)
+        folder.mkdir(exist_ok=True)
+        text = open(toml).read().replace('file = "log.csv"', f'file = "{name}.csv"')
+        (folder / f"{name}.toml").write_text(text)
+        (folder / f"{name}.csv").write_bytes((tmp_path / name / "log.csv").read_bytes())
+    assert main(["broad", "--broad", str(folder), "--out", str(tmp_path / "out"),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "without a magnetometer" in err and "a6" in err and len(err.splitlines()) == 1
+    assert main(["broad", "--broad", str(folder), "--trials", "b9", "--estimators", "mekf",
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert main(["broad", "--broad", str(folder), "--case-study", "--trials", "a6",
+                 "--out", str(tmp_path / "case"), "--quiet"]) == 2
+    assert "have none" in capsys.readouterr().err

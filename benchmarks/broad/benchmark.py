@@ -29,7 +29,7 @@ from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs, scored_metric
 from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
-    scored_samples, unscored_reason
+    scored_samples, unscored_reason, without_heading
 from dynamics.validation import InvalidParameterError
 from benchmarks.engine.recorded import path_of, run_recorded
 from benchmarks.output import progress
@@ -76,17 +76,14 @@ class BroadResult:
     against: str = REFERENCE
     #: The data's name in titles (:attr:`BroadDataset.title`).
     dataset_title: str = "BROAD"
+    #: Whether no trial has a magnetometer (a 6-axis IMU's): every score
+    #: is then the inclination's (:meth:`BroadDataset.sensors`).
+    headless: bool = False
 
     @property
     def by_agreement(self) -> bool:
         """Whether the scores are the estimators' agreement, not accuracy."""
         return self.against != REFERENCE
-
-    @property
-    def headless(self) -> bool:
-        """Whether no estimator has a heading reference (no trial has a
-        magnetometer: a 6-axis IMU): every score is then the inclination's."""
-        return len(inclination_only(self)) == len(self.labels)
 
     @property
     def metric(self) -> str:
@@ -148,8 +145,9 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             if run.diverged_step is None:
                 members.append(name)
     unreferenced = not recording.has_reference.any()
-    if not observers:       # a 6-axis IMU: the inclinations agree or not
+    if not observers:       # a 6-axis IMU: the inclinations agree or not, the headings apart
         members = [row["estimator"] for row in rows if row["diverged_step"] == -1]
+        estimates = {name: without_heading(q) for name, q in estimates.items()}
     if unreferenced or agreement:
         scores, agreement_curves = agreement_scores(estimates, members, observers)
         for row in rows:
@@ -307,7 +305,8 @@ def run_broad(dataset: BroadDataset, trials, estimators, gyro_delay_s: float = 0
     return BroadResult(trials=frame, groups=group_means(dataset, frame), labels=labels,
                        curves=results[shown][1], curve_trial=trials[shown], tuning=tuning,
                        curve_movement=dataset.load(trials[shown]).movement,
-                       dataset_title=dataset.title)
+                       dataset_title=dataset.title,
+                       headless="magnetometer" not in dataset.sensors(trials))
 
 
 def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> BroadResult:
@@ -327,7 +326,8 @@ def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> 
     scored["movement_samples"] = scored["scored_samples"] = scored["samples"]
     return BroadResult(trials=scored, groups=group_means(dataset, scored), labels=labels,
                        curves=results[0][1], curve_trial=trials[0], tuning=tuning,
-                       against=AGAINST, dataset_title=dataset.title)
+                       against=AGAINST, dataset_title=dataset.title,
+                       headless="magnetometer" not in dataset.sensors(trials))
 
 
 #: The CSVs' word for what every score in them was taken against.

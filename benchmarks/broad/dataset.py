@@ -100,16 +100,22 @@ class BroadDataset:
                                     f"{', '.join(trial_label(n) for n in self.available)})")
 
     def sensors(self, trials) -> frozenset:
-        """The vector sensors every one of ``trials`` reads: the
-        accelerometer, and the magnetometer unless one of them has none (a
-        6-axis IMU's declaration or ``.npz``; a published trial holds every
-        channel, and a trial without an accelerometer is refused)."""
-        present = {"accelerometer", "magnetometer"}
-        for trial in trials:
-            if self.files[trial].suffix in (".toml", ".npz") and \
-                    self.load(trial).magnetometer_uT is None:
-                present.discard("magnetometer")
-        return frozenset(present)
+        """The vector sensors ``trials`` read: the accelerometer, and the
+        magnetometer unless they have none (a 6-axis IMU's declaration or
+        ``.npz``; a published trial holds every channel, and a trial without
+        an accelerometer is refused). Trials with and without one are
+        refused together: the ones are scored on their total error, the
+        others on their inclination, which no mean may mix."""
+        without = [trial for trial in trials if self.files[trial].suffix in (".toml", ".npz")
+                   and self.load(trial).magnetometer_uT is None]
+        if without and len(without) < len(trials):
+            raise InvalidParameterError(
+                "trials" if self.parameter == "broad" else self.parameter,
+                ",".join(trial_label(t) for t in trials), f"mix logs without a magnetometer "
+                f"({', '.join(without[:3])}{', …' if len(without) > 3 else ''}), scored on "
+                "their inclination, with logs that have one, scored on their total error: "
+                "run them apart (--trials, or a folder each)")
+        return frozenset({"accelerometer"} if without else {"accelerometer", "magnetometer"})
 
     def selected(self, names=None) -> list[str]:
         """The trials ``names`` (numbers or full names, :meth:`trial_name`;

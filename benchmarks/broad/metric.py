@@ -48,6 +48,17 @@ def inclination_error_rad(error: np.ndarray) -> np.ndarray:
     return 2.0 * np.arccos(np.clip(np.sqrt(error[:, 0] ** 2 + error[:, 3] ** 2), 0.0, 1.0))
 
 
+def without_heading(quat: np.ndarray) -> np.ndarray:
+    """``(N, 4)`` attitudes (body → ENU) with their rotation about the
+    vertical taken off: ``q = q_z(ψ) ⊗ q_level``, ψ = 2 atan2(z, w). The
+    body's up is unchanged, so the inclination error between any two is
+    too (it is the angle between their body-frame ups); what a 6-axis IMU's
+    filters agree on, their headings being each its gyro's."""
+    half = np.arctan2(quat[:, 3], quat[:, 0])
+    zero = np.zeros_like(half)
+    return quat_multiply(np.stack([np.cos(half), zero, zero, -np.sin(half)], axis=1), quat)
+
+
 def errors_deg(estimate: np.ndarray, reference: np.ndarray) -> dict:
     """Total, heading and inclination error of every sample, degrees."""
     error = earth_error_quat(estimate, reference)

@@ -19,6 +19,9 @@ memory = None      # the trials' sizes are known once they are read
 
 #: What a BROAD trial gives the estimators besides the gyro.
 BROAD_SENSORS = frozenset({"accelerometer", "magnetometer"})
+#: Without a magnetometer, the same filter as another in the default list:
+#: left out of it there, so that no result is repeated under two labels.
+SIX_AXIS_TWINS = {"madgwick-broad": "madgwick", "vqf-6d": "vqf"}
 
 
 def arguments(commands, defaults) -> None:
@@ -85,9 +88,13 @@ def run(args, _scenario):
     trials = dataset.selected(args.trials)
     if args.grid and not args.case_study:
         raise UsageError("--grid is the case study's grid search: give --case-study with it")
+    present = dataset.sensors(trials)
     if args.case_study:
+        if present != BROAD_SENSORS:
+            raise UsageError("--case-study runs the authors' Madgwick and Mahony with the "
+                             "magnetometer, and these trials have none")
         return _case_study(args, dataset, trials)
-    args.estimators = _runnable(args, dataset.sensors(trials))
+    args.estimators = _runnable(args, present)
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
     sigmas = {sensor: value for sensor, value in (("accelerometer", args.accelerometer_sigma),
@@ -134,17 +141,20 @@ def _runnable(args, present) -> tuple:
     from benchmarks.sensor_use import refuse_unreadable, usable_estimators
     if present == BROAD_SENSORS:
         return args.estimators
-    where = "these trials (no magnetometer)"
+    where = "each log here (no magnetometer)"
     if not getattr(args, "estimators_by_default", False):
         refuse_unreadable(args.estimators, present, where)
         return args.estimators
     usable = usable_estimators(args.estimators, present)
+    twins = [name for name in usable if SIX_AXIS_TWINS.get(name) in usable]
     left_out = [name for name in args.estimators if name not in usable]
-    if left_out:
-        print(f"{PROG}: note: no magnetometer in these trials: left out {', '.join(left_out)} "
-              "(each needs one); every other filter is scored on its inclination, its "
-              "heading being the gyro's", file=sys.stderr)
-    return usable
+    if left_out or twins:
+        said = [f"{', '.join(left_out)} (each needs one)"] * bool(left_out) + [
+            f"{name} (without one, the same filter as {SIX_AXIS_TWINS[name]})" for name in twins]
+        print(f"{PROG}: note: no magnetometer in these trials: left out {'; '.join(said)}; "
+              "every other filter is scored on its inclination, its heading being the "
+              "gyro's", file=sys.stderr)
+    return tuple(name for name in usable if name not in twins)
 
 
 def _training(args, dataset, trials):
@@ -162,6 +172,10 @@ def _training(args, dataset, trials):
                          "delay is not known: leave it out with --train")
     train = open_broad(args.train, parameter="train")
     tuning.checked_apart(train, dataset, trials)
+    if train.sensors(train.available) != dataset.sensors(trials):
+        raise UsageError("--train: its trials and the scored ones differ in having a "
+                         "magnetometer; settings tuned on the one kind are scored on another "
+                         "error than they would be on the other: train on data of the same kind")
     return "other-dataset", train
 
 
