@@ -74,8 +74,10 @@ class ImuModels:
         self.iron = hard_iron.new_state()
         self.rate_lp = np.zeros(3)
         self.at_rest = False
-        #: Steps since the last accelerometer and magnetometer readings (0: none yet).
+        #: Steps since the last accelerometer and magnetometer readings (0: none
+        #: yet), and each one's last interval (:func:`lowpass.reading_steps`).
         self.since_acc = self.since_mag = 0
+        self.acc_steps = self.mag_steps = 0
         #: Magnetometer readings taken so far.
         self.fields = 0
         self._scratch = np.zeros((2, 3))
@@ -92,16 +94,17 @@ class ImuModels:
         rest.gyro_step(rate, lowpass.coefficients(rest.FILTER_TIME_CONSTANT_S, self.dt),
                        self.dt, self.rest, self.rate_lp)
 
-    def interval(self, since: int) -> float:
-        """Seconds between a sensor's readings, ``since`` steps apart (one
-        step for the first)."""
-        return max(since, 1) * self.dt
+    def interval(self, since: int, last: int) -> float:
+        """Seconds a sensor's reading is filtered over, ``since`` steps after
+        its last one, its last interval ``last`` (:func:`lowpass.reading_steps`)."""
+        return lowpass.reading_steps(since, last)[0] * self.dt
 
     def gravity_reading(self, specific_force: np.ndarray, out: np.ndarray) -> float:
         """Gravity's direction (up, body frame) from one accelerometer reading
         into ``out``, and the time since the last reading; updates the rest
         detector (:attr:`at_rest`)."""
-        interval = self.interval(self.since_acc)
+        steps, self.acc_steps = lowpass.reading_steps(self.since_acc, self.acc_steps)
+        interval = steps * self.dt
         self.since_acc = 0
         self.at_rest = rest.acc_step(
             specific_force, lowpass.coefficients(rest.FILTER_TIME_CONSTANT_S, interval),
@@ -120,7 +123,7 @@ class ImuModels:
         taking the reading in (:func:`hard_iron.step`). Before
         :meth:`field_reading`, where the filter fits it (``hard_iron_fit``)."""
         out = np.empty(3)
-        hard_iron.step(field, self.interval(self.since_mag), self.iron, out)
+        hard_iron.step(field, self.interval(self.since_mag, self.mag_steps), self.iron, out)
         return out
 
     def field_reading(self, q: np.ndarray, field: np.ndarray, reference: np.ndarray,
@@ -132,7 +135,8 @@ class ImuModels:
         known reference (``reference_known``) is the trust's reference from
         the first reading on; otherwise the first reading's norm and dip are
         (:func:`heading.first_state`), and the reference is learnt from there."""
-        interval = self.interval(self.since_mag)
+        steps, self.mag_steps = lowpass.reading_steps(self.since_mag, self.mag_steps)
+        interval = steps * self.dt
         self.since_mag = 0
         if reference_known and not self.fields:       # a model's field: known from the start
             norm = math.sqrt(reference @ reference)

@@ -66,10 +66,12 @@ hard_iron_step = _compiled(hard_iron.step, _take=_compiled(
     _refit=_compiled(hard_iron._refit, _solve_symmetric=_compiled(hard_iron._solve_symmetric),
                      smallest_eigenvalue=_compiled(hard_iron.smallest_eigenvalue))))
 first_trust = _compiled(heading.first_state, new_state=new_trust)
+reading_steps = _compiled(lowpass.reading_steps)
 
 #: Entries of :attr:`ImuState.counts`: steps since the last accelerometer and
-#: magnetometer readings, magnetometer readings so far.
-SINCE_ACC, SINCE_MAG, FIELDS = 0, 1, 2
+#: magnetometer readings, magnetometer readings so far, and each one's last
+#: interval (:func:`estimators.imu.lowpass.reading_steps`).
+SINCE_ACC, SINCE_MAG, FIELDS, ACC_STEPS, MAG_STEPS = 0, 1, 2, 3, 4
 #: Rows of ``imu_table``: the low-pass filters of the rest detector, of
 #: gravity and of the field's steadiness, and their time constants.
 REST_FILTER, GRAVITY_FILTER, STEADY_FILTER = 0, 1, 2
@@ -112,7 +114,7 @@ def imu_state(estimators) -> dict:
                 "imu_densities": np.zeros((count, 3)), "imu_strapdown": np.zeros((count, 4)),
                 "imu_gravity": np.zeros((count, 4, 3)), "imu_detector": np.zeros((count, 9, 3)),
                 "imu_trust": np.zeros((count, heading.STATE_SIZE)), "imu_rate_lp": np.zeros((count, 3)),
-                "imu_counts": np.zeros((count, 3), dtype=np.int64),
+                "imu_counts": np.zeros((count, 5), dtype=np.int64),
                 "imu_rotation": np.zeros((count, 5, 9)), "imu_field": np.zeros((count, 4, 3)),
                 "imu_iron_fit": False, "imu_iron": np.zeros((count, hard_iron.STATE_SIZE))}
     return {**work, "imu_table": coefficient_table(models[0].dt), "imu_table_dt": models[0].dt,
@@ -126,8 +128,8 @@ def imu_state(estimators) -> dict:
             "imu_detector": np.array([m.rest for m in models]),
             "imu_trust": np.array([m.trust for m in models]),
             "imu_rate_lp": np.array([m.rate_lp for m in models]),
-            "imu_counts": np.array([[m.since_acc, m.since_mag, m.fields] for m in models],
-                                   dtype=np.int64),
+            "imu_counts": np.array([[m.since_acc, m.since_mag, m.fields, m.acc_steps,
+                                     m.mag_steps] for m in models], dtype=np.int64),
             "imu_rotation": np.array([np.vstack([m.rotation_integral[None], m.rotation_filter])
                                       for m in models]),
             "imu_field": np.array([m.field_filter for m in models]),
@@ -191,7 +193,8 @@ def accelerometer_reading(models, run, specific_force, dt):
     gravity_state, rotation = models[G_GRAVITY], models[G_ROTATION]
     work, drift = models[G_WORK][run], models[G_DRIFT][run]
     up, scratch = work[UP], work[GRAVITY_SCRATCH:GRAVITY_SCRATCH + 2]
-    interval = max(counts[run, SINCE_ACC], 1) * dt
+    steps, counts[run, ACC_STEPS] = reading_steps(counts[run, SINCE_ACC], counts[run, ACC_STEPS])
+    interval = steps * dt
     counts[run, SINCE_ACC] = 0
     table, table_dt = models[G_TABLE], models[G_TABLE_DT]
     at_rest = rest_acc_step(specific_force,
@@ -220,7 +223,8 @@ def calibrated_field(models, run, field, dt):
     :func:`field_models` gives, into the run's working vector :data:`FIELD`."""
     out = models[F_WORK][run, FIELD]
     if models[F_IRON_FIT]:
-        hard_iron_step(field, max(models[F_COUNTS][run, SINCE_MAG], 1) * dt,
+        hard_iron_step(field, reading_steps(models[F_COUNTS][run, SINCE_MAG],
+                                            models[F_COUNTS][run, MAG_STEPS])[0] * dt,
                        models[F_IRON][run], out)
     else:
         for i in range(3):
@@ -236,7 +240,8 @@ def field_reading(models, run, q, field, reference, known, dt):
     counts, trust, rate_lp = models[F_COUNTS], models[F_TRUST], models[F_RATE_LP]
     strapdown, field_state, work = models[F_STRAPDOWN], models[F_FIELD], models[F_WORK][run]
     scratch = work[FIELD_E]
-    interval = max(counts[run, SINCE_MAG], 1) * dt
+    steps, counts[run, MAG_STEPS] = reading_steps(counts[run, SINCE_MAG], counts[run, MAG_STEPS])
+    interval = steps * dt
     counts[run, SINCE_MAG] = 0
     if known and counts[run, FIELDS] == 0:
         norm = math.sqrt(reference[0] ** 2 + reference[1] ** 2 + reference[2] ** 2)

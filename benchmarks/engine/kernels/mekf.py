@@ -74,7 +74,7 @@ class State(NamedTuple):
     imu_detector: np.ndarray     # (B, 9, 3)
     imu_trust: np.ndarray        # (B, heading.STATE_SIZE) the heading's trust
     imu_rate_lp: np.ndarray      # (B, 3)
-    imu_counts: np.ndarray       # (B, 3) int64
+    imu_counts: np.ndarray       # (B, 5) int64
     imu_rotation: np.ndarray     # (B, 5, 9) the strapdown's rotation integrated, its LP state
     imu_field: np.ndarray        # (B, 4, 3) the field's low-pass filter in the strapdown frame
     imu_iron_fit: bool           # the hard iron fitted online (estimators.imu.hard_iron)
