@@ -155,16 +155,21 @@ def test_an_unusable_first_sample_starts_the_trial_at_the_first_usable_one(tmp_p
             arrays["imu_mag_uT"][0] = 4.0 * arrays["imu_acc_mps2"][0]
         else:
             arrays["imu_acc_mps2" if "accelerometer" in damage else "imu_mag_uT"][0] = 0.0
-    with pytest.warns(UserWarning, match="the start attitude is taken at sample 1"):
+    # The trial starts at its first usable sample: the one before is left
+    # out, and said (a start taken there but used at sample 0 would be off by
+    # the body's turn between the two).
+    with pytest.warns(UserWarning, match="its first sample .* comes before the first sample "
+                      "where both sensors have read .* left out"):
         recording = open_broad(_folder(tmp_path, _on(TRIAL_02, first))).load(TRIAL_02)
+    whole = _arrays(TRIAL_02)
+    assert recording.n_samples == len(whole["imu_gyr_radps"]) - 1
+    np.testing.assert_array_equal(recording.accelerometer_mps2, whole["imu_acc_mps2"][1:])
     prepared = inputs.imu_inputs(recording)
-    at_one = inputs.initial_attitude(recording.accelerometer_mps2[1],
-                                     recording.magnetometer_uT[1], prepared.references)
+    at_one = inputs.initial_attitude(whole["imu_acc_mps2"][1], whole["imu_mag_uT"][1],
+                                     prepared.references)
     np.testing.assert_allclose(prepared.scenario.initial_state, at_one, atol=1e-15)
-    # A zero reading is no reading: the filters are not given it.
     for readings in prepared.sensors.vectors:
-        assert readings.available[0] == (damage == "parallel" or readings.sensor not in damage)
-        assert readings.available[1:].all()
+        assert readings.available.all()
 
 
 def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, capsys):
@@ -175,8 +180,9 @@ def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, 
                                                          names=(TRIAL_02,)))
     assert status == 0, err
     assert "note: trial 02_undisturbed_slow_rotation_B: 1 accelerometer reading and 5 " \
-           "magnetometer readings exactly zero (dropouts), left out; the start attitude is " \
-           "taken at sample 5" in err and "Traceback" not in err
+           "magnetometer readings exactly zero (dropouts), left out" in err
+    assert "note: trial 02_undisturbed_slow_rotation_B: its first 5 samples" in err
+    assert "Traceback" not in err
     damaged = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
     (tmp_path / "intact").mkdir()
     intact = benchmark.run_trial(open_broad(_folder(tmp_path / "intact", names=(TRIAL_02,))),
@@ -209,7 +215,7 @@ def test_a_rest_of_dropouts_is_no_rest_and_none_is_needed(tmp_path, capsys):
     status, _, err, out = _run(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, dead),
                                                          names=(TRIAL_02,)))
     assert status == 0, err
-    assert f"the start attitude is taken at sample {moving}" in err
+    assert f"its first {moving} samples" in err
     scores = pd.read_csv(out / "broad_trials.csv").set_index("estimator")["total_rmse_deg"]
     assert scores.notna().all()
 

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.broad.inputs import (heading_reference, runnable_rule, start_sample,
-                                     usable_readings)
+from benchmarks.broad.inputs import runnable_rule
+from benchmarks.broad.trial_notes import from_start, note_clipping, note_dropouts
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
@@ -210,9 +210,9 @@ class BroadDataset:
         if rule:
             refuse(rule)
         if path.suffix != ".toml":       # there, a sensor on its own clock reads at some samples
-            _note_dropouts(recording, path)
-        _note_clipping(recording, path)
-        return recording
+            note_dropouts(recording, path)
+        note_clipping(recording, path)
+        return from_start(recording, path, refuse)
 
 
 def broad_folder(given: Path | None = None) -> Path:
@@ -419,56 +419,6 @@ def read_index(index: Path, refuse) -> tuple[tuple, dict]:
 def _column(array: np.ndarray) -> np.ndarray:
     """An ``(N, 1)`` or ``(1, N)`` matrix as ``(N,)``; any other shape as it is."""
     return array.reshape(-1) if array.ndim == 2 and 1 in array.shape else array
-
-
-_NOTED = set()
-
-
-def _note_once(path: Path, note: str) -> None:
-    """Warn ``note`` of the trial at ``path``, once: a trial loaded again is
-    not noted again."""
-    if (path, note) not in _NOTED:
-        _NOTED.add((path, note))
-        warnings.warn(note, stacklevel=3)
-
-
-#: A gyro or accelerometer with at least this many readings at its rail is
-#: said to clip (BROAD's magnetometer, held between its own slower
-#: samples, sits three to nine readings at its extreme; no gyro or
-#: accelerometer of its 30 trials reaches one).
-CLIPPED_NOTE_READINGS = 20
-#: What a clipped channel does to the filters.
-CLIPPING_HARM = {"gyro": "every filter's turn there falls short of the body's",
-                 "accelerometer": "the filters read less acceleration than there was"}
-
-
-def _note_clipping(recording: Recording, path: Path) -> None:
-    """A note for a gyro or accelerometer that sits at its rail: clipped."""
-    from benchmarks.experiments.inspection import clipped
-    for name, values, unit in (("gyro", recording.gyro_radps, "rad/s"),
-                               ("accelerometer", recording.accelerometer_mps2, "m/s²")):
-        count, extreme = clipped(values) if values is not None else (0, 0.0)
-        note = (f"trial {recording.name}: {count} {name} readings at ±{extreme:.6g} {unit}, its "
-                f"rail (clipped): {CLIPPING_HARM[name]}")
-        if count >= CLIPPED_NOTE_READINGS:
-            _note_once(path, note)
-
-
-def _note_dropouts(recording: Recording, path: Path) -> None:
-    """A note for readings that are exactly zero, and for a start taken
-    after the first sample (:mod:`benchmarks.broad.inputs`)."""
-    counts = {name: int(np.count_nonzero(~flags))
-              for name, flags in usable_readings(recording).items()}
-    start = start_sample(recording)
-    if any(counts.values()) or start:
-        dropped = " and ".join(f"{count} {name} reading{'s' * (count > 1)}"
-                               for name, count in counts.items() if count)
-        parts = [f"{dropped} exactly zero (dropouts), left out"] if dropped else []
-        if start:
-            parts.append(f"the start attitude is taken at sample {start}, the first where "
-                         + ("both sensors have read and their latest readings are not parallel"
-                            if heading_reference(recording) else "the accelerometer has read"))
-        _note_once(path, f"trial {recording.name}: {'; '.join(parts)}")
 
 
 def _read_mat(path: Path, refuse) -> dict:

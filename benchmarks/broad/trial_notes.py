@@ -1,0 +1,78 @@
+"""What ``broad`` says of a trial as it loads it (:meth:`benchmarks.broad.
+dataset.BroadDataset.load`), once per trial: readings that are exactly
+zero, a channel at its rail, and the samples before the first an attitude
+can be taken at, which it leaves out (:func:`from_start`)."""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
+    usable_readings
+from sensors.recording import Recording
+
+_NOTED = set()
+
+
+def note_once(path: Path, note: str) -> None:
+    """Warn ``note`` of the trial at ``path``, once: a trial loaded again is
+    not noted again."""
+    if (path, note) not in _NOTED:
+        _NOTED.add((path, note))
+        warnings.warn(note, stacklevel=3)
+
+
+#: A gyro or accelerometer with at least this many readings at its rail is
+#: said to clip (BROAD's magnetometer, held between its own slower
+#: samples, sits three to nine readings at its extreme; no gyro or
+#: accelerometer of its 30 trials reaches one).
+CLIPPED_NOTE_READINGS = 20
+#: What a clipped channel does to the filters.
+CLIPPING_HARM = {"gyro": "every filter's turn there falls short of the body's",
+                 "accelerometer": "the filters read less acceleration than there was"}
+
+
+def note_clipping(recording: Recording, path: Path) -> None:
+    """A note for a gyro or accelerometer that sits at its rail: clipped."""
+    from benchmarks.experiments.inspection import clipped
+    for name, values, unit in (("gyro", recording.gyro_radps, "rad/s"),
+                               ("accelerometer", recording.accelerometer_mps2, "m/s²")):
+        count, extreme = clipped(values) if values is not None else (0, 0.0)
+        note = (f"trial {recording.name}: {count} {name} readings at ±{extreme:.6g} {unit}, its "
+                f"rail (clipped): {CLIPPING_HARM[name]}")
+        if count >= CLIPPED_NOTE_READINGS:
+            note_once(path, note)
+
+
+def note_dropouts(recording: Recording, path: Path) -> None:
+    """A note for readings that are exactly zero (:mod:`benchmarks.broad.inputs`)."""
+    counts = {name: int(np.count_nonzero(~flags))
+              for name, flags in usable_readings(recording).items()}
+    if any(counts.values()):
+        dropped = " and ".join(f"{count} {name} reading{'s' * (count > 1)}"
+                               for name, count in counts.items() if count)
+        note_once(path, f"trial {recording.name}: {dropped} exactly zero (dropouts), left out")
+
+
+def from_start(recording: Recording, path: Path, refuse) -> Recording:
+    """``recording`` from the sample its start attitude is taken at
+    (:func:`~benchmarks.broad.inputs.start_sample`): the samples before it
+    (an accelerometer whose file begins later than the gyro's) have no
+    attitude to start from, and a start taken later but used at sample 0
+    would be off by the body's turn between the two; left out, and said."""
+    start = start_sample(recording)
+    if not start:
+        return recording
+    first = "its first sample" if start == 1 else f"its first {start} samples"
+    where = ("both sensors have read and their latest readings are not parallel"
+             if heading_reference(recording) else "the accelerometer has read")
+    note_once(path, f"trial {recording.name}: {first} ({start / recording.rate_hz:.3g} s) "
+              f"come{'s' * (start == 1)} before the first sample where {where}, which the "
+              "start attitude is taken at: left out, every estimator starts there")
+    recording = recording.from_sample(start)
+    rule = runnable_rule(recording)
+    if rule:
+        refuse(rule)
+    return recording
