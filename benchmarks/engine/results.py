@@ -97,7 +97,7 @@ def _nan_from(samples: np.ndarray, first: np.ndarray) -> np.ndarray:
     return np.where((first[:, None] >= 0) & (columns >= first[:, None]), np.nan, samples)
 
 
-def _bin_edge(index: np.ndarray) -> np.ndarray:
+def bin_edge(index: np.ndarray) -> np.ndarray:
     """Lower edge in degrees of histogram bin ``index`` (≥ 1)."""
     bits = (np.asarray(index, dtype=np.int64) - 1 + _FIRST_BITS) << 45
     return bits.view(np.float64)
@@ -107,19 +107,26 @@ def histogram_median(hist: np.ndarray, count: int) -> np.ndarray:
     """Median estimate per row of ``hist`` ``(B, bins)``, degrees.
 
     The median's rank is located in the cumulative counts and interpolated
-    linearly within its bin.
+    linearly within its bin. Only the bins some run holds are summed (a
+    few hundred of the 3,585: the sums a fifth of a 1024-run batch's
+    statistics before); those below are empty for every run.
     """
-    cumulative = np.cumsum(hist, axis=1)
+    held = np.flatnonzero(hist.any(axis=0))
+    low_bin = int(held[0]) if len(held) else 0
+    high_bin = int(held[-1]) + 1 if len(held) else 1
+    cumulative = np.cumsum(hist[:, low_bin:high_bin], axis=1, dtype=np.int64)
     rank = (count - 1) / 2.0          # zero-based; halfway for an even count
-    index = np.argmax(cumulative > rank, axis=1)
+    reached = cumulative[:, -1] > rank
+    inside = np.argmax(cumulative > rank, axis=1)
+    index = np.where(reached, inside + low_bin, 0)
     rows = np.arange(len(hist))
-    before = np.where(index > 0, cumulative[rows, index - 1], 0)
+    before = np.where(reached & (inside > 0), cumulative[rows, inside - 1], 0)
     # A diverged run's histogram stops short of the rank (its bin count may
     # be 0): its median is NaN'd with its other statistics.
     with np.errstate(divide="ignore", invalid="ignore"):
         fraction = (rank - before + 0.5) / hist[rows, index]
     safe = np.maximum(index, 1)
-    low, high = _bin_edge(safe), _bin_edge(safe + 1)
+    low, high = bin_edge(safe), bin_edge(safe + 1)
     return np.where(index == 0, 0.0, low + fraction * (high - low))
 
 
@@ -208,7 +215,7 @@ def _statistics(scenario: Scenario, record, row: int, n_steps: int) -> dict:
         errors = attitude_error_deg(simulate_truth(scenario).q_true, record.traces[row])
         median = np.median(errors, axis=1)
     else:
-        median = histogram_median(record.hist[row].astype(np.int64), n_steps)
+        median = histogram_median(record.hist[row], n_steps)
     columns = {"mean_deg": mean.copy(), "median_deg": median, "std_deg": std,
                "three_sigma_deg": 3.0 * std, "rms_deg": np.sqrt(mean * mean + m2 / n_steps),
                "max_deg": stats[:, MAX].copy(), "final_deg": stats[:, FINAL].copy()}
