@@ -195,7 +195,7 @@ def test_broad_scores_a_six_axis_log_on_its_inclination(broad_runs):
             "mahony"} <= set(six.index)
     assert six[["total_rmse_deg", "heading_rmse_deg"]].isna().all().all()
     assert np.isfinite(six["inclination_rmse_deg"]).all()
-    assert six["rejected_magnetometer_share"].isna().all()
+    assert six[["rejected_magnetometer", "rejected_magnetometer_share"]].isna().all().all()
     kalman = six.loc[["mekf", "mekf-smoother", "usque"], "inclination_rmse_deg"]
     assert kalman.max() < six.loc["dead-reckoning", "inclination_rmse_deg"] / 2
 
@@ -219,6 +219,9 @@ def test_an_estimator_that_needs_a_field_is_refused_by_name(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "triad" in err and "magnetometer" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    assert main(["broad", "--broad", toml, "--magnetometer-sigma", "3", "--out",
+                 str(tmp_path / "out"), "--quiet"]) == 2
+    assert "--magnetometer-sigma: these trials have no magnetometer" in capsys.readouterr().err
 
 
 def test_a_log_without_an_accelerometer_is_refused_naming_it(tmp_path, capsys):
@@ -233,7 +236,8 @@ def test_a_log_without_an_accelerometer_is_refused_naming_it(tmp_path, capsys):
     assert "[recording.accelerometer]" in err and "replay" in err
 
 
-def test_without_a_reference_six_axis_filters_are_ranked_by_their_inclinations(tmp_path):
+def test_without_a_reference_six_axis_filters_are_ranked_by_their_inclinations(tmp_path,
+                                                                               capsys):
     # No filter observes the heading, so their agreement is the inclination's:
     # each against the median of the others, every score said to be that.
     toml = _declared_log(tmp_path / "log", simulated_recording(3, MOTION), magnetometer=False,
@@ -243,6 +247,7 @@ def test_without_a_reference_six_axis_filters_are_ranked_by_their_inclinations(t
                  "--out", str(out), "--quiet"]) == 0
     table = pd.read_csv(out / "broad_trials.csv").set_index("estimator")
     assert (table["scored_against"] == "others' median").all()
+    assert "each heading taken off" in capsys.readouterr().out
     assert table[["total_rmse_deg", "heading_rmse_deg"]].isna().all().all()
     agreement = table["inclination_rmse_deg"]
     assert np.isfinite(agreement).all()

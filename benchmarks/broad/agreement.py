@@ -31,6 +31,8 @@ from benchmarks.broad.metric import errors_deg, rmse_of
 AGREEMENT = ("agreement_total_deg", "agreement_heading_deg", "agreement_inclination_deg")
 #: What the agreement scores are taken against, in words (tables, notes).
 AGAINST = "the median attitude of the other estimators that observe the heading"
+#: The same where none does (no magnetometer): their attitudes, headings off.
+AGAINST_LEVELLED = "the median attitude of the other estimators, each heading taken off"
 #: Weiszfeld's iterations for the median at most (it stops when no
 #: estimate moves by MEDIAN_TOLERANCE), and the least distance a member is
 #: weighted by (a member at the estimate would weigh infinitely).

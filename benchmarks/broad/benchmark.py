@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.agreement import AGAINST, AGREEMENT, agreement_scores
+from benchmarks.broad.agreement import AGAINST, AGAINST_LEVELLED, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import imu_inputs, scored_metric
 from benchmarks.broad.tuning import judged_samples
@@ -199,7 +199,8 @@ def _rejections(estimator, run, readings: dict) -> dict:
     ``readings`` (NaN for a sensor the estimator does not test, or that the
     recording has not)."""
     tested = tests_readings(estimator)
-    return {**{f"rejected_{sensor}": run.rejected.get(sensor, 0) for sensor in SENSORS},
+    return {**{f"rejected_{sensor}": run.rejected.get(sensor, 0) if sensor in readings
+               else math.nan for sensor in SENSORS},
             **{f"rejected_{sensor}_share":
                run.rejected.get(sensor, 0) / readings[sensor]
                if tested[sensor] and readings.get(sensor) else math.nan
@@ -315,23 +316,26 @@ def _by_agreement(dataset, trials, frame, labels, results, tuning, unscored) -> 
     sample of every trial scored against the others' median, said as such;
     an error if no total could be scored (fewer than two estimators that
     observe the heading ran through)."""
+    headless = "magnetometer" not in dataset.sensors(trials)
     if not np.isfinite(frame[list(AGREEMENT)].to_numpy(dtype=float)).any():
         raise InvalidParameterError("trials", ",".join(map(trial_label, trials)), "nothing to "
                                     "score: " + "; ".join(f"{t} {why}"
                                                           for t, why in unscored.items()) +
-                                    "; and fewer than two estimators observe the heading, so "
-                                    "they cannot be ranked by their agreement either")
+                                    "; and fewer than two estimators " +
+                                    ("ran through" if headless else "observe the heading") +
+                                    ", so they cannot be ranked by their agreement either")
     scored = frame.copy()
     scored[list(METRICS)] = frame[list(AGREEMENT)].to_numpy()
     scored["movement_samples"] = scored["scored_samples"] = scored["samples"]
     return BroadResult(trials=scored, groups=group_means(dataset, scored), labels=labels,
                        curves=results[0][1], curve_trial=trials[0], tuning=tuning,
-                       against=AGAINST, dataset_title=dataset.title,
-                       headless="magnetometer" not in dataset.sensors(trials))
+                       against=AGAINST_LEVELLED if headless else AGAINST,
+                       dataset_title=dataset.title, headless=headless)
 
 
 #: The CSVs' word for what every score in them was taken against.
-SCORED_AGAINST = {REFERENCE: "reference", AGAINST: "others' median"}
+SCORED_AGAINST = {REFERENCE: "reference", AGAINST: "others' median",
+                  AGAINST_LEVELLED: "others' median"}
 
 
 def with_scored_against(frame: pd.DataFrame, result: BroadResult) -> pd.DataFrame:

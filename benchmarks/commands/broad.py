@@ -94,6 +94,8 @@ def run(args, _scenario):
             raise UsageError("--case-study runs the authors' Madgwick and Mahony with the "
                              "magnetometer, and these trials have none")
         return _case_study(args, dataset, trials)
+    if args.magnetometer_sigma is not None and "magnetometer" not in present:
+        raise UsageError("--magnetometer-sigma: these trials have no magnetometer")
     args.estimators = _runnable(args, present)
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
