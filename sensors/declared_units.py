@@ -206,13 +206,25 @@ def clock_turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float
     clock in the wrong unit makes the usual window hold a tenth or ten
     times the real turning, which it then blurs or drowns in noise."""
     scale = turning_scale(rates, specific_force, dt)
-    if scale is not None and 1 / CLOCK_SEARCH_FACTOR <= scale <= CLOCK_SEARCH_FACTOR:
+    if scale is not None and (1 / CLOCK_SEARCH_FACTOR <= scale <= CLOCK_SEARCH_FACTOR
+                              or _unit_mistake(scale)):
         return scale, 0
     for power in (1, -1, 2, -2, 3, -3):       # the scale 10**power: its window
         found = turning_scale(rates, specific_force, dt, TURNING_WINDOW_S / 10.0 ** power)
         if found is not None and abs(math.log10(found) - power) <= math.log10(HINT_FACTOR):
             return found, power
     return scale, 0
+
+
+def _unit_mistake(scale: float) -> bool:
+    """Whether ``scale`` is a gyro unit's mistake (57.3 or its inverse,
+    within :data:`HINT_FACTOR`): seen so over the usual window, it is that,
+    not a clock's, whose longer windows can alias near a power of ten (a
+    gyro logged in deg/s, declared rad/s, was blamed on a clock 100 times
+    too slow, and followed, scored 54° with no word)."""
+    factors = UNITS["gyro"].values()
+    return any(abs(math.log(scale * a / b)) <= math.log(HINT_FACTOR)
+               for a in factors for b in factors if a != b)
 
 
 def check_reference_scale(path: Path, rates: np.ndarray, reference: np.ndarray, dt: float,

@@ -133,7 +133,10 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float,
     a frame mirrored between the two: columns in a left-handed order
     (``ω × v`` changes its sign under a reflection of both)."""
     if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
-        return None                       # too few accelerometer readings on the clock
+        # an accelerometer on its own clock, or slower (a phone logger's own
+        # timestamps cover three gyro samples in four): its readings held
+        # from each to the next, whose turning the windows then see
+        specific_force = held_readings(specific_force)
     turning = _turning(rates, specific_force, dt, window_s=window_s)
     if turning is None:
         return None

@@ -320,7 +320,7 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
         parts = declared_parts(path)
         if len(parts) > 1:
             warnings.warn(f"{path.name}: the gyro's clock stops {len(parts) - 1} time(s) (an "
-                          f"interval over {GAP_FACTOR:g} times its median): each unbroken "
+                          f"interval of more than {GAP_FACTOR:g} typical ones): each unbroken "
                           "stretch is a trial of its own, started anew: " + ", ".join(
                               f"{part.name} ({part.n_samples / part.rate_hz:.1f} s)"
                               for part in parts), stacklevel=2)
