@@ -56,9 +56,9 @@ from sensors.clocks import (GAP_FACTOR, IRREGULAR_SHARE, clock_fit, clock_period
                             mended, part_starts, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
-from sensors.declared_units import (UNITS, canonical_unit, check_norm, check_rate,
-                                    check_rates, check_reference_scale, check_turning,
-                                    reading_scale, seconds_per_tick)
+from sensors.declared_units import (UNITS, canonical_unit, check_gyro_axes, check_norm,
+                                    check_rate, check_rates, check_reference_scale,
+                                    check_turning, reading_scale, seconds_per_tick)
 from sensors.magnetometer_calibration import calibrated
 from sensors.recording import Recording, kind_in_words
 from sensors.recording_keys import axes_matrix, axes_names, choice, known_keys, refuse
@@ -192,6 +192,8 @@ def _part(path: Path, name: str, declaration: dict, sections: dict, read: dict,
                       declaration.get("time_unit", "s"), channels.get("magnetometer"))
     for sensor, values in channels.items():
         _check_axes(path, sensor, gyro, values, 1.0 / rate, sections[sensor])
+    if "accelerometer" in channels:
+        check_gyro_axes(path, gyro, channels, 1.0 / rate, sections["gyro"])
     reference = np.full((len(gyro_time), 4), np.nan)
     if "reference" in read:
         reference = declared_reference(path, gyro_time, *read["reference"], sections["reference"])

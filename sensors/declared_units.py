@@ -21,9 +21,11 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS
 from sensors.recording import VECTOR_LIMITS
 from sensors.recording_keys import refuse
-from sensors.turning import (MIRRORED_CORRELATION, TURNING_CORRELATION, TURNING_FACTOR,
-                             TURNING_WINDOW_S, field_correlation, gravity_turning,
-                             reference_fit, reference_fits, reference_scale, turning_scale)
+from sensors.recording_keys import axes_matrix, axes_names
+from sensors.turning import (AXES_THRESHOLDS, MIRRORED_CORRELATION, TURNING_CORRELATION,
+                             TURNING_FACTOR, TURNING_WINDOW_S, field_correlation,
+                             gravity_turning, rates_fit, reference_fit, reference_fits,
+                             reference_scale, turning_scale)
 
 #: Each time unit in seconds; ``time_unit`` may also be a number, the
 #: seconds of one tick of the times (an Xsens ``SampleTimeFine``: 1e-4).
@@ -194,6 +196,29 @@ def check_turning(path: Path, rates: np.ndarray, specific_force: np.ndarray, dt:
     key, value, hint = scale_hint(path, scale, section["unit"], time_unit)
     refuse(path, key, value, f"makes the gyro turn gravity {_as_fast(1 / scale)} the "
             f"accelerometer sees it turn{hint}")
+
+
+def check_gyro_axes(path: Path, rates: np.ndarray, channels: dict, dt: float,
+                    section: dict) -> None:
+    """Refuse a gyro whose axes turn gravity unlike the accelerometer sees
+    it turn, where another order of the gyro's turns it as it does, and the
+    field too where a magnetometer reads it (the other sensors' axes having
+    passed their own checks: the gyro is the one out of their frame, a
+    logger's x and y swapped in its file; it had scored 120° with no word)."""
+    fit = rates_fit(rates, channels["accelerometer"], dt)
+    field = channels.get("magnetometer")
+    if fit is None or (field is not None and (field_correlation(rates @ fit[1].T, field, dt)
+                                              or 0.0) < AXES_THRESHOLDS["magnetometer"][1]):
+        return
+    declared, better, correlation = fit
+    given = section.get("axes", ["x", "y", "z"])
+    names = axes_names(better @ axes_matrix(given, f"{path.name}: recording.gyro.axes"))
+    others = "the accelerometer's and the magnetometer's" if field is not None else \
+        "the accelerometer's (or its axes are the gyro's in another order)"
+    refuse(path, "recording.gyro.axes", given, f"turn gravity unlike the accelerometer sees it "
+           f"turn (their turning correlates {declared:.2f}); axes = "
+           f"[{', '.join(repr(n).replace(chr(39), chr(34)) for n in names)}] turns it, and "
+           f"{others} readings, as they turn ({correlation:.2f})")
 
 
 def clock_turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> tuple:

@@ -204,6 +204,28 @@ def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
     return (declared, ORDERS[index], best) if best >= thresholds[1] else None
 
 
+def rates_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
+              thresholds: tuple = (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE)):
+    """:func:`axes_fit` the other way: ``(declared, better, its
+    correlation)``, ``better`` the reordering of the gyro's axes (rates
+    ``better @ ω``) under which ``vectors`` turn as the rates predict, far
+    better than as declared; None where the declared axes fit, or too little
+    is seen. Its sign is the rates': a mirror turns the other way."""
+    turning = _turning(rates, vectors, dt, offset=True)
+    if turning is None or not np.any(turning[1]) or len(turning[0]) < MIN_BLOCKS:
+        return None
+    declared = _correlation(*turning)
+    if declared is None or declared >= thresholds[0]:
+        return None
+    fits = []
+    for order in ORDERS:
+        for signed in (order, -order):
+            found = _correlation(*_turning(rates @ signed.T, vectors, dt, offset=True))
+            fits.append((found if found is not None else -1.0, len(fits), signed))
+    best, _, better = max(fits, key=lambda fit: fit[:2])
+    return (declared, better, best) if best >= thresholds[1] else None
+
+
 def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
     """``(unexplained, rotation)``: the share of the reference's turning
     (scalar-first quaternions, body → world, NaN where none) that the

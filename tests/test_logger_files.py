@@ -648,7 +648,7 @@ def test_times_printed_coarser_than_the_clock_are_spread(trial, tmp_path):
 # -- a second audit's findings (phone loggers) -----------------------------------
 
 def _handheld_log(folder, seed: int, rate_hz: float, rate_rms_dps: float = 60.0,
-                  gyro_scale: float = 1.0, moving_s: float = 20.0):
+                  gyro_scale: float = 1.0, moving_s: float = 20.0, field: bool = False):
     """A hand-held recording (``moving_s`` of movement) as one table (t, gyro, accelerometer, no
     field or reference) and its declaration (gyro in rad/s): the columns'
     frame and the declaration's text."""
@@ -660,13 +660,16 @@ def _handheld_log(folder, seed: int, rate_hz: float, rate_rms_dps: float = 60.0,
     import pandas as pd
     frame = pd.DataFrame({"t": np.arange(recording.n_samples) / rate_hz})
     for prefix, channel in (("g", recording.gyro_radps * gyro_scale),
-                            ("a", recording.accelerometer_mps2)):
+                            ("a", recording.accelerometer_mps2), ("m", recording.magnetometer_uT)):
         for i, axis in enumerate("xyz"):
             frame[prefix + axis] = channel[:, i]
     folder.mkdir(parents=True, exist_ok=True)
     text = ('[recording]\nfile = "log.csv"\n[recording.gyro]\ntime = "t"\n'
             'columns = ["gx", "gy", "gz"]\nunit = "rad/s"\n[recording.accelerometer]\n'
             'time = "t"\ncolumns = ["ax", "ay", "az"]\nunit = "m/s^2"\n')
+    if field:
+        text += ('[recording.magnetometer]\ntime = "t"\ncolumns = ["mx", "my", "mz"]\n'
+                 'unit = "uT"\n')
     return frame, text
 
 
@@ -722,3 +725,22 @@ def test_two_lost_gyro_samples_are_put_back_not_a_new_trial(tmp_path):
     with pytest.warns(UserWarning, match="2 gyro sample"):
         parts = load_parts(tmp_path / "log.toml")
     assert len(parts) == 1 and parts[0].n_samples == len(frame)
+
+
+@pytest.mark.parametrize("field", [True, False])
+def test_a_gyro_with_two_columns_swapped_is_refused_with_the_axes_that_fit(tmp_path, field):
+    # Only the accelerometer's and the magnetometer's orders were tried: a
+    # gyro with x and y swapped in its file turned gravity at 0.53 of the
+    # gyro's prediction, which passes, and scored 120° with no word. Now the
+    # gyro's orders are tried too, and the one that turns the other sensors'
+    # readings as they turn is named (with the field too where it is read;
+    # without it the accelerometer's own order is the other explanation).
+    frame, text = _handheld_log(tmp_path, 2, 200.0, field=field)
+    frame.to_csv(tmp_path / "log.csv", index=False)
+    (tmp_path / "log.toml").write_text(text)
+    load_declared(tmp_path / "log.toml")                      # as logged: it loads
+    (tmp_path / "log.toml").write_text(text.replace('["gx", "gy", "gz"]', '["gy", "gx", "gz"]'))
+    others = "magnetometer's readings" if field else "or its axes are the gyro's"
+    with pytest.raises(InvalidParameterError,
+                       match=rf'recording\.gyro\.axes.*axes = \["y", "x", "z"\].*{others}'):
+        load_declared(tmp_path / "log.toml")
