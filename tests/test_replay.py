@@ -228,3 +228,40 @@ def test_a_settings_file_overrides_what_the_recording_sets(tmp_path, capsys):
                                        "[estimators.NAME] sections may be given here; the "
                                        "rest is set for you\n")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_rest_before_the_reference_begins_is_the_rest(tmp_path):
+    # A logger's recording at rest for 5 s, moving from then on, its
+    # reference from 7 s: the rest found (VQF's, from the first sample) is
+    # where the gyro's bias and noise are taken, not everything before the
+    # reference (which took the turning of 5-7 s for a bias of 20 deg/s, and
+    # left the filters the default noise).
+    import math
+    import pandas as pd
+    from benchmarks.experiments.replay import load_replay
+    from dynamics.handheld import HandheldMotion
+    from sensors.handheld import simulated_recording
+    recording = simulated_recording(2, HandheldMotion(rate_hz=200.0, rest_s=5.0, moving_s=25.0,
+                                                      final_rest_s=2.0))
+    n = recording.n_samples
+    frame = pd.DataFrame({"t": np.arange(n) / 200.0})
+    for i, axis in enumerate("xyz"):
+        frame["g" + axis] = recording.gyro_radps[:, i]
+        frame["a" + axis] = recording.accelerometer_mps2[:, i]
+    reference = recording.reference_quat.copy()
+    reference[:7 * 200] = np.nan
+    for i, part in enumerate("wxyz"):
+        frame["q" + part] = reference[:, i]
+    frame.to_csv(tmp_path / "log.csv", index=False)
+    (tmp_path / "log.toml").write_text(
+        '[recording]\nfile = "log.csv"\n[recording.gyro]\ntime = "t"\n'
+        'columns = ["gx", "gy", "gz"]\nunit = "rad/s"\n[recording.accelerometer]\ntime = "t"\n'
+        'columns = ["ax", "ay", "az"]\nunit = "m/s^2"\n[recording.reference]\ntime = "t"\n'
+        'columns = ["qw", "qx", "qy", "qz"]\norder = "wxyz"\n')
+    with pytest.warns(UserWarning, match="are at rest"):
+        data = load_replay(str(tmp_path / "log.toml"))
+    at_rest = recording.gyro_radps[:4 * 200].mean(axis=0)       # well inside the rest
+    assert np.abs(np.degrees(data.rest_bias_radps - at_rest)).max() < 0.02
+    noise = float(np.mean(recording.gyro_radps[:4 * 200].var(axis=0))) * recording.dt
+    assert data.scenario.gyro_noise == pytest.approx(noise, rel=0.2)
+    assert math.isfinite(data.scenario.gyro_noise)

@@ -118,8 +118,9 @@ def with_found_rest(recording: Recording) -> Recording:
                   f"{' and the accelerometer' if recording.accelerometer_mps2 is not None else ''}"
                   " still within VQF's thresholds): the gyro's noise and bias are taken there "
                   "and the movement is scored after it", stacklevel=2)
-    return replace(recording, movement=recording.movement & (np.arange(recording.n_samples)
-                                                              >= end))
+    # movement from the rest's end on (scored where the reference is): the
+    # rest is the samples before it, even where the reference begins later
+    return replace(recording, movement=np.arange(recording.n_samples) >= end)
 
 
 def dataset_source(dataset: str) -> tuple:
@@ -163,7 +164,7 @@ def interval_steps(recording: Recording, interval_s: float) -> int:
 
 
 def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S,
-                    noise_deg: float = DEFAULT_NOISE_DEG) -> Scenario:
+                    noise_deg: float = DEFAULT_NOISE_DEG, rest=None) -> Scenario:
     """The scenario that configures every estimator for ``recording``.
 
     ``noise_deg`` must be positive: the filters weigh each reading by its
@@ -180,7 +181,9 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
     bias, which it cannot estimate, causes over a reading interval (derived
     from the rest phase and the interval, not tuned on the movement), the
     six-state filters with a bias prior wide enough for
-    a MEMS gyro (:data:`INITIAL_BIAS_SIGMA_RADPS`).
+    a MEMS gyro (:data:`INITIAL_BIAS_SIGMA_RADPS`). ``rest``: the gyro's
+    samples at rest, where they are not the recording's own (a rest before
+    its reference begins, cut off with it).
     """
     steps = interval_steps(recording, interval_s)
     noise_deg = finite_number("star_tracker_noise_deg", noise_deg, strictly_positive=True)
@@ -189,10 +192,10 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
                                     f"must be at most {MAX_NOISE_DEG:g}°: beyond it a reading "
                                     "says nothing of the attitude")
     dt = recording.dt
-    rest = recording.gyro_radps[recording.rest_samples]
+    rest = recording.gyro_radps[recording.rest_samples] if rest is None else rest
     noise_power = (float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1
                    else GYRO_NOISE_DENSITY ** 2)
-    bias = recording.rest_gyro_mean_radps() if len(rest) else np.zeros(3)
+    bias = rest.mean(axis=0) if len(rest) else np.zeros(3)
     sigma_rad = math.radians(noise_deg)
     # The EKF's Q per step on each quaternion component: the gyro noise,
     # (dt/2)² σ_ω², plus the drift of the bias it cannot estimate, as a random
@@ -297,9 +300,13 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
+    whole_rest = recording.gyro_radps[recording.rest_samples]
     start = int(np.argmax(recording.has_reference))
     recording = recording.from_sample(start)
-    scenario = replay_scenario(recording, interval_s, noise_deg)
+    # the rest within the scored part; where the reference begins after it, the rest before
+    own_rest = recording.gyro_radps[recording.rest_samples]
+    scenario = replay_scenario(recording, interval_s, noise_deg,
+                               own_rest if len(own_rest) > 1 else whole_rest)
     if settings is not None:
         scenario = scenario.with_estimator_settings(settings, allow_imports=allow_imports)
     readings = pseudo_star_tracker(recording, scenario, seed)
