@@ -144,9 +144,20 @@ def check_field_north(path: Path, reference: np.ndarray, field: np.ndarray) -> N
     if np.count_nonzero(seen) < 2:
         return
     from dynamics.quaternion import to_rotation
-    east, north = np.median(to_rotation(reference[seen]).apply(field[seen])[:, :2], axis=0)
+    horizontal = to_rotation(reference[seen]).apply(field[seen])[:, :2]
+    east, north = np.median(horizontal, axis=0)
     azimuth = float(np.degrees(np.arctan2(east, north)))
-    if abs(azimuth) > NORTH_TOLERANCE_DEG:
+    # A room's north is one azimuth; a magnetometer's own iron turns with the
+    # body, and the field it reads, turned into the world, wanders with it.
+    heading = np.exp(1j * np.arctan2(horizontal[:, 0], horizontal[:, 1]))
+    wander = float(np.degrees(np.sqrt(-2.0 * np.log(max(abs(heading.mean()), 1e-12)))))
+    if wander > NORTH_TOLERANCE_DEG:
+        warnings.warn(f"{path.name}: recording.magnetometer: the field, turned into the "
+                      f"world by the reference, wanders by {wander:.0f}° (circular spread) as "
+                      "the body turns: the magnetometer's own iron (calibrate = true in "
+                      "[recording.magnetometer] fits it), or a room of steel",
+                      stacklevel=3)
+    elif abs(azimuth) > NORTH_TOLERANCE_DEG:
         warnings.warn(f"{path.name}: recording.reference: the field points {azimuth:.0f}° "
                       "from its world's north (the magnetic declination, within "
                       f"±{NORTH_TOLERANCE_DEG:.0f}° almost everywhere, aside): its heading is "

@@ -744,3 +744,37 @@ def test_a_gyro_with_two_columns_swapped_is_refused_with_the_axes_that_fit(tmp_p
     with pytest.raises(InvalidParameterError,
                        match=rf'recording\.gyro\.axes.*axes = \["y", "x", "z"\].*{others}'):
         load_declared(tmp_path / "log.toml")
+
+
+def test_a_hard_iron_is_said_to_be_the_magnetometers_not_the_references_north(tmp_path):
+    # A magnetometer with its own iron (117 % of the field) beside a true
+    # reference: the field turned into the world wanders as the body turns,
+    # which a room's north (one azimuth) does not; the note had blamed the
+    # reference's north (62° off) and never named calibrate = true.
+    from dynamics.handheld import HandheldMotion
+    from sensors.handheld import simulated_recording
+    recording = simulated_recording(2, HandheldMotion(rate_hz=100.0, rest_s=3.0, moving_s=30.0,
+                                                      final_rest_s=2.0))
+    import pandas as pd
+    frame = pd.DataFrame({"t": np.arange(recording.n_samples) / 100.0})
+    field = recording.magnetometer_uT + np.array([-20.0, 30.0, -45.0])
+    for prefix, channel in (("g", recording.gyro_radps), ("a", recording.accelerometer_mps2),
+                            ("m", field), ("q", recording.reference_quat)):
+        for i in range(channel.shape[1]):
+            frame[f"{prefix}{i}"] = channel[:, i]
+    frame.to_csv(tmp_path / "log.csv", index=False)
+    text = ('[recording]\nfile = "log.csv"\n[recording.gyro]\ntime = "t"\n'
+            'columns = ["g0", "g1", "g2"]\nunit = "rad/s"\n[recording.accelerometer]\n'
+            'time = "t"\ncolumns = ["a0", "a1", "a2"]\nunit = "m/s^2"\n'
+            '[recording.magnetometer]\ntime = "t"\ncolumns = ["m0", "m1", "m2"]\nunit = "uT"\n'
+            '[recording.reference]\ntime = "t"\ncolumns = ["q0", "q1", "q2", "q3"]\n'
+            'order = "wxyz"\n')
+    (tmp_path / "log.toml").write_text(text)
+    with pytest.warns(UserWarning, match=r"wanders by \d+° .*calibrate = true") as caught:
+        load_declared(tmp_path / "log.toml")
+    assert not any("from its world's north" in str(w.message) for w in caught)
+    calibrated = text.replace('unit = "uT"\n', 'unit = "uT"\ncalibrate = true\n')
+    (tmp_path / "log.toml").write_text(calibrated)
+    with pytest.warns(UserWarning) as caught:
+        load_declared(tmp_path / "log.toml")
+    assert not any("wanders" in str(w.message) for w in caught)
