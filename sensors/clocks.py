@@ -96,20 +96,29 @@ def dequantized(times: np.ndarray) -> np.ndarray:
 MENDED_SHARE = 0.01
 
 
+def repeated_rows(times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the rows that repeat the one before them, their time
+    and every value (a row of empty cells repeats none)."""
+    return np.concatenate([[False], (np.diff(times) == 0)
+                           & np.all(values[1:] == values[:-1], axis=1)])
+
+
 def mended(times: np.ndarray, values: np.ndarray) -> tuple:
     """``(times, values, rows dropped, rows moved)``: a row that repeats the
-    one before it (time and values) dropped, and rows written out of turn
-    put in their time's order, where they are few (:data:`MENDED_SHARE`) and
-    near; otherwise as they are (the check that times increase names them)."""
-    steps = np.diff(times)
-    back = steps <= 0
-    if not back.any() or back.mean() > MENDED_SHARE or len(times) < 3:
+    one before it (time and values) dropped, however many (a logger that
+    writes rows twice: nothing is lost), and rows written out of turn put in
+    their time's order, where they are few (:data:`MENDED_SHARE`) and near;
+    otherwise as they are (the check that times increase names them)."""
+    if len(times) < 3:
         return times, values, 0, 0
-    typical = np.median(steps[~back])
-    if np.any(steps < -GAP_FACTOR * typical):
-        return times, values, 0, 0
-    repeated = np.concatenate([[False], (steps == 0) & np.all(values[1:] == values[:-1], axis=1)])
+    repeated = repeated_rows(times, values)
     kept_times, kept = times[~repeated], values[~repeated]
+    steps = np.diff(kept_times)
+    back = steps <= 0
+    if not back.any():
+        return kept_times, kept, int(np.count_nonzero(repeated)), 0
+    if back.mean() > MENDED_SHARE or np.any(steps < -GAP_FACTOR * np.median(steps[~back])):
+        return times, values, 0, 0
     order = np.argsort(kept_times, kind="stable")
     if np.any(np.diff(kept_times[order]) <= 0):      # a time read twice apart: not mended
         return times, values, 0, 0

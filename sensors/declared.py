@@ -53,7 +53,7 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from sensors.clocks import (GAP_FACTOR, IRREGULAR_SHARE, clock_fit, clock_period, dequantized,
-                            mended, part_starts, unwrapped)
+                            mended, part_starts, repeated_rows, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
 from sensors.declared_units import (UNITS, canonical_unit, check_gyro_axes, check_norm,
@@ -260,16 +260,21 @@ def _sensor(path: Path, table: dict, name: str, section, time_scale: float, orig
                 f"is not a key of the {name}'s section; known: {', '.join(sorted(known))}")
     printed = _column(path, table, f"{key}.time", section.get("time"), origin,
                       time=True) * time_scale
+    width = 4 if name == "reference" and "sequence" not in section else 3
+    values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
+    if len(values) != len(printed):
+        refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
+                f"its time column {section.get('time')!r} holds {len(printed)}")
+    kept = ~repeated_rows(printed, values)      # rows written twice: before the times' print
+    printed, values = printed[kept], values[kept]
     times = dequantized(printed)
     if name == "gyro" and times is not printed:
         warnings.warn(f"{path.name}: {key}.time: {np.mean(np.diff(printed) == 0):.0%} of its "
                       "times repeat the one before (printed coarser than the clock ticks): "
                       "each run of equal times is spread evenly to the next", stacklevel=3)
-    width = 4 if name == "reference" and "sequence" not in section else 3
-    values = _columns(path, table, f"{key}.columns", section.get("columns"), width)
-    if len(values) != len(times):
-        refuse(path, f"{key}.columns", section.get("columns"), f"hold {len(values)} rows; "
-                f"its time column {section.get('time')!r} holds {len(times)}")
+    if not kept.all():
+        warnings.warn(f"{path.name}: {key}: {np.count_nonzero(~kept)} row(s) repeating the one "
+                      "before dropped", stacklevel=3)
     if width == 4:            # a quaternion of zeros: a frame the markers were not seen
         values[np.all(values == 0.0, axis=1)] = np.nan
     times, values = _readings(path, key, section, times, values)

@@ -778,3 +778,21 @@ def test_a_hard_iron_is_said_to_be_the_magnetometers_not_the_references_north(tm
     with pytest.warns(UserWarning) as caught:
         load_declared(tmp_path / "log.toml")
     assert not any("wanders" in str(w.message) for w in caught)
+
+
+def test_rows_written_twice_are_dropped_however_many(tmp_path):
+    # A logger that writes a third of its rows twice (time and values): each
+    # repeat dropped and said, the recording the one written once. Above 1 %
+    # they had been refused as times going back.
+    from sensors.declared import load_parts
+    frame, text = _handheld_log(tmp_path, 2, 100.0)
+    frame.to_csv(tmp_path / "once.csv", index=False)
+    (tmp_path / "once.toml").write_text(text.replace("log.csv", "once.csv"))
+    twice = frame.loc[np.repeat(frame.index, np.where(frame.index % 3 == 0, 2, 1))]
+    twice.to_csv(tmp_path / "log.csv", index=False)
+    (tmp_path / "log.toml").write_text(text)
+    with pytest.warns(UserWarning, match="row\\(s\\) repeating the one before dropped"):
+        (loaded,) = load_parts(tmp_path / "log.toml")
+    (once,) = load_parts(tmp_path / "once.toml")
+    assert np.array_equal(loaded.gyro_radps, once.gyro_radps)
+    assert np.array_equal(loaded.accelerometer_mps2, once.accelerometer_mps2)
