@@ -251,3 +251,19 @@ def test_a_reference_that_does_not_turn_with_the_gyro_is_not_said_to():
                                                       (recording.n_samples, 1)))
     assert _reference_turning(held).startswith("reference: does not turn as the gyro does")
     assert _reference_turning(recording).startswith("reference: turns as the gyro does")
+
+
+@pytest.mark.parametrize("columns, runs", [
+    (["timestamp_ms", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"],
+     "then run: attitude-bench broad --broad"),
+    (["timestamp_ms", "gyro_x", "gyro_y", "gyro_z", "quat_x", "quat_y", "quat_z", "quat_w"],
+     "then run: attitude-bench replay --dataset"),
+    (["timestamp_ms", "gyro_x", "gyro_y", "gyro_z"], "a gyro alone runs with nothing here")])
+def test_inspect_names_the_command_that_runs_what_the_file_holds(phone_csv, tmp_path, capsys,
+                                                                 columns, runs):
+    # broad needs an accelerometer and replay a reference: a gyro and a
+    # reference were told to run broad, which refused them.
+    pd.read_csv(phone_csv[0])[columns].to_csv(tmp_path / "log.csv", index=False)
+    assert main(["inspect", str(tmp_path / "log.csv")]) == 0
+    assert runs in capsys.readouterr().out
+    assert runs.replace("then run: ", "") in (tmp_path / "log.toml").read_text()

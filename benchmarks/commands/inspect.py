@@ -34,7 +34,7 @@ def run(args, _scenario):
                                   sensor_tables)
     from sensors.tables import read_table
     from benchmarks.experiments.inspection import (declaration_toml, findings,
-                                                   guess_declaration, loaded_guess)
+                                                   guess_declaration, loaded_guess, next_step)
     if not args.file.is_file():
         raise UsageError(f"file = {str(args.file)!r}: is not a file")
     declared = args.file.suffix.lower() == ".toml"
@@ -72,8 +72,7 @@ def run(args, _scenario):
         write_text(target, declaration_toml(declaration, args.file.name, parts is not None))
         if parts is None:     # a skeleton to complete: said, and not a success
             raise UsageError(f"wrote {target}, which does not load as suggested (the note "
-                             f"above): complete it by hand, then run: {PROG} broad --broad "
-                             f"{shlex.quote(str(target))}")
-        print(f"wrote {target}: check it, then run: {PROG} broad --broad "
-              f"{shlex.quote(str(target))}")
+                             "above): complete it by hand, "
+                             + next_step(declaration, shlex.quote(str(target))))
+        print(f"wrote {target}: check it, {next_step(declaration, shlex.quote(str(target)))}")
     return None

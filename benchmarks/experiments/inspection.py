@@ -223,13 +223,27 @@ def _told_by_turning(parts) -> bool:
     return any(fit is not None for fit in fits) and all(map(reference_fits, fits))
 
 
+def next_step(declaration: dict, target: str) -> str:
+    """What to do with a suggested declaration (at ``target``): run it with
+    ``broad`` where it has an accelerometer, with ``replay`` where it has a
+    gyro and a reference only; a gyro alone runs with neither."""
+    if "accelerometer" in declaration:
+        return f"then run: attitude-bench broad --broad {target}"
+    if "reference" in declaration:
+        return f"then run: attitude-bench replay --dataset {target}"
+    return ("a gyro alone runs with nothing here: declare its accelerometer (then: "
+            f"attitude-bench broad --broad {target}) or its reference attitude (then: "
+            f"attitude-bench replay --dataset {target})")
+
+
 def declaration_toml(declaration: dict, source: str, loads: bool = True) -> str:
     """``declaration`` as the ``[recording]`` file a user edits (where it
     does not ``loads`` yet, a skeleton to complete, and it says so)."""
+    step = next_step(declaration, "THIS_FILE")
     lines = [f"# The [recording] that attitude-bench inspect suggests for {source}:",
-             "# check each column and unit, then run: attitude-bench broad --broad THIS_FILE"
+             f"# check each column and unit, {step}"
              if loads else "# it does not load as it is: complete what inspect could not "
-             "tell (its notes), then run: attitude-bench broad --broad THIS_FILE",
+             f"tell (its notes), {step}",
              "[recording]"]
     lines += [f"{key} = {_toml(value)}" for key, value in declaration.items()
               if not isinstance(value, dict)]
