@@ -106,9 +106,8 @@ class PeerFilter(MagneticFrame, AttitudeEstimator):
                     or all(np.all(v.available) for v in vectors)):
             return None
         n = len(omega_meas_radps)
+        read = {name: np.asarray(vector.available, dtype=bool) for name, vector in found.items()}
         # a 6-axis IMU: no field reading at any sample, the zeros the peers ignore
-        read = {name: (np.asarray(found[name].available, dtype=bool) if name in found
-                       else np.zeros(n, dtype=bool)) for name in ("accelerometer", "magnetometer")}
         acc, mag = (np.zeros((n, 3)) if name not in found
                     else held_from_first(found[name].body, read[name]) if self.holds_readings
                     else np.where(read[name][:, None], found[name].body, 0.0)

@@ -12,8 +12,8 @@ import numpy as np
 
 from dynamics.validation import InvalidParameterError
 from sensors.recording_keys import choice, refuse
-from sensors.turning import (clock_offset, first_fitting, reference_advice, reference_fit,
-                             reference_fits, reference_problem)
+from sensors.turning import (clock_offset, first_fitting, offset_advice, reference_advice,
+                             reference_fit, reference_fits, reference_problem)
 
 #: The reference is interpolated between readings at most this many of its
 #: typical intervals apart (a longer one is a gap: the markers were not seen).
@@ -119,11 +119,8 @@ def _note_clock_offset(path: Path, fit, rates: np.ndarray, reference: np.ndarray
     found = clock_offset(rates, reference, dt)
     if found is None or abs(found[0]) < dt / 2 or found[1] > fit[0] / 2:
         return
-    warnings.warn(f"{path.name}: recording.reference: its clock "
-                  f"{abs(found[0]) * 1e3:.0f} ms {'behind' if found[0] > 0 else 'ahead of'} the "
-                  f"gyro's would explain more of its turning ({fit[0] * 100:.1f} % "
-                  f"unexplained, {found[1] * 100:.1f} % then): every score includes that offset",
-                  stacklevel=3)
+    warnings.warn(f"{path.name}: recording.reference: it fits, {fit[0] * 100:.1f} % of its "
+                  f"turning unexplained; {offset_advice(found)}", stacklevel=3)
 
 
 def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarray,

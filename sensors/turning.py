@@ -192,16 +192,8 @@ def axes_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
     to say; ``thresholds``: (declared below, another order above), a
     magnetometer's by default (:data:`AXES_THRESHOLDS`). A constant offset
     (a hard iron) is fitted with each order."""
-    turning = _turning(rates, vectors, dt, offset=True)
-    if turning is None or not np.any(turning[1]) or len(turning[0]) < MIN_BLOCKS:
-        return None                   # too few blocks: a correlation by chance
-    declared = _correlation(*turning)
-    if declared is None or declared >= thresholds[0]:
-        return None
-    fits = [(_correlation(*_turning(rates, vectors @ order.T, dt, offset=True)) or -1.0, index)
-            for index, order in enumerate(ORDERS)]
-    best, index = max(fits)
-    return (declared, ORDERS[index], best) if best >= thresholds[1] else None
+    return _better_order(rates, vectors, dt, thresholds, ORDERS,
+                         lambda order: (rates, vectors @ order.T))
 
 
 def rates_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
@@ -211,19 +203,27 @@ def rates_fit(rates: np.ndarray, vectors: np.ndarray, dt: float,
     ``better @ ω``) under which ``vectors`` turn as the rates predict, far
     better than as declared; None where the declared axes fit, or too little
     is seen. Its sign is the rates': a mirror turns the other way."""
+    signed = [sign * order for order in ORDERS for sign in (1, -1)]
+    return _better_order(rates, vectors, dt, thresholds, signed,
+                         lambda order: (rates @ order.T, vectors))
+
+
+def _better_order(rates: np.ndarray, vectors: np.ndarray, dt: float, thresholds: tuple,
+                  orders: list, reordered):
+    """What :func:`axes_fit` and :func:`rates_fit` share: the declared
+    turning's correlation and, below ``thresholds[0]``, the one of
+    ``orders`` whose ``reordered(order)`` (rates, vectors) correlates best,
+    where it reaches ``thresholds[1]``."""
     turning = _turning(rates, vectors, dt, offset=True)
     if turning is None or not np.any(turning[1]) or len(turning[0]) < MIN_BLOCKS:
-        return None
+        return None                   # too few blocks: a correlation by chance
     declared = _correlation(*turning)
     if declared is None or declared >= thresholds[0]:
         return None
-    fits = []
-    for order in ORDERS:
-        for signed in (order, -order):
-            found = _correlation(*_turning(rates @ signed.T, vectors, dt, offset=True))
-            fits.append((found if found is not None else -1.0, len(fits), signed))
-    best, _, better = max(fits, key=lambda fit: fit[:2])
-    return (declared, better, best) if best >= thresholds[1] else None
+    fits = [(_correlation(*_turning(*reordered(order), dt, offset=True)) or -1.0, index)
+            for index, order in enumerate(orders)]
+    best, index = max(fits)
+    return (declared, orders[index], best) if best >= thresholds[1] else None
 
 
 def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
@@ -324,6 +324,12 @@ def reference_advice(fit, rates: np.ndarray, reference_quat: np.ndarray, dt: flo
     found = clock_offset(rates, reference_quat, dt)
     if found is None or found[1] > REFERENCE_UNEXPLAINED or abs(found[0]) < dt / 2:
         return REFERENCE_ADVICE
+    return offset_advice(found)
+
+
+def offset_advice(found: tuple) -> str:
+    """What an offset :func:`clock_offset` ``found`` says of a reference's
+    clock, in words."""
     offset_s, unexplained = found
     return (f"its clock {abs(offset_s) * 1e3:.0f} ms {'behind' if offset_s > 0 else 'ahead of'} "
             f"the gyro's would explain it ({unexplained * 100:.1f} % unexplained then): every "

@@ -26,7 +26,7 @@ import pandas as pd
 
 from benchmarks.broad.agreement import AGAINST, AGAINST_LEVELLED, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
-from benchmarks.broad.inputs import imu_inputs, scored_metric
+from benchmarks.broad.inputs import heading_scored, imu_inputs
 from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
     scored_samples, unscored_reason, without_heading
@@ -127,7 +127,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
         run = run_recorded(estimator, sensors.omega_meas_radps, sensors.vectors)
         seconds = time.perf_counter() - start
         errors = errors_deg(run.estimates, recording.reference_quat)
-        heading = scored_metric(type(estimator), recording) == "total_rmse_deg"
+        heading = heading_scored(type(estimator), recording)
         scores = _scores(errors, run, recording.reference_quat, movement, heading)
         rows.append({"trial": trial, "estimator": name, "mode": estimator.mode, **scores,
                      "us_per_sample": 1e6 * seconds / recording.n_samples,

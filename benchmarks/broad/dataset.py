@@ -22,7 +22,7 @@ import functools
 import json
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +70,8 @@ class BroadDataset:
     trials: dict                 # name → {"description": str, "groups": [names]}
     files: dict                  # name → path, the trials present
     parameter: str = "broad"     # the flag that gave the folder, for errors
+    #: trial → whether it has a magnetometer, found once (:meth:`sensors`)
+    _fields: dict = field(default_factory=dict, compare=False, repr=False)
 
     @functools.cached_property
     def attribution(self) -> str:
@@ -106,8 +108,11 @@ class BroadDataset:
         an accelerometer is refused). Trials with and without one are
         refused together: the ones are scored on their total error, the
         others on their inclination, which no mean may mix."""
-        without = [trial for trial in trials if self.files[trial].suffix in (".toml", ".npz")
-                   and self.load(trial).magnetometer_uT is None]
+        for trial in trials:
+            if trial not in self._fields:
+                self._fields[trial] = self.files[trial].suffix not in (".toml", ".npz") or \
+                    self.load(trial).magnetometer_uT is not None
+        without = [trial for trial in trials if not self._fields[trial]]
         if without and len(without) < len(trials):
             raise InvalidParameterError(
                 "trials" if self.parameter == "broad" else self.parameter,
@@ -165,10 +170,12 @@ class BroadDataset:
     def load(self, name: str) -> Recording:
         """Trial ``name`` as a checked recording with its accelerometer (and
         its magnetometer, where it has one: a 6-axis IMU's heading is its
-        gyro's, :func:`~benchmarks.broad.inputs.heading_reference`), and a rest the estimators can be configured and
-        started from (:func:`~benchmarks.broad.inputs.runnable_rule`); a note
-        (a warning) says how many readings are dropouts (exactly zero,
-        left out) and where the start was taken if not at the first sample."""
+        gyro's, :func:`~benchmarks.broad.inputs.heading_reference`), from the
+        sample the estimators can be started at
+        (:func:`~benchmarks.broad.inputs.runnable_rule`,
+        :func:`~benchmarks.broad.trial_notes.from_start`); notes (warnings)
+        say how many readings are dropouts (exactly zero, left out) and how
+        many samples come before the start."""
         path = self.files[name]
         # The file as the folder holds it: a long path would be cut short in
         # the message, and the trial's name with it.

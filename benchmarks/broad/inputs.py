@@ -161,12 +161,18 @@ def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
+def heading_scored(cls, recording: Recording) -> bool:
+    """Whether estimator class ``cls`` is scored on its heading on
+    ``recording``: it has a heading reference there
+    (:func:`heading_reference`, :func:`estimators.sensing.heading_observed`)."""
+    return heading_reference(recording) and sensing.heading_observed(cls, channels(recording))
+
+
 def scored_metric(cls, recording: Recording) -> str:
     """The RMSE that scores estimator class ``cls`` on ``recording``: the
-    total, or the inclination's where it has no heading reference there
-    (:func:`heading_reference`, :func:`estimators.sensing.heading_observed`)."""
-    heading = heading_reference(recording) and sensing.heading_observed(cls, channels(recording))
-    return "total_rmse_deg" if heading else "inclination_rmse_deg"
+    total, or the inclination's where its heading is not scored
+    (:func:`heading_scored`)."""
+    return "total_rmse_deg" if heading_scored(cls, recording) else "inclination_rmse_deg"
 
 
 def start_pair(recording: Recording) -> tuple | None:
@@ -194,20 +200,20 @@ def start_sample(recording: Recording) -> int | None:
 
 
 def runnable_rule(recording: Recording) -> str | None:
-    """The rule ``recording`` (with both vector channels) breaks for the
+    """The rule ``recording`` (with its accelerometer) breaks for the
     estimators to be started on it (module docstring), in words; None if it
     breaks none."""
     if recording.n_samples < MIN_SAMPLES:
         return (f"has {recording.n_samples} sample{'s' * (recording.n_samples != 1)}; a trial "
                 f"needs at least {MIN_SAMPLES} to be run and scored")
-    if start_sample(recording) is None and not heading_reference(recording):
+    if start_sample(recording) is not None:
+        return None
+    if not heading_reference(recording):
         return "has no accelerometer reading that is not zero, which the start attitude's " \
             "inclination is taken from"
-    if start_sample(recording) is None:
-        return ("no accelerometer reading and magnetometer reading, the latest of each at a "
-                f"sample, are both non-zero and at least {MIN_SEPARATION_DEG:g}° apart, which "
-                "the start attitude is taken from")
-    return None
+    return ("no accelerometer reading and magnetometer reading, the latest of each at a "
+            f"sample, are both non-zero and at least {MIN_SEPARATION_DEG:g}° apart, which the "
+            "start attitude is taken from")
 
 
 def _checked_runnable(recording: Recording) -> None:
