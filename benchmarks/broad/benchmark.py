@@ -27,6 +27,7 @@ import pandas as pd
 from benchmarks.broad.agreement import AGAINST, AGAINST_LEVELLED, AGREEMENT, agreement_scores
 from benchmarks.broad.dataset import BroadDataset, trial_label
 from benchmarks.broad.inputs import heading_scored, imu_inputs
+from benchmarks.broad.trial_notes import note_magnetometer_delay
 from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
     scored_samples, unscored_reason, without_heading
@@ -112,6 +113,8 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
     ``second_half``, every estimator runs the whole trial and is scored on its
     second half only (``--tune halves`` tuned on the first)."""
     recording = dataset.load(trial)
+    if dataset.magnetometer_delay == 0.0:
+        note_magnetometer_delay(recording, dataset.files[trial])
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
     sensors = inputs.sensors
     readings = {v.sensor: int(np.count_nonzero(v.available)) for v in sensors.vectors}

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.broad.inputs import runnable_rule
-from benchmarks.broad.trial_notes import from_start, note_clipping, note_dropouts
+from benchmarks.broad.trial_notes import (from_start, magnetometer_timed, note_clipping,
+                                          note_dropouts)
 from benchmarks.broad.metric import scored_samples, unscored_reason
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
@@ -70,6 +71,9 @@ class BroadDataset:
     trials: dict                 # name → {"description": str, "groups": [names]}
     files: dict                  # name → path, the trials present
     parameter: str = "broad"     # the flag that gave the folder, for errors
+    #: how late each trial's magnetometer reads against its gyro: s, or
+    #: "auto" to fit it (:func:`~benchmarks.broad.trial_notes.magnetometer_timed`)
+    magnetometer_delay: object = 0.0
     #: trial → whether it has a magnetometer, found once (:meth:`sensors`)
     _fields: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -173,9 +177,10 @@ class BroadDataset:
         gyro's, :func:`~benchmarks.broad.inputs.heading_reference`), from the
         sample the estimators can be started at
         (:func:`~benchmarks.broad.inputs.runnable_rule`,
-        :func:`~benchmarks.broad.trial_notes.from_start`); notes (warnings)
-        say how many readings are dropouts (exactly zero, left out) and how
-        many samples come before the start."""
+        :func:`~benchmarks.broad.trial_notes.from_start`), its magnetometer's
+        readings at their samples' times (:attr:`magnetometer_delay`); notes
+        (warnings) say how many readings are dropouts (exactly zero, left
+        out), how many samples come before the start, and the delay fitted."""
         path = self.files[name]
         # The file as the folder holds it: a long path would be cut short in
         # the message, and the trial's name with it.
@@ -219,7 +224,8 @@ class BroadDataset:
         if path.suffix != ".toml":       # there, a sensor on its own clock reads at some samples
             note_dropouts(recording, path)
         note_clipping(recording, path)
-        return from_start(recording, path, refuse)
+        return magnetometer_timed(from_start(recording, path, refuse), self.magnetometer_delay,
+                                  path)
 
 
 def broad_folder(given: Path | None = None) -> Path:

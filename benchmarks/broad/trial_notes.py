@@ -1,16 +1,20 @@
 """What ``broad`` says of a trial as it loads it (:meth:`benchmarks.broad.
 dataset.BroadDataset.load`), once per trial: readings that are exactly
-zero, a channel at its rail, and the samples before the first an attitude
-can be taken at, which it leaves out (:func:`from_start`)."""
+zero, a channel at its rail, the samples before the first an attitude
+can be taken at, which it leaves out (:func:`from_start`), and how late its
+magnetometer reads against its gyro (:func:`magnetometer_timed`,
+:func:`note_magnetometer_delay`)."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
     usable_readings
+from sensors.delay import at_sample_times, delay_fit
 from sensors.recording import Recording
 
 _NOTED = set()
@@ -76,3 +80,49 @@ def from_start(recording: Recording, path: Path, refuse) -> Recording:
     if rule:
         refuse(rule)
     return recording
+
+
+def _fitted_delay(recording: Recording):
+    """The magnetometer's delay against the gyro (:func:`sensors.delay.delay_fit`),
+    where it is clear (:meth:`~sensors.delay.DelayFit.clear`); else None."""
+    field = recording.magnetometer_uT
+    fit = delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
+    return fit if fit is not None and fit.clear(recording.dt) else None
+
+
+def _delay_words(recording: Recording, fit) -> str:
+    return (f"trial {recording.name}: its magnetometer reads {abs(fit.delay_s) * 1e3:.1f} ± "
+            f"{fit.standard_error_s * 1e3:.1f} ms {'late' if fit.delay_s > 0 else 'early'} "
+            "against its gyro (fitted from how the field turns as the gyro says)")
+
+
+def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
+    """``recording`` with its magnetometer's readings taken at their samples'
+    times (:func:`sensors.delay.at_sample_times`): ``delay`` ``"auto"``
+    fits how late they are (said in a note; where the fit is not clear, the
+    readings are kept), a number is that many seconds late, 0 keeps the
+    recording as it is."""
+    if recording.magnetometer_uT is None or (delay != "auto" and delay == 0.0):
+        return recording
+    field, offset = recording.magnetometer_uT, np.zeros(3)
+    if delay == "auto":
+        fit = _fitted_delay(recording)
+        if fit is None:
+            note_once(path, f"trial {recording.name}: no clear delay of its magnetometer "
+                      "against its gyro (too little turning to time it): its readings kept")
+            return recording
+        note_once(path, _delay_words(recording, fit) + ": each reading taken at its "
+                  "sample's time")
+        delay, offset = fit.delay_s, fit.offset
+    read = np.any(field != 0.0, axis=1)
+    timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
+    return replace(recording, magnetometer_uT=timed)
+
+
+def note_magnetometer_delay(recording: Recording, path: Path) -> None:
+    """A note where ``recording``'s magnetometer reads clearly late or early
+    against its gyro, kept as it is (``--magnetometer-delay 0``)."""
+    fit = _fitted_delay(recording) if recording.magnetometer_uT is not None else None
+    if fit is not None:
+        note_once(path, _delay_words(recording, fit) + "; --magnetometer-delay auto takes "
+                  "each reading at its sample's time")

@@ -35,6 +35,7 @@ from benchmarks.output import progress, write_text
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
 from estimators import resolve_estimator
+from sensors.delay import delay_argument
 
 #: The estimators compared by default: ours, online and offline, and VQF's.
 DEFAULT_ESTIMATORS = ("mekf", "mekf-smoother", "vqf", "vqf-offline")
@@ -93,6 +94,8 @@ def script_parser(prog: str, doc: str) -> argparse.ArgumentParser:
                         "shipped trials)")
     parser.add_argument("--out", type=Path, default=Path("results"))
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--magnetometer-delay", type=delay_argument, default=0.0,
+                        metavar="SECONDS|auto", help="as broad's (default 0)")
     return parser
 
 
@@ -101,7 +104,8 @@ def trial_rows(args, name: str, scores, check=lambda: None):
     over its trials, ``check()`` first; None where the input is refused (one
     line on stderr, ``NAME: error: …``)."""
     try:
-        dataset = open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent)
+        dataset = replace(open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent),
+                          magnetometer_delay=args.magnetometer_delay)
         check()
         return dataset, [row for trial in progress(dataset.available, desc="trials",
                                                    quiet=args.quiet)
@@ -128,6 +132,10 @@ def simulated_rows(args, names):
         raise InvalidParameterError("--simulated", args.simulated, "cannot be given with --broad")
     if args.simulated < 1:
         raise InvalidParameterError("--simulated", args.simulated, "must be a whole number >= 1")
+    if args.magnetometer_delay != 0.0:
+        raise InvalidParameterError("--magnetometer-delay", args.magnetometer_delay,
+                                    "applies to recorded trials; the simulated magnetometer "
+                                    "reads on time")
     for name in names:
         resolve_estimator(name)
     return [row for seed in progress(range(args.simulated), desc="recordings", quiet=args.quiet)

@@ -4,6 +4,7 @@ case study reproduced (``--case-study``)."""
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from benchmarks.commands.options import (PROG, UsageError, add_divergence_option,
@@ -11,6 +12,7 @@ from benchmarks.commands.options import (PROG, UsageError, add_divergence_option
                                          whole)
 from benchmarks.divergence import report_of
 from benchmarks.output import figure_bytes, write_bytes, write_text
+from sensors.delay import delay_argument
 
 OUTPUTS = ("broad_trials.csv", "broad_groups.csv", "broad.png", "broad_trial.png",
            "broad_case_study.csv", "broad_case_study_grid.csv", "broad_tuning.csv",
@@ -47,6 +49,12 @@ def arguments(commands, defaults) -> None:
     broad.add_argument("--gyro-delay", type=number, default=0.0, metavar="SECONDS",
                        help="how late the gyro's samples are against the other channels "
                        "(default 0)")
+    broad.add_argument("--magnetometer-delay", type=delay_argument, default=0.0,
+                       metavar="SECONDS|auto",
+                       help="how late the magnetometer reads against the gyro: each reading is "
+                       "taken at its sample's time, turned by the gyro; auto fits it from how "
+                       "the field turns (default 0: the recording as it is, with a note where "
+                       "it is clearly late)")
     broad.add_argument("--accelerometer-sigma", type=number, default=None, metavar="M/S2",
                        help="the smallest σ per axis the filters take for the accelerometer "
                        "(default 0.3: in motion it reads the linear acceleration too)")
@@ -84,7 +92,8 @@ def run(args, _scenario):
     from benchmarks.sensor_use import refuse_unreadable
     if not args.case_study:
         refuse_unreadable(args.estimators, BROAD_SENSORS, "a BROAD trial")
-    dataset = open_broad(broad_folder(args.broad))
+    dataset = replace(open_broad(broad_folder(args.broad)),
+                      magnetometer_delay=args.magnetometer_delay)
     trials = dataset.selected(args.trials)
     if args.grid and not args.case_study:
         raise UsageError("--grid is the case study's grid search: give --case-study with it")
@@ -94,8 +103,10 @@ def run(args, _scenario):
             raise UsageError("--case-study runs the authors' Madgwick and Mahony with the "
                              "magnetometer, and these trials have none")
         return _case_study(args, dataset, trials)
-    if args.magnetometer_sigma is not None and "magnetometer" not in present:
-        raise UsageError("--magnetometer-sigma: these trials have no magnetometer")
+    for flag, given in (("--magnetometer-sigma", args.magnetometer_sigma is not None),
+                        ("--magnetometer-delay", args.magnetometer_delay != 0.0)):
+        if given and "magnetometer" not in present:
+            raise UsageError(f"{flag}: these trials have no magnetometer")
     args.estimators = _runnable(args, present)
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
@@ -172,7 +183,8 @@ def _training(args, dataset, trials):
     if args.gyro_delay:
         raise UsageError("--gyro-delay is the scored device's; the training dataset's "
                          "delay is not known: leave it out with --train")
-    train = open_broad(args.train, parameter="train")
+    train = replace(open_broad(args.train, parameter="train"),
+                    magnetometer_delay=args.magnetometer_delay)
     tuning.checked_apart(train, dataset, trials)
     if train.sensors(train.available) != dataset.sensors(trials):
         raise UsageError("--train: its trials and the scored ones differ in having a "
@@ -211,6 +223,7 @@ def _case_study(args, dataset, trials):
     published numbers (and with ``--grid``, their grid search)."""
     from benchmarks.broad import case_study
     for flag, given in (("--gyro-delay", args.gyro_delay),
+                        ("--magnetometer-delay", args.magnetometer_delay != 0.0),
                         ("--accelerometer-sigma", args.accelerometer_sigma),
                         ("--magnetometer-sigma", args.magnetometer_sigma),
                         ("--tune", args.tune != "none"),
