@@ -147,11 +147,14 @@ class _Pairs:
         late, leaves unexplained, and the hard iron fitted with it."""
         theta = (_integral_at(self.total, self.rates, self.dt, self.j * self.dt - delay_s)
                  - _integral_at(self.total, self.rates, self.dt, self.i * self.dt - delay_s))
-        residual = (self.change + np.cross(theta, self.mean)).reshape(-1)   # = [θ×] h
-        cross = np.cross(theta[:, None, :], np.eye(3)).transpose(0, 2, 1).reshape(-1, 3)
-        offset = np.linalg.lstsq(cross, residual, rcond=None)[0]
-        left = residual - cross @ offset
-        return float(left @ left) / float(np.sum(self.change * self.change)), offset
+        residual = self.change + np.cross(theta, self.mean)      # = θ × h, h the hard iron
+        # least squares in h by its normal equations, summed pair by pair:
+        # Σ [θ×]ᵀ[θ×] = Σ (|θ|² I − θθᵀ), Σ [θ×]ᵀ r = −Σ θ × r
+        normal = np.sum(theta * theta) * np.eye(3) - theta.T @ theta
+        right = -np.sum(np.cross(theta, residual), axis=0)
+        offset = np.linalg.lstsq(normal, right, rcond=None)[0]
+        left = residual - np.cross(theta, offset)
+        return float(np.sum(left * left)) / float(np.sum(self.change * self.change)), offset
 
 
 def _best(pairs: _Pairs, delays: np.ndarray) -> tuple[int, np.ndarray]:
