@@ -189,3 +189,14 @@ def test_the_case_study_refuses_a_delay(tmp_path, capsys):
     assert main(["broad", "--case-study", "--magnetometer-delay", "auto", "--out",
                  str(tmp_path / "out"), "--quiet"]) == 2
     assert "--magnetometer-delay does not apply to --case-study" in capsys.readouterr().err
+
+
+def test_a_workers_notes_are_said_as_the_commands_own(tmp_path, capsys):
+    # Run on a Dask worker, a trial's notes come back with its results and
+    # are said as the command says them: not printed raw in the worker's
+    # process, file and line first.
+    assert main(["broad", "--trials", "07", "--estimators", "mekf", "--workers", "1",
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "note: trial 07_undisturbed_fast_rotation_B: its magnetometer reads 12.8" in err
+    assert "UserWarning" not in err and "benchmark.py" not in err

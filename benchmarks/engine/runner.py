@@ -211,10 +211,14 @@ def map_tasks(function, arguments, workers: int, progress_bar) -> list:
         return out
     client, cluster = dask_client(workers, None)
     try:
-        futures = [client.submit(function, *args, pure=False) for args in arguments]
+        futures = [client.submit(_with_warnings, function, *args, pure=False)
+                   for args in arguments]
         out = []
         for future in futures:
-            out.append(future.result())
+            result, caught = future.result()
+            for message, category in caught:     # said here, as the command says its notes
+                warnings.warn(message, category, stacklevel=2)
+            out.append(result)
             if progress_bar is not None:
                 progress_bar.update(1)
         return out
@@ -222,6 +226,17 @@ def map_tasks(function, arguments, workers: int, progress_bar) -> list:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _with_warnings(function, *args):
+    """``function(*args)`` in a worker, and the warnings it gave (message,
+    category), for :func:`map_tasks` to give again where the results are
+    read: in the worker's own process they would print raw, file and line
+    first, past the command's notes."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = function(*args)
+    return result, [(str(warning.message), warning.category) for warning in caught]
 
 
 def dask_client(workers: int, scheduler: str | None):
