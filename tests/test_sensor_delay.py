@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Slerp
 
+from benchmarks.broad import trial_notes
 from benchmarks.broad.dataset import open_broad
 from benchmarks.cli import main
 from benchmarks.shipped import shipped_file
@@ -141,8 +142,7 @@ def test_the_dataset_takes_each_reading_at_its_time_only_when_asked():
     dataset = open_broad(SHIPPED)
     trial = dataset.available[1]
     raw = dataset.load(trial).magnetometer_uT
-    with pytest.warns(UserWarning, match=r"magnetometer reads 1\d\.\d ± \d\.\d ms late"):
-        auto = replace(dataset, magnetometer_delay="auto").load(trial).magnetometer_uT
+    auto = replace(dataset, magnetometer_delay="auto").load(trial).magnetometer_uT
     given_delay = replace(dataset, magnetometer_delay=0.0128).load(trial).magnetometer_uT
     assert not np.array_equal(auto, raw)
     # the fitted delay is 12.8 ms: a number close to it takes nearly the same readings
@@ -191,7 +191,28 @@ def test_the_case_study_refuses_a_delay(tmp_path, capsys):
     assert "--magnetometer-delay does not apply to --case-study" in capsys.readouterr().err
 
 
-def test_a_workers_notes_are_said_as_the_commands_own(tmp_path, capsys):
+@pytest.mark.parametrize("delay, said", [
+    ("0", "reads 12.8 ± 0.1 ms late against its gyro (fitted from how the field turns as the "
+          "gyro says); --magnetometer-delay auto takes each reading at its sample's time"),
+    ("auto", "reads 12.8 ± 0.1 ms late against its gyro (fitted from how the field turns as "
+             "the gyro says): each reading taken at its sample's time"),
+])
+def test_the_delay_is_said_once_the_inputs_are_checked(tmp_path, capsys, monkeypatch, delay,
+                                                       said):
+    monkeypatch.setattr(trial_notes, "_NOTED", set())
+    assert main(["broad", "--trials", "07", "--estimators", "mekf", "--magnetometer-delay",
+                 delay, "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert said in capsys.readouterr().err
+    # a refusal after the trial is read is its one line, the note unsaid
+    monkeypatch.setattr(trial_notes, "_NOTED", set())
+    assert main(["broad", "--trials", "07", "--estimators", "mekf", "--magnetometer-delay",
+                 delay, "--gyro-delay", "1", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "gyro_delay = 1.0" in err
+
+
+def test_a_workers_notes_are_said_as_the_commands_own(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(trial_notes, "_NOTED", set())
     # Run on a Dask worker, a trial's notes come back with its results and
     # are said as the command says them: not printed raw in the worker's
     # process, file and line first.

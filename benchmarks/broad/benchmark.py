@@ -113,9 +113,9 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
     ``second_half``, every estimator runs the whole trial and is scored on its
     second half only (``--tune halves`` tuned on the first)."""
     recording = dataset.load(trial)
-    if dataset.magnetometer_delay == 0.0:
-        note_magnetometer_delay(recording, dataset.files[trial])
     inputs = imu_inputs(recording, gyro_delay_s, sigmas)
+    # after the inputs' checks: a refusal is one line
+    note_magnetometer_delay(recording, dataset.files[trial], dataset.magnetometer_delay)
     sensors = inputs.sensors
     readings = {v.sensor: int(np.count_nonzero(v.available)) for v in sensors.vectors}
     judged = judged_samples(recording, second_half)

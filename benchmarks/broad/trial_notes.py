@@ -96,33 +96,45 @@ def _delay_words(recording: Recording, fit) -> str:
             "against its gyro (fitted from how the field turns as the gyro says)")
 
 
+#: path → the delay fitted to its trial's magnetometer as it was loaded
+#: with ``auto`` (None: none was clear), for :func:`note_magnetometer_delay`.
+_FITTED = {}
+
+
 def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     """``recording`` with its magnetometer's readings taken at their samples'
     times (:func:`sensors.delay.at_sample_times`): ``delay`` ``"auto"``
-    fits how late they are (said in a note; where the fit is not clear, the
-    readings are kept), a number is that many seconds late, 0 keeps the
-    recording as it is."""
+    fits how late they are (where the fit is not clear, the readings are
+    kept; :func:`note_magnetometer_delay` says which), a number is that many
+    seconds late, 0 keeps the recording as it is."""
     if recording.magnetometer_uT is None or (delay != "auto" and delay == 0.0):
         return recording
     field, offset = recording.magnetometer_uT, np.zeros(3)
     if delay == "auto":
-        fit = _fitted_delay(recording)
+        fit = _FITTED[path] = _fitted_delay(recording)
         if fit is None:
-            note_once(path, f"trial {recording.name}: no clear delay of its magnetometer "
-                      "against its gyro (too little turning to time it): its readings kept")
             return recording
-        note_once(path, _delay_words(recording, fit) + ": each reading taken at its "
-                  "sample's time")
         delay, offset = fit.delay_s, fit.offset
     read = np.any(field != 0.0, axis=1)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
     return replace(recording, magnetometer_uT=timed)
 
 
-def note_magnetometer_delay(recording: Recording, path: Path) -> None:
-    """A note where ``recording``'s magnetometer reads clearly late or early
-    against its gyro, kept as it is (``--magnetometer-delay 0``)."""
-    fit = _fitted_delay(recording) if recording.magnetometer_uT is not None else None
-    if fit is not None:
-        note_once(path, _delay_words(recording, fit) + "; --magnetometer-delay auto takes "
-                  "each reading at its sample's time")
+def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
+    """The note of how late ``recording``'s magnetometer reads, said once a
+    run's inputs are checked (a refusal is then its one line): with
+    ``delay`` ``"auto"``, the delay fitted as it was loaded, or that none
+    was clear; left at 0, where it is clearly late or early; given in
+    seconds, nothing."""
+    if recording.magnetometer_uT is None:
+        return
+    if delay == "auto" and path in _FITTED:
+        fit = _FITTED[path]
+        note_once(path, f"trial {recording.name}: no clear delay of its magnetometer against "
+                  "its gyro (too little turning to time it): its readings kept" if fit is None
+                  else _delay_words(recording, fit) + ": each reading taken at its sample's time")
+    elif delay != "auto" and delay == 0.0:
+        fit = _fitted_delay(recording)
+        if fit is not None:
+            note_once(path, _delay_words(recording, fit) + "; --magnetometer-delay auto takes "
+                      "each reading at its sample's time")
