@@ -267,3 +267,28 @@ def test_inspect_names_the_command_that_runs_what_the_file_holds(phone_csv, tmp_
     assert main(["inspect", str(tmp_path / "log.csv")]) == 0
     assert runs in capsys.readouterr().out
     assert runs.replace("then run: ", "") in (tmp_path / "log.toml").read_text()
+
+
+def test_inspect_times_the_magnetometer_against_the_gyro(tmp_path, capsys):
+    """BROAD's magnetometer reads about 13 ms late against its gyro
+    (sensors.delay); a minute of the fast trial is enough to say so, and
+    the same readings put at their times are said to be on time."""
+    from sensors.delay import at_sample_times, delay_fit
+    recording = load_recording(TRIAL.with_name("07_undisturbed_fast_rotation_B.npz"))
+    keep = int(60 * recording.rate_hz)
+    gyro, field = recording.gyro_radps[:keep], recording.magnetometer_uT[:keep]
+    read = np.ones(keep, dtype=bool)
+    fit = delay_fit(gyro, field, read, recording.dt)
+    for name, mag in (("late", field),
+                      ("timed", at_sample_times(gyro, field, read, recording.dt, fit.delay_s,
+                                                fit.offset))):
+        np.savez(tmp_path / f"{name}.npz", t_s=recording.time_s[:keep], gyro_rad_s=gyro,
+                 acc_m_s2=recording.accelerometer_mps2[:keep], mag_uT=mag)
+        assert main(["inspect", str(tmp_path / f"{name}.npz")]) == 0
+        out = capsys.readouterr().out
+        line = next(line for line in out.splitlines() if "magnetometer timing" in line)
+        if name == "late":
+            assert "reads 13.0 ± 0.2 ms late against the gyro" in line, line
+            assert "--magnetometer-delay auto" in line
+        else:
+            assert "on time as far as its turning tells" in line, line

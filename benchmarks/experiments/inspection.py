@@ -307,6 +307,7 @@ def _physics(recording, calibrated: bool = False) -> list[str]:
     if recording.magnetometer_uT is not None:
         lines.append("calibration: the declaration applies one (calibrate, hard_iron or "
                      "soft_iron)" if calibrated else _calibration(recording.magnetometer_uT))
+        lines.append(_magnetometer_timing(recording))
     if recording.has_reference.any():
         lines.append(_reference_turning(recording))
     return lines
@@ -324,6 +325,21 @@ def _reference_turning(recording) -> str:
     verdict = "turns as the gyro does" if reference_fits(fit) else \
         "does not turn as the gyro does"
     return f"reference: {verdict}, {100 * unexplained:.1f} % of its turning unexplained; {axes}"
+
+
+def _magnetometer_timing(recording) -> str:
+    """How late the magnetometer reads against the gyro (:mod:`sensors.delay`)."""
+    from sensors.delay import delay_fit
+    field = recording.magnetometer_uT
+    fit = delay_fit(recording.gyro_radps, field, np.any(field != 0, axis=1), recording.dt)
+    if fit is None:
+        return "magnetometer timing: too little turning to time it against the gyro"
+    said = (f"{abs(fit.delay_s) * 1e3:.1f} ± {fit.standard_error_s * 1e3:.1f} ms "
+            f"{'late' if fit.delay_s > 0 else 'early'} against the gyro")
+    if not fit.clear(recording.dt):
+        return f"magnetometer timing: on time as far as its turning tells ({said})"
+    return (f"magnetometer timing: reads {said} (fitted from how the field turns); broad "
+            "--magnetometer-delay auto takes each reading at its sample's time")
 
 
 def _calibration(field: np.ndarray) -> str:
