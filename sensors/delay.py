@@ -60,8 +60,8 @@ COARSE_STEP_S, FINE_STEPS = 0.004, 17
 MIN_PAIRS, MIN_RATE_RADPS = 100, 0.1
 #: A delay is clear this many standard errors from none (:meth:`DelayFit.clear`).
 CLEAR_ERRORS = 5.0
-#: A delay given in seconds is at most this: beyond, it is a clock's offset,
-#: not a sensor's filter (declared with the clock, in the recording's file).
+#: A delay given in seconds is at most this: beyond, it is no sensor's
+#: filter but the magnetometer's timestamps (its file's own clock) to check.
 MAX_GIVEN_DELAY_S = 1.0
 
 
@@ -77,7 +77,7 @@ def delay_argument(text: str):
     if not (math.isfinite(value) and abs(value) <= MAX_GIVEN_DELAY_S):
         raise argparse.ArgumentTypeError(
             f"{text!r}: must be auto or seconds within ±{MAX_GIVEN_DELAY_S:g} (a longer one is "
-            "a clock's offset: declare the clock in the recording's file)")
+            "no sensor's filter: check the magnetometer's timestamps)")
     return value
 
 
