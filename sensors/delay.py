@@ -22,15 +22,24 @@ a recording that turns is enough. The gyro's integral takes each reading as
 the rate over the interval before it, as the filters do on a recording
 (``rate_interpolation = "end"``), so the delay is the one the filters see: a
 gyro that reads the rate over the interval after each sample makes an
-on-time magnetometer one sample late.
+on-time magnetometer one sample late. Likewise the delay is against the
+gyro samples the readings are placed at: a reading on its own clock is
+placed at the next gyro sample (:mod:`sensors.declared`), up to a step
+after its time, and the fit includes that. Pairs across a gap in the
+readings are left out (they would turn beyond the first order). The
+delay's standard error is a jackknife's over stretches of the recording
+(:func:`_jackknife_error`): neighbouring pairs share a reading and the
+room's field, which least squares' own error would take as independent.
 
 A reading is then taken at its sample's time (:func:`at_sample_times`):
 turned by the gyro's rotation over the delay,
 :math:`v(t_k) = \exp(-[\theta \times])\,(v_k - h) + h` with
-:math:`\theta = \int_{t_k - \tau}^{t_k} \omega\, dt`.
+:math:`\theta = \int_{t_k - \tau}^{t_k} \omega\, dt`, one rotation
+vector: exact for a fixed axis, and to the first order of the axis's turn
+otherwise, which delays within :data:`MAX_DELAY_S` keep small.
 
 On BROAD's 30 trials the magnetometer reads 11.8 to 14.1 ms late (3.4 to
-4.0 of their 3.5 ms samples; standard errors 0.1 to 1.4 ms), each trial
+4.0 of their 3.5 ms samples; standard errors 0.1 to 0.9 ms), each trial
 fitted alone. Where it is not taken out, a filter's field turns late against
 its gyro: in a turn of 400 °/s the field seems 5° off, and the field's
 disturbance tests reject what is the sensor's timing (BROAD's fast trials: a
@@ -56,28 +65,30 @@ PAIR_SPACING_S = 0.02
 #: The search: a grid of COARSE_STEP_S, then FINE_STEPS points between the
 #: best's neighbours, then the parabola through the best three.
 COARSE_STEP_S, FINE_STEPS = 0.004, 17
-#: Evidence enough: this many pairs, turning this fast on average (rad/s).
+#: Evidence enough: this many pairs turning at least this fast (rad/s).
 MIN_PAIRS, MIN_RATE_RADPS = 100, 0.1
+#: A pair further apart than this many times the usual spans a gap in the
+#: readings: left out.
+GAP_FACTOR = 1.5
+#: The stretches the delay's standard error is found over (:func:`_jackknife_error`).
+JACKKNIFE_BLOCKS = 20
 #: A delay is clear this many standard errors from none (:meth:`DelayFit.clear`).
 CLEAR_ERRORS = 5.0
-#: A delay given in seconds is at most this: beyond, it is no sensor's
-#: filter but the magnetometer's timestamps (its file's own clock) to check.
-MAX_GIVEN_DELAY_S = 1.0
-
-
 def delay_argument(text: str):
     """A command line's delay (``--magnetometer-delay``): ``auto`` (fit it),
-    or seconds within ±:data:`MAX_GIVEN_DELAY_S`."""
-    if text == "auto":
+    or seconds within ±:data:`MAX_DELAY_S` (a sensor's filter delays it by
+    milliseconds; beyond, its timestamps are to be checked, and the
+    readings' turn by the gyro would leave its first order)."""
+    rule = (f"must be auto or seconds within ±{MAX_DELAY_S:g} (a sensor's filter delays its "
+            "readings by milliseconds: a longer delay is its timestamps to check)")
+    if text.strip().lower() == "auto":
         return "auto"
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and abs(value) <= MAX_GIVEN_DELAY_S):
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: must be auto or seconds within ±{MAX_GIVEN_DELAY_S:g} (a longer one is "
-            "no sensor's filter: check the magnetometer's timestamps)")
+        raise argparse.ArgumentTypeError(f"{text!r}: {rule}") from None
+    if not (math.isfinite(value) and abs(value) <= MAX_DELAY_S):
+        raise argparse.ArgumentTypeError(f"{text!r}: {rule}")
     return value
 
 
@@ -93,11 +104,16 @@ class DelayFit:
     offset: np.ndarray
     unexplained: float
     unexplained_without: float
+    #: the best delay lies at the search's edge: the readings' timing is
+    #: beyond it, or their field does not turn as the gyro says
+    beyond: bool = False
 
     def clear(self, dt: float) -> bool:
         """Whether the readings are clearly late (or early) by a tenth of a
-        sample of step ``dt`` or more: :data:`CLEAR_ERRORS` standard errors from none."""
-        return abs(self.delay_s) >= max(dt / 10, CLEAR_ERRORS * self.standard_error_s)
+        sample of step ``dt`` or more: :data:`CLEAR_ERRORS` standard errors
+        from none, within the search, and explaining some of the field's turning."""
+        return (not self.beyond and self.unexplained < 1.0
+                and abs(self.delay_s) >= max(dt / 10, CLEAR_ERRORS * self.standard_error_s))
 
 
 def _integral(rates: np.ndarray, dt: float) -> np.ndarray:
@@ -121,30 +137,36 @@ class _Pairs:
     def __init__(self, rates: np.ndarray, vectors: np.ndarray, available: np.ndarray, dt: float):
         read = np.flatnonzero(available)
         spacing = max(1, int(round(PAIR_SPACING_S / dt)))
-        if len(read) > 1 and np.median(np.diff(read)) >= spacing:
-            i, j = read[:-1], read[1:]
-        else:
-            i = read[::spacing]
-            i, j = i[:-1], i[1:]
+        if len(read) > 1 and np.median(np.diff(read)) < spacing:
+            read = read[::spacing]
+        i, j = read[:-1], read[1:]
+        span = j - i
+        usual = np.median(span) if len(span) else 0
         margin = int(np.ceil(MAX_DELAY_S / dt)) + 1
-        inside = (i >= margin) & (j < len(rates) - margin)
-        self.i, self.j = i[inside], j[inside]
+        # a pair across a gap in the readings would turn too far for the first order
+        kept = (i >= margin) & (j < len(rates) - margin) & (span <= GAP_FACTOR * usual)
+        self.i, self.j = i[kept], j[kept]
         self.rates, self.dt = rates, dt
         self.total = _integral(rates, dt)
         self.change = vectors[self.j] - vectors[self.i]
         self.mean = (vectors[self.i] + vectors[self.j]) / 2
 
     def enough(self) -> bool:
-        """Whether the pairs turn enough to time the readings."""
-        if len(self.i) < MIN_PAIRS:
-            return False
+        """Whether enough pairs turn to time the readings (a rest, however
+        long, neither helps nor hinders)."""
         turned = self.total[self.j] - self.total[self.i]
-        spans = (self.j - self.i) * self.dt
-        return float(np.mean(np.linalg.norm(turned, axis=1) / spans)) >= MIN_RATE_RADPS
+        rates = np.linalg.norm(turned, axis=1) / ((self.j - self.i) * self.dt)
+        return int(np.count_nonzero(rates >= MIN_RATE_RADPS)) >= MIN_PAIRS
 
     def unexplained(self, delay_s: float) -> tuple[float, np.ndarray]:
         """The share of the pairs' change that the gyro's rotation, ``delay_s``
         late, leaves unexplained, and the hard iron fitted with it."""
+        left, offset = self.left(delay_s)
+        return float(np.sum(left)) / float(np.sum(self.change * self.change)), offset
+
+    def left(self, delay_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each pair's change left unexplained (squared) with ``delay_s``,
+        and the hard iron fitted over all pairs."""
         theta = (_integral_at(self.total, self.rates, self.dt, self.j * self.dt - delay_s)
                  - _integral_at(self.total, self.rates, self.dt, self.i * self.dt - delay_s))
         residual = self.change + np.cross(theta, self.mean)      # = θ × h, h the hard iron
@@ -154,7 +176,7 @@ class _Pairs:
         right = -np.sum(np.cross(theta, residual), axis=0)
         offset = np.linalg.lstsq(normal, right, rcond=None)[0]
         left = residual - np.cross(theta, offset)
-        return float(np.sum(left * left)) / float(np.sum(self.change * self.change)), offset
+        return np.sum(left * left, axis=1), offset
 
 
 def _best(pairs: _Pairs, delays: np.ndarray) -> tuple[int, np.ndarray]:
@@ -166,32 +188,68 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
               dt: float) -> DelayFit | None:
     """The delay of a vector sensor's readings ``vectors`` ``(N, 3)`` (read
     where ``available``) against the gyro's ``rates`` ``(N, 3)``, rad/s, on
-    the gyro's grid of step ``dt`` (module docstring); None where the
-    recording turns too little to say, or the best delay lies at the
-    search's edge (no delay within :data:`MAX_DELAY_S` explains it)."""
+    the gyro's grid of step ``dt`` (module docstring); None where too few
+    pairs of readings turn to say. A best delay at the search's edge is
+    :attr:`DelayFit.beyond` (none within :data:`MAX_DELAY_S` explains it)."""
     pairs = _Pairs(np.asarray(rates, dtype=float), np.asarray(vectors, dtype=float),
                    np.asarray(available, dtype=bool), dt)
     if not pairs.enough():
         return None
+    without = pairs.unexplained(0.0)[0]
     coarse = np.arange(-MAX_DELAY_S, MAX_DELAY_S + COARSE_STEP_S / 2, COARSE_STEP_S)
-    best, _ = _best(pairs, coarse)
+    best, shares = _best(pairs, coarse)
     if best in (0, len(coarse) - 1):
-        return None
+        unexplained, offset = pairs.unexplained(coarse[best])
+        return DelayFit(float(coarse[best]), math.inf, offset, unexplained, without, True)
     fine = np.linspace(coarse[best - 1], coarse[best + 1], FINE_STEPS)
     best, shares = _best(pairs, fine)
     delay, step = fine[best], fine[1] - fine[0]
     middle = min(max(best, 1), len(fine) - 2)          # the parabola through the best three
     low, mid, high = shares[middle - 1:middle + 2]
     curvature = (low - 2.0 * mid + high) / step ** 2    # the share's second derivative
-    if curvature <= 0.0:
-        return None
-    if middle == best:
+    if middle == best and curvature > 0.0:
         delay += 0.5 * (low - high) / (curvature * step)
     unexplained, offset = pairs.unexplained(delay)
-    # least squares: var(τ) = 2 σ² / C'' with σ² = C_min / dof, C the squares' sum
-    standard_error = np.sqrt(2.0 * unexplained / (curvature * max(3 * len(pairs.i) - 4, 1)))
-    return DelayFit(float(delay), float(standard_error), offset, unexplained,
-                    pairs.unexplained(0.0)[0])
+    return DelayFit(float(delay), _jackknife_error(pairs, delay, step), offset, unexplained,
+                    without)
+
+
+def _jackknife_error(pairs: _Pairs, delay: float, step: float) -> float:
+    """The delay's standard error by the delete-a-block jackknife over
+    :data:`JACKKNIFE_BLOCKS` stretches of the recording (Efron & Tibshirani,
+    *An Introduction to the Bootstrap*, 1993, §11.2), each block's deletion
+    taken to first order (one Newton step from the fit): neighbouring pairs
+    share a reading and the room's field, so their errors are not
+    independent, and least squares' own error, which takes them so, would
+    be several times off."""
+    low, high = pairs.left(delay - step)[0], pairs.left(delay + step)[0]
+    mid = pairs.left(delay)[0]
+    curvature = float(np.sum(low) - 2.0 * np.sum(mid) + np.sum(high)) / step ** 2
+    if curvature <= 0.0:
+        return math.inf
+    blocks = np.array_split(high - low, JACKKNIFE_BLOCKS)
+    k = len(blocks)
+    # deleting block b moves the fit by its gradient over the others' curvature
+    shifts = np.array([np.sum(b) / (2.0 * step) for b in blocks]) / (curvature * (k - 1) / k)
+    return float(np.sqrt((k - 1) / k * np.sum((shifts - shifts.mean()) ** 2)))
+
+
+def described(fit: DelayFit | None, dt: float) -> str:
+    """What ``fit`` (:func:`delay_fit`, on a gyro of step ``dt``) says of a
+    magnetometer's timing, as what follows "the magnetometer"."""
+    if fit is None:
+        return "turns too little to be timed against the gyro"
+    if fit.beyond:
+        return (f"is off the gyro by more than {MAX_DELAY_S * 1e3:.0f} ms, or its field does "
+                "not turn as the gyro says: check its timestamps and its axes")
+    said = (f"{abs(fit.delay_s) * 1e3:.1f} ± {fit.standard_error_s * 1e3:.1f} ms "
+            f"{'late' if fit.delay_s > 0 else 'early'} against the gyro")
+    if fit.unexplained >= 1.0:
+        return (f"does not turn as the gyro says at any delay ({said}): check its axes and "
+                "timestamps")
+    if not fit.clear(dt):
+        return f"is on time as far as its turning tells ({said})"
+    return f"reads {said} (fitted from how the field turns as the gyro says)"
 
 
 def at_sample_times(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray, dt: float,

@@ -14,7 +14,7 @@ import numpy as np
 
 from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
     usable_readings
-from sensors.delay import at_sample_times, delay_fit
+from sensors.delay import at_sample_times, delay_fit, described
 from sensors.recording import Recording
 
 _NOTED = set()
@@ -83,21 +83,19 @@ def from_start(recording: Recording, path: Path, refuse) -> Recording:
 
 
 def _fitted_delay(recording: Recording):
-    """The magnetometer's delay against the gyro (:func:`sensors.delay.delay_fit`),
-    where it is clear (:meth:`~sensors.delay.DelayFit.clear`); else None."""
+    """The magnetometer's delay against the gyro (:func:`sensors.delay.delay_fit`;
+    None where too little turns to tell)."""
     field = recording.magnetometer_uT
-    fit = delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
-    return fit if fit is not None and fit.clear(recording.dt) else None
+    return delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
 
 
-def _delay_words(recording: Recording, fit) -> str:
-    return (f"trial {recording.name}: its magnetometer reads {abs(fit.delay_s) * 1e3:.1f} ± "
-            f"{fit.standard_error_s * 1e3:.1f} ms {'late' if fit.delay_s > 0 else 'early'} "
-            "against its gyro (fitted from how the field turns as the gyro says)")
+def _timing_note(recording: Recording, fit) -> str:
+    return f"trial {recording.name}: its magnetometer {described(fit, recording.dt)}"
 
 
 #: path → the delay fitted to its trial's magnetometer as it was loaded
-#: with ``auto`` (None: none was clear), for :func:`note_magnetometer_delay`.
+#: with ``auto`` (None: too little turned) and whether it was clear, so
+#: applied, for :func:`note_magnetometer_delay`.
 _FITTED = {}
 
 
@@ -111,13 +109,23 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
         return recording
     field, offset = recording.magnetometer_uT, np.zeros(3)
     if delay == "auto":
-        fit = _FITTED[path] = _fitted_delay(recording)
-        if fit is None:
+        fit = _fitted_delay(recording)
+        clear = fit is not None and fit.clear(recording.dt)
+        _FITTED[path] = (fit, clear)
+        if not clear:
             return recording
         delay, offset = fit.delay_s, fit.offset
     read = np.any(field != 0.0, axis=1)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
     return replace(recording, magnetometer_uT=timed)
+
+
+def applied_delay(path: Path):
+    """The delay applied to the magnetometer of the trial at ``path`` as it
+    was last loaded with ``auto`` (a :class:`sensors.delay.DelayFit`; None
+    where none was clear, or it was not loaded so)."""
+    fit, clear = _FITTED.get(path, (None, False))
+    return fit if clear else None
 
 
 def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
@@ -129,12 +137,13 @@ def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
     if recording.magnetometer_uT is None:
         return
     if delay == "auto" and path in _FITTED:
-        fit = _FITTED[path]
-        note_once(path, f"trial {recording.name}: no clear delay of its magnetometer against "
-                  "its gyro (too little turning to time it): its readings kept" if fit is None
-                  else _delay_words(recording, fit) + ": each reading taken at its sample's time")
+        fit, clear = _FITTED[path]
+        note_once(path, _timing_note(recording, fit) + (
+            ": each reading taken at its sample's time" if clear else ": its readings kept"))
     elif delay != "auto" and delay == 0.0:
         fit = _fitted_delay(recording)
-        if fit is not None:
-            note_once(path, _delay_words(recording, fit) + "; --magnetometer-delay auto takes "
+        if fit is not None and fit.clear(recording.dt):
+            note_once(path, _timing_note(recording, fit) + "; --magnetometer-delay auto takes "
                       "each reading at its sample's time")
+        elif fit is not None and (fit.beyond or fit.unexplained >= 1.0):
+            note_once(path, _timing_note(recording, fit))

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.dataset import open_broad
+from benchmarks.broad.dataset import open_broad, trial_label
+from benchmarks.broad.trial_notes import applied_delay
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
 from benchmarks.engine.recorded import run_recorded
@@ -103,16 +104,35 @@ def trial_rows(args, name: str, scores, check=lambda: None):
     """The dataset of ``args.broad`` and the rows of ``scores(dataset, trial)``
     over its trials, ``check()`` first; None where the input is refused (one
     line on stderr, ``NAME: error: …``)."""
+    folder = args.broad or shipped_file("datasets/broad/trials.json").parent
     try:
-        dataset = replace(open_broad(args.broad or shipped_file("datasets/broad/trials.json").parent),
-                          magnetometer_delay=args.magnetometer_delay)
+        dataset = replace(open_broad(folder), magnetometer_delay=args.magnetometer_delay)
+        if args.magnetometer_delay != 0.0 and \
+                "magnetometer" not in dataset.sensors(dataset.available):
+            raise InvalidParameterError("--magnetometer-delay", args.magnetometer_delay,
+                                        "needs a magnetometer, and these trials have none")
         check()
-        return dataset, [row for trial in progress(dataset.available, desc="trials",
-                                                   quiet=args.quiet)
-                         for row in scores(dataset, trial)]
+        rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
+                for row in scores(dataset, trial)]
     except InvalidParameterError as err:
         print(f"{name}: error: {err}", file=sys.stderr)
         return None
+    if args.magnetometer_delay == "auto":
+        print(f"{name}: note: {delays_fitted(dataset)}", file=sys.stderr)
+    return dataset, rows
+
+
+def delays_fitted(dataset) -> str:
+    """What ``--magnetometer-delay auto`` fitted over ``dataset``'s trials,
+    in one line (:func:`benchmarks.broad.trial_notes.applied_delay`)."""
+    fits = {trial: applied_delay(dataset.files[trial]) for trial in dataset.available}
+    clear = {trial: fit.delay_s * 1e3 for trial, fit in fits.items() if fit is not None}
+    kept = [trial_label(trial) for trial in fits if trial not in clear]
+    said = (f"the magnetometer reads {min(clear.values()):.1f} to {max(clear.values()):.1f} ms "
+            f"late against the gyro on {len(clear)} of {len(fits)} trials (each fitted, its "
+            "readings taken at their times)" if clear else "no trial's magnetometer is "
+            "clearly late against its gyro")
+    return said + (f"; kept as recorded: {', '.join(kept)}" if kept and clear else "")
 
 
 def write_table(out: Path, name: str, table: pd.DataFrame, attribution: str) -> None:

@@ -107,6 +107,9 @@ def run(args, _scenario):
                         ("--magnetometer-delay", args.magnetometer_delay != 0.0)):
         if given and "magnetometer" not in present:
             raise UsageError(f"{flag}: these trials have no magnetometer")
+    if args.gyro_delay and args.magnetometer_delay != 0.0:
+        raise UsageError("--magnetometer-delay is the magnetometer's against the gyro as "
+                         "recorded, and --gyro-delay moves the gyro: give one of them")
     args.estimators = _runnable(args, present)
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
@@ -183,6 +186,10 @@ def _training(args, dataset, trials):
     if args.gyro_delay:
         raise UsageError("--gyro-delay is the scored device's; the training dataset's "
                          "delay is not known: leave it out with --train")
+    if args.magnetometer_delay not in (0.0, "auto"):
+        raise UsageError(f"--magnetometer-delay {args.magnetometer_delay:g} is the scored "
+                         "device's; the training dataset's is not known: give auto (each "
+                         "trial's fitted) or leave it out with --train")
     train = replace(open_broad(args.train, parameter="train"),
                     magnetometer_delay=args.magnetometer_delay)
     tuning.checked_apart(train, dataset, trials)

@@ -329,17 +329,12 @@ def _reference_turning(recording) -> str:
 
 def _magnetometer_timing(recording) -> str:
     """How late the magnetometer reads against the gyro (:mod:`sensors.delay`)."""
-    from sensors.delay import delay_fit
+    from sensors.delay import delay_fit, described
     field = recording.magnetometer_uT
     fit = delay_fit(recording.gyro_radps, field, np.any(field != 0, axis=1), recording.dt)
-    if fit is None:
-        return "magnetometer timing: too little turning to time it against the gyro"
-    said = (f"{abs(fit.delay_s) * 1e3:.1f} ± {fit.standard_error_s * 1e3:.1f} ms "
-            f"{'late' if fit.delay_s > 0 else 'early'} against the gyro")
-    if not fit.clear(recording.dt):
-        return f"magnetometer timing: on time as far as its turning tells ({said})"
-    return (f"magnetometer timing: reads {said} (fitted from how the field turns); broad "
-            "--magnetometer-delay auto takes each reading at its sample's time")
+    advice = ("; broad --magnetometer-delay auto takes each reading at its sample's time"
+              if fit is not None and fit.clear(recording.dt) else "")
+    return f"magnetometer timing: it {described(fit, recording.dt)}{advice}"
 
 
 def _calibration(field: np.ndarray) -> str:
