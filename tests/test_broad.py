@@ -590,3 +590,14 @@ def test_a_held_out_verdict_is_not_better_where_the_tuning_refuses_more_readings
     assert held_out_verdict({**found, "held_out_refused_share": 0.005}) == "better"
     assert held_out_verdict({**found, "held_out_loss": -14.0, "held_out_refused_share": 0.0}) == \
         "not better: keep the defaults"
+
+
+def test_the_noise_note_says_the_sigmas_given(tmp_path, capsys):
+    # The note of what the inputs assume says the σ the filters took: the
+    # one given on the command line, not its default.
+    assert main(["broad", "--trials", "07", "--estimators", "mekf", "--accelerometer-sigma",
+                 "0.5", "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    note = next(line for line in capsys.readouterr().err.splitlines()
+                if "nothing is taken from a rest" in line)
+    assert ("the noise is the defaults but the accelerometer's as given (gyro 0.001 rad/√s, "
+            "accelerometer 0.5 m/s², magnetometer 4 µT)") in note

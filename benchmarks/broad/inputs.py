@@ -269,7 +269,7 @@ def initial_attitude(acc: np.ndarray, mag: np.ndarray | None, references: dict) 
     return wahba.triad(body, reference, np.array([2.0, 1.0]))
 
 
-def assumptions(recording: Recording, references: dict) -> tuple:
+def assumptions(recording: Recording, references: dict, sigmas=None) -> tuple:
     """What :func:`imu_inputs` assumed for ``recording``, one line each."""
     field = references.get("magnetometer")
     if field is None:
@@ -284,25 +284,33 @@ def assumptions(recording: Recording, references: dict) -> tuple:
         start = "TRIAD"
     return (f"gravity: the standard {STANDARD_GRAVITY_MPS2} m/s², up (no site given)",
             field_line,
-            f"the start: {start} on sample {start_sample(recording)}; noise: the defaults "
-            f"(gyro {GYRO_NOISE_DENSITY:g} rad/√s, accelerometer "
-            f"{MOTION_SIGMAS['accelerometer']:g} m/s², magnetometer "
-            f"{MOTION_SIGMAS['magnetometer']:g} µT)")
+            f"the start: {start} on sample {start_sample(recording)}; noise: "
+            f"{noise_words(sigmas, field is not None)}")
 
 
-def assumed(heading: bool = True) -> str:
+def noise_words(sigmas=None, heading: bool = True) -> str:
+    """The noise the filters take, in words: the defaults, or ``sigmas``
+    (sensor → σ, ``--accelerometer-sigma``, ``--magnetometer-sigma``) where given."""
+    given = dict(sigmas or {})
+    parts = [f"gyro {GYRO_NOISE_DENSITY:g} rad/√s"] + [
+        f"{name} {given.get(name, MOTION_SIGMAS[name]):g} {unit}"
+        for name, unit in (("accelerometer", "m/s²"), ("magnetometer", "µT"))
+        if heading or name == "accelerometer"]
+    which = " and ".join(f"the {name}'s" for name in MOTION_SIGMAS if name in given)
+    return f"the defaults{f' but {which} as given' if which else ''} ({', '.join(parts)})"
+
+
+def assumed(heading: bool = True, sigmas=None) -> str:
     """What every trial's inputs assume, in one line (:func:`assumptions`
     has one trial's numbers); ``heading``: whether the trials have a
-    magnetometer (a 6-axis IMU's have not)."""
+    magnetometer (a 6-axis IMU's have not); ``sigmas``: the σ given over
+    the defaults (:func:`noise_words`)."""
     start = ("each trial starts on TRIAD of its first usable sample; the vector filters' "
              f"field is the median of its first {FIELD_WINDOW_S:g} s, the MEKF learns its own "
              "online" if heading else "each trial starts level with its first accelerometer "
              "reading, its heading arbitrary (no magnetometer)")
     return (f"nothing is taken from a rest: gravity is the standard {STANDARD_GRAVITY_MPS2} "
-            f"m/s² (no site given); {start}; the noise is the defaults (gyro "
-            f"{GYRO_NOISE_DENSITY:g} rad/√s, accelerometer {MOTION_SIGMAS['accelerometer']:g} "
-            f"m/s²" + (f", magnetometer {MOTION_SIGMAS['magnetometer']:g} µT)" if heading
-                       else ")"))
+            f"m/s² (no site given); {start}; the noise is {noise_words(sigmas, heading)}")
 
 
 def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> ImuInputs:
@@ -337,4 +345,4 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
                          available=np.zeros(n, dtype=bool), vectors=vectors)
     return ImuInputs(recording=recording, scenario=scenario, sensors=sensors,
                      references=references, variances=variances,
-                     assumptions=assumptions(recording, references))
+                     assumptions=assumptions(recording, references, sigmas))

@@ -129,7 +129,8 @@ def run(args, _scenario):
     result = benchmark.run_broad(dataset, trials, args.estimators, args.gyro_delay, sigmas,
                                  quiet=args.quiet, workers=args.workers, options=options,
                                  tuning=mode, agreement=args.agreement)
-    print(f"{PROG}: note: {inputs.assumed(heading=not result.headless)}", file=sys.stderr)
+    print(f"{PROG}: note: {inputs.assumed(heading=not result.headless, sigmas=sigmas)}",
+          file=sys.stderr)
     against = " against the others' median" if result.by_agreement else ""
     if against:
         print(f"No trial has a reference: every score below is the RMS angle to "
