@@ -103,13 +103,7 @@ def run(args, _scenario):
             raise UsageError("--case-study runs the authors' Madgwick and Mahony with the "
                              "magnetometer, and these trials have none")
         return _case_study(args, dataset, trials)
-    for flag, given in (("--magnetometer-sigma", args.magnetometer_sigma is not None),
-                        ("--magnetometer-delay", args.magnetometer_delay != 0.0)):
-        if given and "magnetometer" not in present:
-            raise UsageError(f"{flag}: these trials have no magnetometer")
-    if args.gyro_delay and args.magnetometer_delay != 0.0:
-        raise UsageError("--magnetometer-delay is the magnetometer's against the gyro as "
-                         "recorded, and --gyro-delay moves the gyro: give one of them")
+    _check_magnetometer_flags(args, present)
     args.estimators = _runnable(args, present)
     from benchmarks.broad import benchmark, inputs, tuning
     from benchmarks.broad.inputs import checked_sigmas
@@ -148,6 +142,18 @@ def run(args, _scenario):
     _write(args, result, tunings, dataset, train)
     return report_of(result.dt, {name: part["diverged_step"].to_numpy() for name, part
                                  in result.trials.groupby("estimator", sort=False)})
+
+
+def _check_magnetometer_flags(args, present) -> None:
+    """The magnetometer's flags refused where the trials (their vector
+    sensors ``present``) have none, and its delay with a moved gyro."""
+    for flag, given in (("--magnetometer-sigma", args.magnetometer_sigma is not None),
+                        ("--magnetometer-delay", args.magnetometer_delay != 0.0)):
+        if given and "magnetometer" not in present:
+            raise UsageError(f"{flag}: these trials have no magnetometer")
+    if args.gyro_delay and args.magnetometer_delay != 0.0:
+        raise UsageError("--magnetometer-delay is the magnetometer's against the gyro as "
+                         "recorded, and --gyro-delay moves the gyro: give one of them")
 
 
 def _runnable(args, present) -> tuple:
