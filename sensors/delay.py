@@ -56,6 +56,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynamics.validation import InvalidParameterError
+
 #: Delays are searched within ±MAX_DELAY_S s of none.
 MAX_DELAY_S = 0.1
 #: The readings are compared in pairs this far apart, s (or consecutive
@@ -74,36 +76,48 @@ GAP_FACTOR = 1.5
 JACKKNIFE_BLOCKS = 20
 #: A delay is clear this many standard errors from none (:meth:`DelayFit.clear`).
 CLEAR_ERRORS = 5.0
+def checked_delay(value):
+    """``value`` as a delay setting: ``"auto"``, or seconds within
+    ±:data:`MAX_DELAY_S`; else :class:`InvalidParameterError` naming
+    ``magnetometer_delay``."""
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        seconds = math.nan
+    if not (math.isfinite(seconds) and abs(seconds) <= MAX_DELAY_S):
+        raise InvalidParameterError("magnetometer_delay", value, DELAY_RULE)
+    return seconds
+
+
+#: What a delay setting must be.
+DELAY_RULE = (f"must be auto or seconds within ±{MAX_DELAY_S:g} (a sensor's filter delays its "
+              "readings by milliseconds: a longer delay is its timestamps to check)")
+
+
 def delay_argument(text: str):
     """A command line's delay (``--magnetometer-delay``): ``auto`` (fit it),
     or seconds within ±:data:`MAX_DELAY_S` (a sensor's filter delays it by
     milliseconds; beyond, its timestamps are to be checked, and the
     readings' turn by the gyro would leave its first order)."""
-    rule = (f"must be auto or seconds within ±{MAX_DELAY_S:g} (a sensor's filter delays its "
-            "readings by milliseconds: a longer delay is its timestamps to check)")
-    if text.strip().lower() == "auto":
-        return "auto"
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: {rule}") from None
-    if not (math.isfinite(value) and abs(value) <= MAX_DELAY_S):
-        raise argparse.ArgumentTypeError(f"{text!r}: {rule}")
-    return value
+        return checked_delay(text)
+    except InvalidParameterError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {DELAY_RULE}") from None
 
 
 @dataclass(frozen=True)
 class DelayFit:
     """A fitted delay: ``delay_s`` (positive: the readings come late), its
-    standard error (least squares' own, from the unexplained share's
-    curvature), the hard iron ``offset`` fitted with it, the share of the
-    readings' change it leaves unexplained, and that share with no delay."""
+    standard error (a block jackknife's, :func:`_jackknife_error`), the
+    hard iron ``offset`` fitted with it, and the share of the readings'
+    change it leaves unexplained."""
 
     delay_s: float
     standard_error_s: float
     offset: np.ndarray
     unexplained: float
-    unexplained_without: float
     #: the best delay lies at the search's edge: the readings' timing is
     #: beyond it, or their field does not turn as the gyro says
     beyond: bool = False
@@ -136,9 +150,9 @@ class _Pairs:
 
     def __init__(self, rates: np.ndarray, vectors: np.ndarray, available: np.ndarray, dt: float):
         read = np.flatnonzero(available)
-        spacing = max(1, int(round(PAIR_SPACING_S / dt)))
-        if len(read) > 1 and np.median(np.diff(read)) < spacing:
-            read = read[::spacing]
+        spacing = max(1, int(round(PAIR_SPACING_S / dt)))       # in gyro samples
+        between = np.median(np.diff(read)) if len(read) > 1 else spacing
+        read = read[::max(1, int(round(spacing / between)))]
         i, j = read[:-1], read[1:]
         span = j - i
         usual = np.median(span) if len(span) else 0
@@ -156,7 +170,8 @@ class _Pairs:
         long, neither helps nor hinders)."""
         turned = self.total[self.j] - self.total[self.i]
         rates = np.linalg.norm(turned, axis=1) / ((self.j - self.i) * self.dt)
-        return int(np.count_nonzero(rates >= MIN_RATE_RADPS)) >= MIN_PAIRS
+        return (int(np.count_nonzero(rates >= MIN_RATE_RADPS)) >= MIN_PAIRS
+                and float(np.sum(self.change * self.change)) > 0.0)    # a stuck sensor: no
 
     def unexplained(self, delay_s: float) -> tuple[float, np.ndarray]:
         """The share of the pairs' change that the gyro's rotation, ``delay_s``
@@ -191,16 +206,14 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
     the gyro's grid of step ``dt`` (module docstring); None where too few
     pairs of readings turn to say. A best delay at the search's edge is
     :attr:`DelayFit.beyond` (none within :data:`MAX_DELAY_S` explains it)."""
-    pairs = _Pairs(np.asarray(rates, dtype=float), np.asarray(vectors, dtype=float),
-                   np.asarray(available, dtype=bool), dt)
-    if not pairs.enough():
+    pairs = _pairs(rates, vectors, available, dt)
+    if pairs is None:
         return None
-    without = pairs.unexplained(0.0)[0]
     coarse = np.arange(-MAX_DELAY_S, MAX_DELAY_S + COARSE_STEP_S / 2, COARSE_STEP_S)
     best, shares = _best(pairs, coarse)
     if best in (0, len(coarse) - 1):
         unexplained, offset = pairs.unexplained(coarse[best])
-        return DelayFit(float(coarse[best]), math.inf, offset, unexplained, without, True)
+        return DelayFit(float(coarse[best]), math.inf, offset, unexplained, True)
     fine = np.linspace(coarse[best - 1], coarse[best + 1], FINE_STEPS)
     best, shares = _best(pairs, fine)
     delay, step = fine[best], fine[1] - fine[0]
@@ -210,8 +223,26 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
     if middle == best and curvature > 0.0:
         delay += 0.5 * (low - high) / (curvature * step)
     unexplained, offset = pairs.unexplained(delay)
-    return DelayFit(float(delay), _jackknife_error(pairs, delay, step), offset, unexplained,
-                    without)
+    return DelayFit(float(delay), _jackknife_error(pairs, delay, step), offset, unexplained)
+
+
+def _pairs(rates, vectors, available, dt: float) -> _Pairs | None:
+    """The readings' pairs, or None where the readings or the rates are not
+    finite, or too few pairs turn (:meth:`_Pairs.enough`)."""
+    rates, vectors = np.asarray(rates, dtype=float), np.asarray(vectors, dtype=float)
+    available = np.asarray(available, dtype=bool)
+    if not (np.isfinite(rates).all() and np.isfinite(vectors[available]).all()):
+        return None
+    pairs = _Pairs(rates, vectors, available, dt)
+    return pairs if pairs.enough() else None
+
+
+def hard_iron_at(rates, vectors, available, dt: float, delay_s: float) -> np.ndarray:
+    """The hard iron that fits the readings best at a given delay (zero
+    where too few turn to fit it): the offset :func:`at_sample_times`
+    turns them about."""
+    pairs = _pairs(rates, vectors, available, dt)
+    return np.zeros(3) if pairs is None else pairs.unexplained(delay_s)[1]
 
 
 def _jackknife_error(pairs: _Pairs, delay: float, step: float) -> float:
@@ -262,7 +293,7 @@ def at_sample_times(rates: np.ndarray, vectors: np.ndarray, available: np.ndarra
     out = np.array(vectors, dtype=float)
     read = np.flatnonzero(available)
     total = _integral(rates, dt)
-    last = (len(rates) - 2) * dt
+    last = (len(rates) - 1) * dt
     theta = total[read] - _integral_at(total, rates, dt,
                                        np.clip(read * dt - delay_s, 0.0, last))
     out[read] = Rotation.from_rotvec(-theta).apply(out[read] - offset) + offset

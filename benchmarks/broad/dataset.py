@@ -35,6 +35,7 @@ from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
 from sensors.clocks import GAP_FACTOR
 from sensors.declared import data_files, load_parts, read_declaration
+from sensors.delay import checked_delay
 from sensors.recording import Recording, checked_recording, load_recording
 
 ENVIRONMENT_VARIABLE = "ATTITUDE_BENCH_BROAD"
@@ -76,6 +77,9 @@ class BroadDataset:
     magnetometer_delay: object = 0.0
     #: trial → whether it has a magnetometer, found once (:meth:`sensors`)
     _fields: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "magnetometer_delay", checked_delay(self.magnetometer_delay))
 
     @functools.cached_property
     def attribution(self) -> str:
@@ -180,7 +184,9 @@ class BroadDataset:
         :func:`~benchmarks.broad.trial_notes.from_start`), its magnetometer's
         readings at their samples' times (:attr:`magnetometer_delay`); notes
         (warnings) say how many readings are dropouts (exactly zero, left
-        out), how many samples come before the start, and the delay fitted."""
+        out) and how many samples come before the start (the delay is said
+        once a run's inputs are checked: :func:`~benchmarks.broad.
+        trial_notes.note_magnetometer_delay`)."""
         path = self.files[name]
         # The file as the folder holds it: a long path would be cut short in
         # the message, and the trial's name with it.

@@ -1,9 +1,10 @@
 """What ``broad`` says of a trial as it loads it (:meth:`benchmarks.broad.
 dataset.BroadDataset.load`), once per trial: readings that are exactly
-zero, a channel at its rail, the samples before the first an attitude
-can be taken at, which it leaves out (:func:`from_start`), and how late its
-magnetometer reads against its gyro (:func:`magnetometer_timed`,
-:func:`note_magnetometer_delay`)."""
+zero, a channel at its rail, and the samples before the first an attitude
+can be taken at, which it leaves out (:func:`from_start`); and, once the
+run's inputs are checked, how late its magnetometer reads against its gyro
+(:func:`magnetometer_timed` takes the readings at their times as the trial
+loads, :func:`note_magnetometer_delay` says so)."""
 from __future__ import annotations
 
 import warnings
@@ -14,7 +15,7 @@ import numpy as np
 
 from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
     usable_readings
-from sensors.delay import at_sample_times, delay_fit, described
+from sensors.delay import at_sample_times, delay_fit, described, hard_iron_at
 from sensors.recording import Recording
 
 _NOTED = set()
@@ -93,9 +94,10 @@ def _timing_note(recording: Recording, fit) -> str:
     return f"trial {recording.name}: its magnetometer {described(fit, recording.dt)}"
 
 
-#: path → the delay fitted to its trial's magnetometer as it was loaded
-#: with ``auto`` (None: too little turned) and whether it was clear, so
-#: applied, for :func:`note_magnetometer_delay`.
+#: (path, trial) → the delay fitted to its magnetometer as it was last
+#: loaded, with ``auto`` (None: too little turned), and whether it was
+#: clear, so applied, for :func:`note_magnetometer_delay`; in the process
+#: that loaded it (a file with gaps in its gyro's clock holds several trials).
 _FITTED = {}
 
 
@@ -105,26 +107,30 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     fits how late they are (where the fit is not clear, the readings are
     kept; :func:`note_magnetometer_delay` says which), a number is that many
     seconds late, 0 keeps the recording as it is."""
+    key = (path, recording.name)
+    _FITTED.pop(key, None)
     if recording.magnetometer_uT is None or (delay != "auto" and delay == 0.0):
         return recording
-    field, offset = recording.magnetometer_uT, np.zeros(3)
+    field = recording.magnetometer_uT
+    read = np.any(field != 0.0, axis=1)
     if delay == "auto":
         fit = _fitted_delay(recording)
         clear = fit is not None and fit.clear(recording.dt)
-        _FITTED[path] = (fit, clear)
+        _FITTED[key] = (fit, clear)
         if not clear:
             return recording
         delay, offset = fit.delay_s, fit.offset
-    read = np.any(field != 0.0, axis=1)
+    else:               # a delay given: the hard iron it is turned about, fitted at it
+        offset = hard_iron_at(recording.gyro_radps, field, read, recording.dt, delay)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
     return replace(recording, magnetometer_uT=timed)
 
 
-def applied_delay(path: Path):
-    """The delay applied to the magnetometer of the trial at ``path`` as it
-    was last loaded with ``auto`` (a :class:`sensors.delay.DelayFit`; None
-    where none was clear, or it was not loaded so)."""
-    fit, clear = _FITTED.get(path, (None, False))
+def applied_delay(path: Path, trial: str):
+    """The delay applied to the magnetometer of ``trial`` (at ``path``) as
+    it was last loaded in this process (a :class:`sensors.delay.DelayFit`;
+    None where it was not loaded with ``auto``, or none was clear)."""
+    fit, clear = _FITTED.get((path, trial), (None, False))
     return fit if clear else None
 
 
@@ -136,8 +142,8 @@ def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
     seconds, nothing."""
     if recording.magnetometer_uT is None:
         return
-    if delay == "auto" and path in _FITTED:
-        fit, clear = _FITTED[path]
+    if delay == "auto" and (path, recording.name) in _FITTED:
+        fit, clear = _FITTED[(path, recording.name)]
         note_once(path, _timing_note(recording, fit) + (
             ": each reading taken at its sample's time" if clear else ": its readings kept"))
     elif delay != "auto" and delay == 0.0:
@@ -146,4 +152,4 @@ def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
             note_once(path, _timing_note(recording, fit) + "; --magnetometer-delay auto takes "
                       "each reading at its sample's time")
         elif fit is not None and (fit.beyond or fit.unexplained >= 1.0):
-            note_once(path, _timing_note(recording, fit))
+            note_once(path, _timing_note(recording, fit))     # its timestamps or axes to check

@@ -125,13 +125,13 @@ def trial_rows(args, name: str, scores, check=lambda: None):
 def delays_fitted(dataset) -> str:
     """What ``--magnetometer-delay auto`` fitted over ``dataset``'s trials,
     in one line (:func:`benchmarks.broad.trial_notes.applied_delay`)."""
-    fits = {trial: applied_delay(dataset.files[trial]) for trial in dataset.available}
+    fits = {trial: applied_delay(dataset.files[trial], trial) for trial in dataset.available}
     clear = {trial: fit.delay_s * 1e3 for trial, fit in fits.items() if fit is not None}
     kept = [trial_label(trial) for trial in fits if trial not in clear]
-    said = (f"the magnetometer reads {min(clear.values()):.1f} to {max(clear.values()):.1f} ms "
-            f"late against the gyro on {len(clear)} of {len(fits)} trials (each fitted, its "
-            "readings taken at their times)" if clear else "no trial's magnetometer is "
-            "clearly late against its gyro")
+    said = (f"the magnetometer's delay against the gyro, fitted on {len(clear)} of {len(fits)} "
+            f"trials: {min(clear.values()):.1f} to {max(clear.values()):.1f} ms (positive: "
+            "late; each trial's readings taken at their times)" if clear else
+            "no trial's magnetometer is clearly late or early against its gyro")
     return said + (f"; kept as recorded: {', '.join(kept)}" if kept and clear else "")
 
 
