@@ -87,7 +87,8 @@ def _fitted_delay(recording: Recording):
     """The magnetometer's delay against the gyro (:func:`sensors.delay.delay_fit`;
     None where too little turns to tell)."""
     field = recording.magnetometer_uT
-    return delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
+    return delay_fit(recording.gyro_radps, field, usable_readings(recording)["magnetometer"],
+                     recording.dt)
 
 
 def _timing_note(recording: Recording, fit) -> str:
@@ -112,7 +113,7 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     if recording.magnetometer_uT is None or (delay != "auto" and delay == 0.0):
         return recording
     field = recording.magnetometer_uT
-    read = np.any(field != 0.0, axis=1)
+    read = usable_readings(recording)["magnetometer"]
     if delay == "auto":
         fit = _fitted_delay(recording)
         clear = fit is not None and fit.clear(recording.dt)
