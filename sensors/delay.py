@@ -164,6 +164,8 @@ class _Pairs:
         self.total = _integral(rates, dt)
         self.change = vectors[self.j] - vectors[self.i]
         self.mean = (vectors[self.i] + vectors[self.j]) / 2
+        #: the change's squared sum, which every share is of
+        self.size = float(np.sum(self.change * self.change))
 
     def enough(self) -> bool:
         """Whether enough pairs turn to time the readings (a rest, however
@@ -171,13 +173,13 @@ class _Pairs:
         turned = self.total[self.j] - self.total[self.i]
         rates = np.linalg.norm(turned, axis=1) / ((self.j - self.i) * self.dt)
         return (int(np.count_nonzero(rates >= MIN_RATE_RADPS)) >= MIN_PAIRS
-                and float(np.sum(self.change * self.change)) > 0.0)    # a stuck sensor: no
+                and self.size > 0.0)                                   # a stuck sensor: no
 
     def unexplained(self, delay_s: float) -> tuple[float, np.ndarray]:
         """The share of the pairs' change that the gyro's rotation, ``delay_s``
         late, leaves unexplained, and the hard iron fitted with it."""
         left, offset = self.left(delay_s)
-        return float(np.sum(left)) / float(np.sum(self.change * self.change)), offset
+        return float(np.sum(left)) / self.size, offset
 
     def left(self, delay_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Each pair's change left unexplained (squared) with ``delay_s``,
@@ -222,8 +224,9 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
     curvature = (low - 2.0 * mid + high) / step ** 2    # the share's second derivative
     if middle == best and curvature > 0.0:
         delay += 0.5 * (low - high) / (curvature * step)
-    unexplained, offset = pairs.unexplained(delay)
-    return DelayFit(float(delay), _jackknife_error(pairs, delay, step), offset, unexplained)
+    left, offset = pairs.left(delay)
+    return DelayFit(float(delay), _jackknife_error(pairs, delay, step, left), offset,
+                    float(np.sum(left)) / pairs.size)
 
 
 def _pairs(rates, vectors, available, dt: float) -> _Pairs | None:
@@ -245,16 +248,15 @@ def hard_iron_at(rates, vectors, available, dt: float, delay_s: float) -> np.nda
     return np.zeros(3) if pairs is None else pairs.unexplained(delay_s)[1]
 
 
-def _jackknife_error(pairs: _Pairs, delay: float, step: float) -> float:
+def _jackknife_error(pairs: _Pairs, delay: float, step: float, mid: np.ndarray) -> float:
     """The delay's standard error by the delete-a-block jackknife over
     :data:`JACKKNIFE_BLOCKS` stretches of the recording (Efron & Tibshirani,
     *An Introduction to the Bootstrap*, 1993, §11.2), each block's deletion
     taken to first order (one Newton step from the fit): neighbouring pairs
     share a reading and the room's field, so their errors are not
     independent, and least squares' own error, which takes them so, would
-    be several times off."""
+    be several times off. ``mid``: each pair's share left at ``delay``."""
     low, high = pairs.left(delay - step)[0], pairs.left(delay + step)[0]
-    mid = pairs.left(delay)[0]
     curvature = float(np.sum(low) - 2.0 * np.sum(mid) + np.sum(high)) / step ** 2
     if curvature <= 0.0:
         return math.inf
