@@ -20,8 +20,7 @@ import numpy as np
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS
 from sensors.recording import VECTOR_LIMITS
-from sensors.recording_keys import refuse
-from sensors.recording_keys import axes_matrix, axes_names
+from sensors.recording_keys import axes_matrix, axes_names, refuse
 from sensors.turning import (AXES_THRESHOLDS, MIRRORED_CORRELATION, TURNING_CORRELATION,
                              TURNING_FACTOR, TURNING_WINDOW_S, field_correlation,
                              gravity_turning, rates_fit, reference_fit, reference_fits,

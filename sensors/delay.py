@@ -229,6 +229,18 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
                     float(np.sum(left)) / pairs.size)
 
 
+def recording_fit(recording) -> DelayFit | None:
+    """:func:`delay_fit` of a recording's magnetometer against its gyro
+    (:class:`sensors.recording.Recording`; its readings the rows that are
+    not exactly zero, which on a gyro's grid is no reading)."""
+    field = recording.magnetometer_uT
+    return delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
+
+
+#: What a clear delay's note advises (``broad``, ``inspect``).
+AUTO_ADVICE = "--magnetometer-delay auto takes each reading at its sample's time"
+
+
 def _pairs(rates, vectors, available, dt: float) -> _Pairs | None:
     """The readings' pairs, or None where the readings or the rates are not
     finite, or too few pairs turn (:meth:`_Pairs.enough`)."""

@@ -15,7 +15,8 @@ import numpy as np
 
 from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
     usable_readings
-from sensors.delay import at_sample_times, delay_fit, described, hard_iron_at
+from sensors.delay import AUTO_ADVICE, at_sample_times, described, hard_iron_at, \
+    recording_fit
 from sensors.recording import Recording
 
 _NOTED = set()
@@ -83,14 +84,6 @@ def from_start(recording: Recording, path: Path, refuse) -> Recording:
     return recording
 
 
-def _fitted_delay(recording: Recording):
-    """The magnetometer's delay against the gyro (:func:`sensors.delay.delay_fit`;
-    None where too little turns to tell)."""
-    field = recording.magnetometer_uT
-    return delay_fit(recording.gyro_radps, field, usable_readings(recording)["magnetometer"],
-                     recording.dt)
-
-
 def _timing_note(recording: Recording, fit) -> str:
     return f"trial {recording.name}: its magnetometer {described(fit, recording.dt)}"
 
@@ -115,7 +108,7 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     field = recording.magnetometer_uT
     read = usable_readings(recording)["magnetometer"]
     if delay == "auto":
-        fit = _fitted_delay(recording)
+        fit = recording_fit(recording)
         clear = fit is not None and fit.clear(recording.dt)
         _FITTED[key] = (fit, clear)
         if not clear:
@@ -148,9 +141,8 @@ def note_magnetometer_delay(recording: Recording, path: Path, delay) -> None:
         note_once(path, _timing_note(recording, fit) + (
             ": each reading taken at its sample's time" if clear else ": its readings kept"))
     elif delay != "auto" and delay == 0.0:
-        fit = _fitted_delay(recording)
+        fit = recording_fit(recording)
         if fit is not None and fit.clear(recording.dt):
-            note_once(path, _timing_note(recording, fit) + "; --magnetometer-delay auto takes "
-                      "each reading at its sample's time")
+            note_once(path, f"{_timing_note(recording, fit)}; {AUTO_ADVICE}")
         elif fit is not None and (fit.beyond or fit.unexplained >= 1.0):
             note_once(path, _timing_note(recording, fit))     # its timestamps or axes to check

@@ -329,11 +329,9 @@ def _reference_turning(recording) -> str:
 
 def _magnetometer_timing(recording) -> str:
     """How late the magnetometer reads against the gyro (:mod:`sensors.delay`)."""
-    from sensors.delay import delay_fit, described
-    field = recording.magnetometer_uT
-    fit = delay_fit(recording.gyro_radps, field, np.any(field != 0, axis=1), recording.dt)
-    advice = ("; broad --magnetometer-delay auto takes each reading at its sample's time"
-              if fit is not None and fit.clear(recording.dt) else "")
+    from sensors.delay import AUTO_ADVICE, described, recording_fit
+    fit = recording_fit(recording)
+    advice = f"; broad {AUTO_ADVICE}" if fit is not None and fit.clear(recording.dt) else ""
     return f"magnetometer timing: it {described(fit, recording.dt)}{advice}"
 
 
