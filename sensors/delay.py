@@ -287,6 +287,8 @@ def described(fit: DelayFit | None, dt: float) -> str:
     if fit.beyond:
         return (f"is off the gyro by more than {MAX_DELAY_S * 1e3:.0f} ms, or its field does "
                 "not turn as the gyro says: check its timestamps and its axes")
+    if not math.isfinite(fit.standard_error_s):        # no best delay: no error to give
+        return "turns with no clear best delay against the gyro (its timing cannot be told)"
     said = (f"{abs(fit.delay_s) * 1e3:.1f} ± {fit.standard_error_s * 1e3:.1f} ms "
             f"{'late' if fit.delay_s > 0 else 'early'} against the gyro")
     if fit.unexplained >= 1.0:

@@ -1,6 +1,7 @@
 """A magnetometer that reads late against its gyro: the delay fitted from
 how the field turns (no reference read), the readings taken at their
 samples' times, and ``broad --magnetometer-delay``."""
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -265,6 +266,10 @@ def test_a_delay_beyond_the_search_is_never_clear(brisk):
     assert fit.beyond or fit.unexplained >= 1.0
     assert "check its timestamps" in described(fit, brisk.dt)
     assert "too little" in described(None, brisk.dt)
+    # a fit with no best delay (its share not curved upward there) gives no
+    # error to print: said so, never "± inf ms"
+    flat = replace(fit, beyond=False, unexplained=0.5, standard_error_s=math.inf)
+    assert "no clear best delay" in described(flat, brisk.dt) and not flat.clear(brisk.dt)
 
 
 def test_a_gyro_delay_with_a_magnetometer_delay_is_refused(tmp_path, capsys):
