@@ -4,9 +4,12 @@ The readings are what a MEMS IMU gives of that motion, in the units and
 frames of a recorded trial (:class:`sensors.recording.Recording`), with the
 truth as its reference attitude and no gap in it:
 
-- the gyro: the body rate through a matrix ``I + M`` (``M``'s diagonal
-  the scale factors' errors, drawn uniformly within
-  ``±gyro_scale_percent``; off it the axes' misalignments, within
+- the gyro: the body rate over the interval before each sample (an IMU
+  reads its rate averaged since its last reading, as the filters take it,
+  ``rate_interpolation = "end"``; the truth's rate is held over the
+  interval after each sample, :mod:`dynamics.handheld`), through a matrix
+  ``I + M`` (``M``'s diagonal the scale factors' errors, drawn uniformly
+  within ``±gyro_scale_percent``; off it the axes' misalignments, within
   ``±gyro_misalignment_deg``), plus a constant bias drawn per axis
   uniformly within ``±gyro_bias_dps``, plus white noise of density
   ``gyro_noise_density`` (rad/√s): the errors a MEMS gyro keeps after a
@@ -72,6 +75,13 @@ class HandheldImu:
         return self.field_uT * np.array([0.0, np.cos(dip), -np.sin(dip)])
 
 
+def rate_before(omega_radps: np.ndarray) -> np.ndarray:
+    """``(N, 3)``: at each sample the rate over the interval before it, from
+    rates held over the interval after each sample (the truth's); the first
+    sample, which has no interval before it, reads its own."""
+    return np.concatenate([omega_radps[:1], omega_radps[:-1]])
+
+
 def simulated_recording(seed: int, motion: HandheldMotion = HandheldMotion(),
                         imu: HandheldImu = HandheldImu()) -> Recording:
     """A recording of ``motion`` by ``imu``, drawn from seed ``seed`` (the
@@ -83,7 +93,7 @@ def simulated_recording(seed: int, motion: HandheldMotion = HandheldMotion(),
     to_body = to_rotation(truth.q_true).inv()
     bias = np.radians(imu.gyro_bias_dps) * rng.uniform(-1.0, 1.0, 3)
     errors = imu.gyro_errors(rng)
-    gyro = truth.omega_radps @ (np.eye(3) + errors).T + bias \
+    gyro = rate_before(truth.omega_radps) @ (np.eye(3) + errors).T + bias \
         + imu.gyro_noise_density * np.sqrt(rate) * rng.standard_normal((n, 3))
     force = to_body.apply(truth.acceleration_mps2 + [0.0, 0.0, GRAVITY_MPS2])
     field = to_body.apply(np.tile(imu.field_world(), (n, 1)))

@@ -226,6 +226,14 @@ def _better_order(rates: np.ndarray, vectors: np.ndarray, dt: float, thresholds:
     return (declared, orders[index], best) if best >= thresholds[1] else None
 
 
+def _turned_rates(rates: np.ndarray, steps: int, starts: int) -> np.ndarray:
+    """The gyro's mean rate from each block's first sample to the next
+    block's, ``(starts - 1, 3)``: reading ``k`` is the rate over the interval
+    before sample ``k`` (an IMU's, as the filters take it), so the turn from
+    sample ``s`` to ``s + steps`` is read at ``s + 1`` to ``s + steps``."""
+    return _block_means(rates[1:], steps)[:starts - 1]
+
+
 def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
     """``(unexplained, rotation)``: the share of the reference's turning
     (scalar-first quaternions, body → world, NaN where none) that the
@@ -244,7 +252,7 @@ def reference_fit(rates: np.ndarray, reference_quat: np.ndarray, dt: float):
     attitude = Rotation.from_quat(quat[:-1][paired], scalar_first=True)
     after = Rotation.from_quat(quat[1:][paired], scalar_first=True)
     turned = (attitude.inv() * after).as_rotvec() / (steps * dt)
-    rate = _block_means(rates, steps)[:len(starts) - 1][paired]
+    rate = _turned_rates(rates, steps, len(starts))[paired]
     if np.sqrt(np.mean(np.sum(rate * rate, axis=1))) < MIN_RATE_RADPS:
         return None
     if not np.any(turned):
@@ -276,7 +284,7 @@ def reference_scale(rates: np.ndarray, reference_quat: np.ndarray, dt: float) ->
         return None
     turned = (Rotation.from_quat(quat[:-1][paired], scalar_first=True).inv() * Rotation.from_quat(
         quat[1:][paired], scalar_first=True)).as_rotvec() / (steps * dt)
-    rate = _block_means(rates, steps)[:len(starts) - 1][paired]
+    rate = _turned_rates(rates, steps, len(starts))[paired]
     turned_rms, rate_rms = (float(np.sqrt(np.mean(np.sum(x * x, axis=1)))) for x in (turned, rate))
     if max(turned_rms, rate_rms) < MIN_RATE_RADPS or rate_rms == 0.0:
         return None

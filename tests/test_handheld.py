@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from dynamics.handheld import HandheldMotion, simulate_handheld
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_rotation
 from dynamics.validation import InvalidParameterError
-from sensors.handheld import GRAVITY_MPS2, HandheldImu, simulated_recording
+from sensors.handheld import GRAVITY_MPS2, HandheldImu, rate_before, simulated_recording
 
 #: A short motion, so that each example takes milliseconds.
 SHORT = HandheldMotion(rate_hz=50.0, rest_s=1.0, moving_s=4.0, final_rest_s=1.0, taper_s=0.5)
@@ -66,7 +66,7 @@ def test_a_perfect_imu_reads_the_truth():
     recording = simulated_recording(3, SHORT, PERFECT)
     truth = simulate_handheld(SHORT, np.random.default_rng(3))
     np.testing.assert_array_equal(recording.reference_quat, truth.q_true)
-    np.testing.assert_allclose(recording.gyro_radps, truth.omega_radps, atol=1e-15)
+    np.testing.assert_allclose(recording.gyro_radps, rate_before(truth.omega_radps), atol=1e-15)
     to_world = to_rotation(recording.reference_quat)
     np.testing.assert_allclose(to_world.apply(recording.magnetometer_uT),
                                np.tile(PERFECT.field_world(), (len(truth.q_true), 1)), atol=1e-9)
@@ -78,12 +78,30 @@ def test_a_perfect_imu_reads_the_truth():
     assert np.degrees(np.arctan2(-field[2], field[1])) == pytest.approx(66.0)
 
 
+def test_the_gyro_reads_the_interval_before_each_sample_as_the_filters_take_it():
+    # Integrated as the filters integrate an IMU's gyro (rate_interpolation
+    # "end": reading k turns the body from sample k-1 to k), the perfect
+    # IMU's readings give the truth back; taken as the interval after each
+    # sample they are a sample late, off by the turn of a step.
+    recording = simulated_recording(6, SHORT, PERFECT)
+    truth, dt = recording.reference_quat, recording.dt
+    q = truth[0]
+    for k in range(1, len(truth)):
+        q = quat_multiply(q, quat_from_rotvec(recording.gyro_radps[k] * dt))
+        assert min(np.abs(q - truth[k]).max(), np.abs(q + truth[k]).max()) < 1e-9
+    late, worst = truth[0], 0.0
+    for k in range(1, len(truth)):
+        late = quat_multiply(late, quat_from_rotvec(recording.gyro_radps[k - 1] * dt))
+        worst = max(worst, min(np.abs(late - truth[k]).max(), np.abs(late + truth[k]).max()))
+    assert worst > 1e-3
+
+
 def test_the_gyro_bias_is_constant_and_within_its_bound():
     imu = HandheldImu(gyro_bias_dps=2.0, gyro_scale_percent=0.0, gyro_misalignment_deg=0.0,
                       gyro_noise_density=0.0)
     recording = simulated_recording(4, SHORT, imu)
     truth = simulate_handheld(SHORT, np.random.default_rng(4))
-    offset = np.degrees(recording.gyro_radps - truth.omega_radps)
+    offset = np.degrees(recording.gyro_radps - rate_before(truth.omega_radps))
     np.testing.assert_allclose(offset, np.tile(offset[0], (len(offset), 1)), atol=1e-12)
     assert np.all(np.abs(offset[0]) <= 2.0) and np.any(offset[0] != 0.0)
 
@@ -139,9 +157,10 @@ def test_the_gyro_reads_the_rate_through_its_scale_and_misalignment():
                       gyro_misalignment_deg=1.0)
     recording = simulated_recording(5, SHORT, imu)
     truth = simulate_handheld(SHORT, np.random.default_rng(5))
-    matrix = np.linalg.lstsq(truth.omega_radps, recording.gyro_radps, rcond=None)[0].T
+    rates = rate_before(truth.omega_radps)
+    matrix = np.linalg.lstsq(rates, recording.gyro_radps, rcond=None)[0].T
     errors = matrix - np.eye(3)
     assert np.all(np.abs(np.diag(errors)) <= 0.02) and np.any(np.diag(errors) != 0.0)
     off = errors[~np.eye(3, dtype=bool)]
     assert np.all(np.abs(off) <= np.radians(1.0)) and np.any(off != 0.0)
-    np.testing.assert_allclose(recording.gyro_radps, truth.omega_radps @ matrix.T, atol=1e-12)
+    np.testing.assert_allclose(recording.gyro_radps, rates @ matrix.T, atol=1e-12)

@@ -13,8 +13,8 @@ from scipy.spatial.transform import Rotation
 from dynamics.validation import InvalidParameterError
 from sensors.recording import load_recording
 from sensors.turning import (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE, ORDERS,
-                             REFERENCE_UNEXPLAINED, axes_fit, first_fitting, reference_fit,
-                             reference_fits)
+                             REFERENCE_UNEXPLAINED, axes_fit, clock_offset, first_fitting,
+                             reference_fit, reference_fits)
 
 RATE_HZ = 200.0
 DT = 1.0 / RATE_HZ
@@ -27,9 +27,9 @@ def _motion(seconds: float = 30.0, scale: float = 1.0):
     t = np.arange(int(seconds * RATE_HZ)) * DT
     rates = scale * np.stack([0.9 * np.sin(0.7 * t), 0.7 * np.sin(1.1 * t + 1.0),
                               0.5 * np.cos(0.5 * t)], axis=1)
-    steps = Rotation.from_rotvec(rates * DT)
+    steps = Rotation.from_rotvec(rates * DT)     # reading k: the interval before sample k
     attitude = [Rotation.identity()]
-    for step in steps[:-1]:
+    for step in steps[1:]:
         attitude.append(attitude[-1] * step)
     return rates, Rotation.concatenate(attitude)
 
@@ -122,6 +122,20 @@ def test_a_reference_clock_behind_the_gyros_is_found(tmp_path):
     with pytest.warns(UserWarning, match=r"opt_quat turns unlike the gyro .*: its clock 450 ms "
                       r"behind the gyro's would explain it \(0\.0 % unexplained then\)"):
         load_recording(_late_reference_npz(tmp_path, 0.45))
+
+
+def test_a_clock_offset_is_found_to_the_sample(motion):
+    """Each reading is the rate over the interval before its sample (an
+    IMU's, as the filters take it): a reference 60 ms late is found 60 ms
+    late, not a sample less (the check had read each rate as the interval
+    after its sample), and on time leaves nothing unexplained."""
+    rates, attitude = motion
+    quat = _quat(attitude)
+    late = 12                                      # samples: 60 ms at 200 Hz
+    shifted = np.concatenate([np.repeat(quat[:1], late, axis=0), quat[:-late]])
+    offset, unexplained = clock_offset(rates, shifted, DT)
+    assert offset == pytest.approx(late * DT) and unexplained < 1e-6
+    assert reference_fit(rates, quat, DT)[0] < 1e-6
 
 
 def test_too_little_turning_or_reference_is_no_evidence(motion):
