@@ -78,36 +78,53 @@ def reversed_readings(vectors) -> tuple:
                  for v in vectors)
 
 
+#: Samples fused at a time: the fusion's temporaries (a dozen arrays of
+#: covariances) stay some ten MB however long the recording.
+FUSE_CHUNK = 1 << 13
+
+
 def fuse(forward, backward) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The two-filter fusion (module docstring) of the forward pass's
     ``(q, β, P)`` — ``(N, 4)`` attitudes, ``(N, 3)`` biases, ``(N, 6, 6)``
     covariances of the body-frame error state — with the backward pass's,
     whose bias is the reversed gyro's (negated here). Returns the fused
     attitudes, biases and covariances; where one pass is not finite, the
-    other's."""
+    other's. Fused :data:`FUSE_CHUNK` samples at a time, each sample alone:
+    the same numbers as all at once."""
     q_f, b_f, P_f = (np.asarray(x, dtype=float) for x in forward)
     q_b, b_b, P_b = (np.asarray(x, dtype=float) for x in backward)
     flip = _flip(P_f.shape[-1])
-    b_b, P_b = b_b * flip[3:], P_b * np.outer(flip, flip)   # the reversed gyro's bias is −β
-    fused = [q_f.copy(), b_f.copy(), P_f.copy()]
-    ok_f, ok_b = _finite(q_f, b_f, P_f), _finite(q_b, b_b, P_b)
-    for mine, theirs in zip(fused, (q_b, b_b, P_b)):
+    fused = (q_f.copy(), b_f.copy(), P_f.copy())
+    for start in range(0, len(q_f), FUSE_CHUNK):
+        part = slice(start, start + FUSE_CHUNK)
+        # the reversed gyro's bias is −β
+        _fuse_part(tuple(x[part] for x in fused),
+                   (q_b[part], b_b[part] * flip[3:], P_b[part] * np.outer(flip, flip)))
+    return fused
+
+
+def _fuse_part(fused, backward) -> None:
+    """:func:`fuse` on part of the samples: ``fused`` (views into the
+    output, holding the forward pass) fused in place with ``backward``."""
+    q_b, b_b, P_b = backward
+    ok_f, ok_b = _finite(*fused), _finite(q_b, b_b, P_b)
+    for mine, theirs in zip(fused, backward):
         mine[~ok_f] = theirs[~ok_f]
     both = ok_f & ok_b
-    if both.any():
-        from scipy.spatial.transform import Rotation  # here: a scenario is built without scipy
-        forward_rotation = Rotation.from_quat(q_f[both][:, [1, 2, 3, 0]])
-        delta = np.concatenate(
-            [(forward_rotation.inv() * Rotation.from_quat(q_b[both][:, [1, 2, 3, 0]])).as_rotvec(),
-             b_b[both] - b_f[both]], axis=1)
-        Pf = P_f[both]
-        gain = np.linalg.solve(Pf + P_b[both], Pf).transpose(0, 2, 1)   # P_f (P_f + P_b)⁻¹
-        step = np.einsum("nij,nj->ni", gain, delta)
-        quat = (forward_rotation * Rotation.from_rotvec(step[:, :3])).as_quat()[:, [3, 0, 1, 2]]
-        fused[0][both] = quat * np.sign(np.sum(quat * q_f[both], axis=1))[:, None]
-        fused[1][both] = b_f[both] + step[:, 3:]
-        fused[2][both] = Pf - gain @ Pf
-    return tuple(fused)
+    if not both.any():
+        return
+    from scipy.spatial.transform import Rotation  # here: a scenario is built without scipy
+    q_f, b_f, Pf = (x[both] for x in fused)
+    forward_rotation = Rotation.from_quat(q_f[:, [1, 2, 3, 0]])
+    delta = np.concatenate(
+        [(forward_rotation.inv() * Rotation.from_quat(q_b[both][:, [1, 2, 3, 0]])).as_rotvec(),
+         b_b[both] - b_f], axis=1)
+    gain = np.linalg.solve(Pf + P_b[both], Pf).transpose(0, 2, 1)   # P_f (P_f + P_b)⁻¹
+    step = np.einsum("nij,nj->ni", gain, delta)
+    quat = (forward_rotation * Rotation.from_rotvec(step[:, :3])).as_quat()[:, [3, 0, 1, 2]]
+    fused[0][both] = quat * np.sign(np.sum(quat * q_f, axis=1))[:, None]
+    fused[1][both] = b_f + step[:, 3:]
+    fused[2][both] = Pf - gain @ Pf
 
 
 def _flip(size: int) -> np.ndarray:

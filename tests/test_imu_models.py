@@ -513,6 +513,29 @@ def test_fusion_weighs_each_estimate_by_its_information():
     np.testing.assert_array_equal(fused, q_f)
 
 
+@pytest.mark.parametrize("size", [6, 9])
+def test_fusion_in_parts_is_fusion_at_once(monkeypatch, size):
+    # A long recording is fused a part at a time (its memory bounded); each
+    # sample is fused alone, so the parts give the same bits as one part,
+    # passes that are not finite included (here on a part's edges).
+    import estimators.smoother as smoother
+    rng = np.random.default_rng(8)
+    n = 1001
+    spread = rng.standard_normal((2, n, size, size))
+    P_f, P_b = spread @ spread.transpose(0, 1, 3, 2) * 1e-3 + np.eye(size) * 1e-4
+    q_f = rng.standard_normal((n, 4))
+    q_f /= np.linalg.norm(q_f, axis=1, keepdims=True)
+    q_b = q_f + 0.01 * rng.standard_normal((n, 4))
+    b_f, b_b = rng.standard_normal((2, n, size - 3))
+    q_f[99], q_b[100], P_b[500, 0, 0] = np.nan, np.nan, np.inf
+    whole = fuse((q_f, b_f, P_f), (q_b, b_b, P_b))
+    monkeypatch.setattr(smoother, "FUSE_CHUNK", 100)
+    parts = fuse((q_f, b_f, P_f), (q_b, b_b, P_b))
+    for a, b in zip(whole, parts):
+        np.testing.assert_array_equal(a, b)
+    assert np.isfinite(whole[0][[99, 100, 500]]).all()     # the other pass's, where one is not
+
+
 @pytest.mark.parametrize("interpolation", ["hold", "trapezoid", "end"])
 def test_the_reversed_rates_turn_the_record_back_to_its_start(interpolation):
     # Propagating the reversed rates as the filter takes them undoes the forward turn.
