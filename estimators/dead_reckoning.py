@@ -15,7 +15,13 @@ as the average rate from :math:`t_k` to :math:`t_{k+1}`, as the filters use it;
 ``rate_timing="step-average"`` matches that,
 :math:`\hat q_k = f(\hat q_{k-1}, \tilde\omega_{k-1})` with
 :math:`\hat q_0 = q_0`, and so avoids a constant lag of one step's rotation
-(23 arcsec at 0.0011 rad/s and 10 Hz).
+(23 arcsec at 0.0011 rad/s and 10 Hz). An IMU's reading is the mean rate
+over the interval *before* its sample (its rate filtered inside the
+sensor): ``rate_timing="end"``,
+:math:`\hat q_k = f(\hat q_{k-1}, \tilde\omega_k)` with :math:`\hat q_0 =
+q_0` (reading 0 covers the time before the start), as the MEKF's
+``rate_interpolation = "end"`` takes it; a recording's scenario sets it
+(:data:`benchmarks.experiments.replay.RECORDED_GYRO`).
 """
 from __future__ import annotations
 
@@ -26,7 +32,7 @@ from dynamics.validation import one_of
 from estimators.base import AttitudeEstimator
 from estimators.model import propagate
 
-RATE_TIMINGS = ("workshop", "step-average")
+RATE_TIMINGS = ("workshop", "step-average", "end")
 
 
 class DeadReckoning(AttitudeEstimator):
@@ -39,9 +45,10 @@ class DeadReckoning(AttitudeEstimator):
     initial_attitude : (4,) array-like
         Starting estimate (``q̂[-1]``, or ``q̂[0]`` with step-average timing),
         scalar-first; normalised.
-    rate_timing : {"workshop", "step-average"}
-        Whether ``ω̃[k]`` takes the estimate to step ``k`` (the workshop) or
-        from ``k`` to ``k + 1`` (see the module docstring).
+    rate_timing : {"workshop", "step-average", "end"}
+        Whether ``ω̃[k]`` takes the estimate to step ``k`` (the workshop; with
+        ``"end"`` from step ``k - 1``, reading 0 unused) or from ``k`` to
+        ``k + 1`` (see the module docstring).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`).
@@ -75,6 +82,8 @@ class DeadReckoning(AttitudeEstimator):
     def reset(self) -> None:
         self.attitude = self.initial_attitude.copy()
         self._pending_rate = None
+        #: Whether a reading was taken since the reset ("end": reading 0 is not integrated).
+        self._started = False
         #: The time the next propagation covers: dt, or what is left of a step
         #: after a reading taken within it (dead reckoning with resets).
         self._next_dt = self.dt
@@ -83,8 +92,11 @@ class DeadReckoning(AttitudeEstimator):
         """Propagate with the rate that belongs to this step under ``rate_timing``."""
         omega = np.asarray(omega_meas_radps, float)
         step, self._next_dt = self._next_dt, self.dt
-        if self.rate_timing == "workshop":
+        started, self._started = self._started, True
+        if self.rate_timing == "workshop" or (self.rate_timing == "end" and started):
             self.attitude = propagate(self.attitude, omega, step)
+            return
+        if self.rate_timing == "end":          # reading 0: the time before the start
             return
         if self._pending_rate is not None:
             self.attitude = propagate(self.attitude, self._pending_rate, step)

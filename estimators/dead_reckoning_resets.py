@@ -32,7 +32,7 @@ class DeadReckoningWithResets(DeadReckoning):
         Gyro step, seconds.
     initial_attitude : (4,) array-like
         Starting estimate ``q̂[-1]``, scalar-first; normalised.
-    rate_timing : {"workshop", "step-average"}
+    rate_timing : {"workshop", "step-average", "end"}
         As for :class:`~estimators.DeadReckoning`.
     align_sign : bool
         Flip a reading to the sign nearest the current estimate (default).
@@ -76,7 +76,7 @@ class DeadReckoningWithResets(DeadReckoning):
         self._advance(omega_meas_radps)
         estimate = self.attitude.copy()
         self.attitude = self._aligned(star_tracker_quat)
-        if self.rate_timing == "workshop":
+        if self.rate_timing != "step-average":
             self._next_dt = self.dt - offset_s
         else:
             self.attitude = propagate(self.attitude, self._pending_rate, self.dt - offset_s)

@@ -100,7 +100,9 @@ def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = F
     if len(read) > 1 and np.median(np.diff(read)) * dt > window_s:
         summed = np.concatenate([np.zeros((1, 3)), np.cumsum(rates, axis=0)])
         steps = np.diff(read)[:, None]
-        rate = (summed[read[1:]] - summed[read[:-1]]) / steps
+        # from reading i to reading j the gyro's readings i + 1 … j (each the
+        # rate over the interval before its sample)
+        rate = (summed[read[1:] + 1] - summed[read[:-1] + 1]) / steps
         vector = vectors[read]
         change = np.diff(vector, axis=0) / (steps * dt)
         vector = (vector[1:] + vector[:-1]) / 2
@@ -132,10 +134,13 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float,
     rad/s); None where there is too little of it. A correlation near −1 is
     a frame mirrored between the two: columns in a left-handed order
     (``ω × v`` changes its sign under a reflection of both)."""
-    if np.mean(np.any(specific_force != 0.0, axis=1)) < 0.9:
-        # an accelerometer on its own clock, or slower (a phone logger's own
-        # timestamps cover three gyro samples in four): its readings held
-        # from each to the next, whose turning the windows then see
+    read = np.flatnonzero(np.any(specific_force != 0.0, axis=1))
+    if len(read) < 0.9 * len(specific_force) and (
+            len(read) < 2 or np.median(np.diff(read)) * dt <= window_s):
+        # an accelerometer on its own clock (a phone logger's own timestamps
+        # cover three gyro samples in four): its readings held from each to
+        # the next, whose turning the windows then see; one slower than the
+        # windows is compared reading to reading (_turning)
         specific_force = held_readings(specific_force)
     turning = _turning(rates, specific_force, dt, window_s=window_s)
     if turning is None:

@@ -164,3 +164,35 @@ def test_the_gyro_reads_the_rate_through_its_scale_and_misalignment():
     off = errors[~np.eye(3, dtype=bool)]
     assert np.all(np.abs(off) <= np.radians(1.0)) and np.any(off != 0.0)
     np.testing.assert_allclose(recording.gyro_radps, rates @ matrix.T, atol=1e-12)
+
+
+@pytest.mark.parametrize("inputs", ["broad", "replay"])
+def test_dead_reckoning_takes_a_recorded_gyro_as_an_imus(inputs):
+    """broad's and replay's scenarios take each gyro sample as the rate over
+    the interval before it (RECORDED_GYRO): dead reckoning on a perfect IMU
+    then follows the truth but for its first-order step's error, where
+    holding each sample over the interval after lagged by a step's turn
+    (about 0.5° at 100 °/s and 200 Hz)."""
+    from benchmarks.broad.inputs import imu_inputs
+    from benchmarks.broad.metric import errors_deg
+    from benchmarks.engine.recorded import run_recorded
+    from benchmarks.experiments.replay import replay_scenario
+    from estimators import resolve_estimator
+    motion = HandheldMotion(rate_hz=200.0, rest_s=0.5, moving_s=10.0, final_rest_s=0.5,
+                            rate_rms_dps=100.0)
+    recording = simulated_recording(1, motion, PERFECT)
+    scenario = (imu_inputs(recording).scenario if inputs == "broad"
+                else replay_scenario(recording))
+    worst = {}
+    for timing in (None, "step-average"):
+        options = {} if timing is None else {"rate_timing": timing}
+        estimator = resolve_estimator("dead-reckoning").from_scenario(scenario, **options)
+        assert timing or estimator.rate_timing == "end"
+        estimator.initial_attitude = recording.reference_quat[0]
+        run = run_recorded(estimator, recording.gyro_radps)
+        worst[timing] = errors_deg(run.estimates, recording.reference_quat)["total"].max()
+    assert worst[None] < 0.02 and worst["step-average"] > 0.3
+    for name in ("mekf", "usque", "dead-reckoning-resets"):
+        estimator = resolve_estimator(name).from_scenario(scenario)
+        assert getattr(estimator, "rate_interpolation", getattr(estimator, "rate_timing", None)) \
+            == "end"

@@ -154,9 +154,10 @@ def engine_cases(draw):
         # past 1e-9 (measured: 2e-9 at P₀/R = 4e8). Keep it below 1e4.
         initial_covariance=draw(st.sampled_from([1e-12, 1e-10, 1e-9])),
         estimator_options={
-            "dead-reckoning": {"rate_timing": draw(st.sampled_from(["workshop", "step-average"]))},
+            "dead-reckoning": {"rate_timing": draw(st.sampled_from(["workshop", "step-average",
+                                                                    "end"]))},
             "dead-reckoning-resets": {
-                "rate_timing": draw(st.sampled_from(["workshop", "step-average"])),
+                "rate_timing": draw(st.sampled_from(["workshop", "step-average", "end"])),
                 "align_sign": draw(st.booleans())},
             "ekf": {"output": draw(st.sampled_from(["prior", "posterior"])),
                     "align_sign": draw(st.booleans())},

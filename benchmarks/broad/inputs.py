@@ -25,9 +25,10 @@ The MEKF and USQUE run the IMU models (:mod:`estimators.imu`, by their
 ``[estimators.mekf]`` and ``[estimators.usque]`` settings:
 :data:`IMU_MODELS`): gravity low-passed in its strapdown frame, the
 heading-only magnetometer with its hard iron fitted online, rest detection
-with the zero-rate update of its bias, and the gyro's reading taken as the
-rate over the interval before it (an IMU's output is filtered inside the
-sensor).
+with the zero-rate update of its bias. Every estimator with a setting for
+it takes the gyro's reading as the rate over the interval before it (an
+IMU's output is filtered inside the sensor:
+:data:`benchmarks.experiments.replay.RECORDED_GYRO`).
 
 A reading of exactly zero on all three axes is a dropout (no accelerometer
 reads no gravity, no magnetometer no field): it is no reading (``available``
@@ -43,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from benchmarks.experiments.replay import checked_gyro_delay, delayed_gyro
+from benchmarks.experiments.replay import RECORDED_GYRO, checked_gyro_delay, delayed_gyro
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import SensorData
 from dynamics.environment import STANDARD_GRAVITY_MPS2
@@ -81,7 +82,7 @@ GATE_PROBABILITY = 0.9999
 MAGNETIC_NORM_TOLERANCE = 0.1
 #: The MEKF's and USQUE's settings on an IMU recording (module docstring).
 IMU_MODELS = {"gravity_model": "lowpass", "magnetometer_model": "heading",
-              "rest_updates": True, "hard_iron_fit": True, "rate_interpolation": "end"}
+              "rest_updates": True, "hard_iron_fit": True}
 
 
 @dataclass(frozen=True)
@@ -337,7 +338,9 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         # model out of use (an outage throughout) because its own vector
         # sensors are simulated ones, and these readings are recorded.
         star_tracker_model="rotation", star_tracker_outages_s=((0.0, n * dt),),
-        estimator_options={"mekf": {**priors, **IMU_MODELS}, "usque": {**priors, **IMU_MODELS},
+        estimator_options={**RECORDED_GYRO,
+                           **{name: {**RECORDED_GYRO[name], **priors, **IMU_MODELS}
+                              for name in ("mekf", "usque")},
                            "ekf": {"gate_probability": GATE_PROBABILITY},
                            **_vqf_options(usable, dt)})
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),

@@ -60,6 +60,15 @@ DEFAULT_NOISE_DEG = 0.1
 #: switch-on, 0.01 rad/s ≈ 0.6 °/s, which covers a MEMS gyro's turn-on bias.
 BIAS_RANDOM_WALK = 1e-4
 INITIAL_BIAS_SIGMA_RADPS = 0.01
+#: How the estimators take a recorded IMU's gyro: each reading the mean rate
+#: over the interval before its sample (an IMU filters its rate inside the
+#: sensor), reading 0 the time before the start: the filters'
+#: ``rate_interpolation = "end"``, dead reckoning's ``rate_timing = "end"``
+#: (the additive EKF has no such setting: it holds each reading over the
+#: step after it). ``broad``'s inputs take them too.
+RECORDED_GYRO = {"mekf": {"rate_interpolation": "end"}, "usque": {"rate_interpolation": "end"},
+                 "dead-reckoning": {"rate_timing": "end"},
+                 "dead-reckoning-resets": {"rate_timing": "end"}}
 #: The six-state filters start on the first reference attitude, within this.
 INITIAL_ATTITUDE_SIGMA_RAD = math.radians(1.0)
 SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "final_deg",
@@ -215,7 +224,8 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
         time_between_measurements=interval, star_tracker_outages_s=gaps,
         measurement_covariance=(sigma_rad / 2) ** 2 * np.eye(4),
         pc_exponent=math.log(max(q_variance, 1e-300)),
-        estimator_options={"mekf": dict(six_state), "usque": dict(six_state)})
+        estimator_options={**RECORDED_GYRO, "mekf": {**RECORDED_GYRO["mekf"], **six_state},
+                           "usque": {**RECORDED_GYRO["usque"], **six_state}})
 
 
 #: What a replay gives the estimators: the gyro, and the pseudo star tracker.
@@ -338,9 +348,10 @@ def delayed_gyro(recording: Recording, delay_s: float) -> np.ndarray:
     :math:`t_k` is the recording's at :math:`t_k + \text{delay}`, linearly
     interpolated (the first and last samples held at the ends). An IMU's
     internal low-pass filters and its clock against the motion capture's
-    delay its rate by a few milliseconds; the estimators integrate each
-    sample over the step after it, so a delay is an attitude error of the
-    rate times the delay (at 1,400 °/s, 7° per 5 ms)."""
+    delay its rate by a few milliseconds; the estimators take each sample
+    as the rate over the step before it (:data:`RECORDED_GYRO`), so a delay
+    is an attitude error of the rate times the delay (at 1,400 °/s, 7° per
+    5 ms)."""
     if not delay_s:
         return recording.gyro_radps
     time_s = recording.time_s

@@ -1,6 +1,6 @@
 """Dead reckoning in the engine: :class:`estimators.DeadReckoning`, the
 gyro integrated step by step (``f`` of :func:`estimators.model.propagate_with_jacobian`),
-with the workshop's or the step-average rate timing."""
+with the workshop's, the step-average or the end rate timing."""
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -22,13 +22,15 @@ class State(NamedTuple):
     q: np.ndarray                # (B, 4) the estimate
     previous_rate: np.ndarray    # (B, 3) the last step's rate (step-average timing)
     step_average: bool
+    skip_first: bool             # "end" timing: reading 0 is not integrated
 
 
 def initial_state(estimators) -> State:
     """From the per-run objects (``from_scenario``), one per run."""
     return State(q=np.array([e.initial_attitude for e in estimators]),
                  previous_rate=np.zeros((len(estimators), 3)),
-                 step_average=estimators[0].rate_timing == "step-average")
+                 step_average=estimators[0].rate_timing == "step-average",
+                 skip_first=estimators[0].rate_timing == "end")
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -50,7 +52,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = borrowed(error_arrays(record, row))
     q_all, previous_all = borrowed((state.q, state.previous_rate))
-    step_average = state.step_average
+    step_average, skip_first = state.step_average, state.skip_first
     half_dt = 0.5 * dt
     batch = (np.empty((last - first, 3)), np.empty((last - first, 4, 4)),
              np.empty((last - first, 1)), np.empty((last - first, 6, 6)))
@@ -64,7 +66,8 @@ def advance_runs(first, last, block, sensors, state, record, row):
             gyro_reading(w, run, j, k, last_step, omega, gyro_std, normals, scale, has_scale,
                          has_bias, bias_model, bias, bias_last)
             if not step_average:
-                propagate(q, w, half_dt, q, F, False)
+                if k > 0 or not skip_first:
+                    propagate(q, w, half_dt, q, F, False)
             elif k > 0:
                 propagate(q, previous_rate, half_dt, q, F, False)
             record_error(run, k, q_true[j], q, stats, hist, first_bits, traces, keep_traces,

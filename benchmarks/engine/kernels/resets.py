@@ -22,6 +22,7 @@ class State(NamedTuple):
     q: np.ndarray                # (B, 4) the estimate
     previous_rate: np.ndarray    # (B, 3) the last step's rate (step-average timing)
     step_average: bool
+    skip_first: bool             # "end" timing: reading 0 is not integrated
     align_sign: bool
 
 
@@ -30,16 +31,20 @@ def initial_state(estimators) -> State:
     first = estimators[0]
     return State(q=np.array([e.initial_attitude for e in estimators]),
                  previous_rate=np.zeros((len(estimators), 3)),
-                 step_average=first.rate_timing == "step-average", align_sign=first.align_sign)
+                 step_average=first.rate_timing == "step-average",
+                 skip_first=first.rate_timing == "end", align_sign=first.align_sign)
 
 
 @njit(cache=True, error_model="numpy")
-def _predict(q, w, previous_rate, k, step_average, half_dt, out, F):
+def _predict(q, w, previous_rate, k, step_average, skip_first, half_dt, out, F):
     """out = q propagated as the per-run class propagates it at step ``k``."""
-    if not step_average:
+    if not step_average and (k > 0 or not skip_first):
         propagate(q, w, half_dt, out, F, False)
-    elif k > 0:
+    elif step_average and k > 0:
         propagate(q, previous_rate, half_dt, out, F, False)
+    else:
+        for i in range(4):
+            out[i] = q[i]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -62,7 +67,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
     (stats, hist, first_bits, traces, keep_traces, error_every, samples, diverged, check,
      health) = borrowed(error_arrays(record, row))
     q_all, previous_all = borrowed((state.q, state.previous_rate))
-    step_average = state.step_average
+    step_average, skip_first = state.step_average, state.skip_first
     align_sign, half_dt = state.align_sign, 0.5 * dt
     n = last - first
     batch = (np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4)),
@@ -85,13 +90,14 @@ def advance_runs(first, last, block, sensors, state, record, row):
                     # The sign nearest the prediction, as the per-run class compares it.
                     for i in range(4):
                         aligned[i] = q[i]
-                    _predict(aligned, w, previous_rate, k, step_average, half_dt, aligned, F)
+                    _predict(aligned, w, previous_rate, k, step_average, skip_first, half_dt,
+                             aligned, F)
                     flip = (aligned[0] * z[0] + aligned[1] * z[1] + aligned[2] * z[2]
                             + aligned[3] * z[3]) < 0
                 for i in range(4):
                     q[i] = -z[i] if flip else z[i]
             else:
-                _predict(q, w, previous_rate, k, step_average, half_dt, q, F)
+                _predict(q, w, previous_rate, k, step_average, skip_first, half_dt, q, F)
             record_error(run, k, q_true[j], q, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if check:
