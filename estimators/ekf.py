@@ -81,6 +81,7 @@ from dynamics.validation import (
 )
 from estimators.base import (OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state,
                              gate_probability_setting)
+from estimators.sampled_rate import SampledRate
 from estimators.tunable import GATE_PROBABILITY, MEASUREMENT_SCALE, Tunable
 
 _IDENTITY_4 = np.eye(4)
@@ -113,7 +114,12 @@ def vector_jacobian(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return quadratic @ (np.eye(4) - np.outer(n, n)) / norm
 
 
-class QuaternionEKF(KalmanEstimator):
+#: The rates over a step the EKF takes (its kernel has these two; the
+#: trapezoid is the six-state filters').
+EKF_RATE_INTERPOLATIONS = ("hold", "end")
+
+
+class QuaternionEKF(SampledRate, KalmanEstimator):
     """The workshop's additive quaternion EKF (on a filterpy ``ExtendedKalmanFilter``).
 
     Parameters
@@ -134,23 +140,23 @@ class QuaternionEKF(KalmanEstimator):
         ``x̂[k|k-1]`` (default) or the corrected ``x̂[k|k]``.
     align_sign : bool
         Flip a reading ``z`` to ``-z`` when ``x̂ · z < 0`` before the update
-        (default). ``q`` and ``-q`` are one attitude, but ``h(q) = q`` is not
-        sign-invariant: a star tracker that reports the ``w >= 0``
-        representative makes the raw innovation ``z - x̂`` nearly ``-2 x̂``
-        where the true ``w`` crosses zero. The workshop's readings always lie
-        on the prediction's side, so its numbers are unchanged (tested);
-        ``align_sign=False`` shows the failure.
+        (default): ``h(q) = q`` is not sign-invariant, and a tracker that
+        reports the ``w >= 0`` representative makes the raw innovation nearly
+        ``-2 x̂`` where the true ``w`` crosses zero (``align_sign=False``
+        shows it; the workshop's readings, on the prediction's side, are unchanged).
     gate_probability : float or None
         Innovation gating (see :class:`~estimators.MultiplicativeEKF`); None: off.
+    rate_interpolation : {"hold", "end"}
+        A reading held over the step after it (the workshop's) or the rate over
+        the step before it (an IMU's; :mod:`estimators.sampled_rate`).
     on_invalid : {"raise", "skip"}
         What to do with an unusable measurement (see
         :meth:`~estimators.AttitudeEstimator.step`).
 
     After each :meth:`step` the filterpy object :attr:`filter` (a
-    :class:`~estimators.ekf_filter.WorkshopModelEKF`) is there to inspect: ``x_prior``/``P_prior``
-    (after the predict), ``x_post``/``P_post`` (after the update), ``y``,
-    ``S``, ``K``, ``F``. ``Q = exp(pc_exponent) I₄`` and ``R`` are its ``Q``
-    and ``R``.
+    :class:`~estimators.ekf_filter.WorkshopModelEKF`) is there to inspect:
+    ``x_prior``/``P_prior``, ``x_post``/``P_post``, ``y``, ``S``, ``K``,
+    ``F``, ``Q = exp(pc_exponent) I₄`` and ``R``.
     """
 
     name = "ekf"
@@ -209,9 +215,8 @@ class QuaternionEKF(KalmanEstimator):
 
     @classmethod
     def settings_from_scenario(cls, scenario) -> dict:
-        """The scenario's settings, and the output: the workshop's prior on
-        its sensors, the posterior (the estimate after the step's reading, as
-        the MEKF and USQUE give) on any other."""
+        """The scenario's settings, and the output: the workshop's prior on its
+        sensors, the posterior (as the MEKF and USQUE give) on any other."""
         settings = super().settings_from_scenario(scenario)
         settings["output"] = "prior" if scenario.is_workshop_sensors else "posterior"
         return settings
@@ -220,7 +225,8 @@ class QuaternionEKF(KalmanEstimator):
                  measurement_covariance=1.0, initial_attitude=IDENTITY,
                  initial_covariance: float = 1e-12, output: str = "prior",
                  align_sign: bool = True, gate_probability: float | None = None,
-                 on_invalid: str = "raise", initial_state=None):
+                 rate_interpolation: str = "hold", on_invalid: str = "raise",
+                 initial_state=None):
         # initial_state, the former name of initial_attitude, wins when given
         # (an [estimators.ekf] section's over the scenario's default).
         if initial_state is not None:
@@ -235,12 +241,15 @@ class QuaternionEKF(KalmanEstimator):
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
         self.output = one_of("output", output, OUTPUTS)
+        self._set_rate_interpolation(one_of("rate_interpolation", rate_interpolation,
+                                            EKF_RATE_INTERPOLATIONS))
         self.filter.R = covariance_matrix("measurement_covariance", measurement_covariance)
         self.filter.Q = math.exp(self.pc_exponent) * _IDENTITY_4
         self.reset()
 
     def reset(self) -> None:
         self._reset_filter(self.initial_attitude.copy(), self.initial_covariance * _IDENTITY_4)
+        self._restart_rates()
         self._record()
 
     def _record(self) -> None:

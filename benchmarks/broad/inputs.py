@@ -341,7 +341,8 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         estimator_options={**RECORDED_GYRO,
                            **{name: {**RECORDED_GYRO[name], **priors, **IMU_MODELS}
                               for name in ("mekf", "usque")},
-                           "ekf": {"gate_probability": GATE_PROBABILITY},
+                           "ekf": {**RECORDED_GYRO["ekf"],
+                                   "gate_probability": GATE_PROBABILITY},
                            **_vqf_options(usable, dt)})
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),

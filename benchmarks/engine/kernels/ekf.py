@@ -1,6 +1,8 @@
 """The workshop's additive quaternion EKF in the engine:
 :class:`estimators.QuaternionEKF` — filterpy's update with ``H = I`` (Joseph
-form), then the nonlinear predict with the exact Jacobian."""
+form), then the nonlinear predict with the exact Jacobian (with
+``rate_interpolation = "end"``, an IMU's reading, the predict first, from
+the step before)."""
 from __future__ import annotations
 
 import math
@@ -33,6 +35,7 @@ class State(NamedTuple):
     R: np.ndarray                # (B, 4, 4): each run's (derived from its tracker's noise)
     posterior: bool
     align_sign: bool
+    end: bool                    # rate_interpolation "end": predict to the step, then update
 
 
 def initial_state(estimators) -> State:
@@ -44,7 +47,7 @@ def initial_state(estimators) -> State:
                  q_variance=np.array([e.filter.Q[0, 0] for e in estimators]),
                  R=np.array([e.filter.R for e in estimators]),
                  posterior=first.output == "posterior",
-                 align_sign=first.align_sign)
+                 align_sign=first.align_sign, end=first.rate_interpolation == "end")
 
 
 def nis_dof(estimators) -> int:
@@ -107,6 +110,17 @@ def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _predict_step(run, k, x, P, w, half_dt, q_variance, F, scratch, diverged, traces,
+                  keep_traces, error_every, samples, check, health, factor):
+    """The predict, and where it leaves the state: diverged, or its health."""
+    _ekf_predict(x, P, w, half_dt, q_variance, F, scratch)
+    if not finite_state(x, 4, P, 4):
+        mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+    if check:
+        check_health(x, True, P, 4, health, factor)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _star_update(run, x, P, z, aligned, R, align_sign, scratch, check, health, factor,
                  streaming, nis_sum, nis_count, likelihood):
     """A star tracker reading: its sign turned to the estimate's where the
@@ -155,7 +169,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = borrowed(nees_arrays(record, row))
     x_all, P_all, q_variance, R_all = borrowed((state.x, state.P, state.q_variance, state.R))
-    posterior, align_sign, half_dt = state.posterior, state.align_sign, 0.5 * dt
+    posterior, align_sign, end, half_dt = state.posterior, state.align_sign, state.end, 0.5 * dt
     batch = _batch_scratch(last - first)
     for index in range(first, last):
         run = np.int64(index)
@@ -170,6 +184,10 @@ def advance_runs(first, last, block, sensors, state, record, row):
                          has_bias, bias_model, bias, bias_last)
             available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
                                                       star)
+            if end and k > 0:
+                _predict_step(run, k, x, P, w, half_dt, q_variance[run], F, scratch, diverged,
+                              traces, keep_traces, error_every, samples, check, health[run],
+                              factor)
             for i in range(4):
                 prior[i] = x[i]
             if (streaming or keep_traces) and not posterior:
@@ -193,11 +211,10 @@ def advance_runs(first, last, block, sensors, state, record, row):
                               settle, nees_samples, nees_sum)
             record_error(run, k, q_true[j], prior, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
-            _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
-            if not finite_state(x, 4, P, 4):
-                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
-            if check:
-                check_health(x, True, P, 4, health[run], factor)
+            if not end:
+                _predict_step(run, k, x, P, w, half_dt, q_variance[run], F, scratch, diverged,
+                              traces, keep_traces, error_every, samples, check, health[run],
+                              factor)
 
 
 #: Every run of the batch through a block, a share of the runs per core.
