@@ -43,7 +43,7 @@ class DeadReckoning(AttitudeEstimator):
     dt : float
         Gyro step, seconds.
     initial_attitude : (4,) array-like
-        Starting estimate (``q̂[-1]``, or ``q̂[0]`` with step-average timing),
+        Starting estimate (``q̂[-1]``, or ``q̂[0]`` with step-average or end timing),
         scalar-first; normalised.
     rate_timing : {"workshop", "step-average", "end"}
         Whether ``ω̃[k]`` takes the estimate to step ``k`` (the workshop; with

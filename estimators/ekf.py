@@ -23,7 +23,10 @@ with ``f`` and its exact Jacobian from :mod:`estimators.model`,
 Order within step ``k`` (the Simulink filter block with "use current
 measurement" off): output the prior ``x̂[k|k-1]`` as ``q̂[k]``; correct with
 ``z_k`` if a reading is available; then predict to ``x̂[k+1|k]`` with
-``ω̃_k``. ``output="posterior"`` outputs ``x̂[k|k]`` instead.
+``ω̃_k``. ``output="posterior"`` outputs ``x̂[k|k]`` instead. With
+``rate_interpolation="end"`` (an IMU's reading, the rate over the step
+before it) the predict comes first: to ``x̂[k|k-1]`` with ``ω̃_k``, then the
+output and the correction.
 
 filterpy's own ``predict`` is linear (``x = F x``); here the filter's
 ``predict_x`` is overridden (:class:`~estimators.ekf_filter.WorkshopModelEKF`) so the state goes

@@ -52,10 +52,10 @@ def derived_rate_interpolation(scenario) -> str:
 
 
 class SampledRate:
-    """The step template of a filter that propagates with ``"hold"`` or
-    ``"trapezoid"`` (module docstring): mixed into
-    :class:`~estimators.base.AttitudeAndBiasEstimator`, whose
-    ``propagate(omega, dt)`` it calls."""
+    """The step template of a filter that propagates with ``"hold"``,
+    ``"trapezoid"`` or ``"end"`` (module docstring): mixed into
+    :class:`~estimators.base.AttitudeAndBiasEstimator` and
+    :class:`~estimators.QuaternionEKF`, whose ``propagate(omega, dt)`` it calls."""
 
     rate_interpolation = "hold"
 

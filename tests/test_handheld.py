@@ -199,11 +199,12 @@ def test_dead_reckoning_takes_a_recorded_gyro_as_an_imus(inputs):
 
 
 def test_the_ekf_takes_an_imus_reading_as_the_rate_over_the_step_before_it():
-    """Replayed with a perfect tracker every step and a perfect IMU, the
-    additive EKF that takes each reading over the step before it (as the
-    recording's scenario sets it) is the truth to its first-order step; held
-    over the step after, it lags the truth by a step's turn. The kernel and
-    the per-run class give the same numbers."""
+    """On a perfect IMU's gyro alone (no reading: a recording's kernel path
+    has none; the update's order is held to the class by the engine's
+    property test), the additive EKF that takes each reading over the step
+    before it, as a recording's scenario sets it, is the truth to its
+    first-order step; held over the step after, it lags by a step's turn.
+    The kernel and the per-run class give the same numbers."""
     from benchmarks.broad.metric import errors_deg
     from benchmarks.engine.recorded import run_recorded
     from benchmarks.experiments.replay import replay_scenario

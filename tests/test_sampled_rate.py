@@ -73,3 +73,26 @@ def test_the_output_is_the_same_instant_either_way():
     runs = [MultiplicativeEKF(dt=dt, rate_interpolation=mode).run(omega, star, available)
             for mode in ("hold", "trapezoid")]
     assert np.abs(runs[0] - runs[1]).max() < 1e-12
+
+
+@pytest.mark.parametrize("interpolation", ["hold", "end"])
+@pytest.mark.parametrize("output", ["prior", "posterior"])
+def test_the_ekfs_kernel_marks_a_divergence_where_its_class_does(interpolation, output):
+    # An update that overflows P (a prior and an R of 1e308) leaves the state
+    # not finite at step 0: the kernel, which with "end" predicts before the
+    # update, marks it at that step as the per-run class does (it had marked
+    # it a step late, its estimate at step 0 still finite).
+    import warnings
+    from benchmarks.engine import make_runs, run_batch
+    from benchmarks.simulation import simulate
+    scenario = Scenario(tstop=0.1, initial_covariance=1e308,
+                        measurement_covariance=1e308 * np.eye(4),
+                        estimator_options={"ekf": {"rate_interpolation": interpolation,
+                                                   "output": output}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        batch = run_batch(scenario, make_runs(scenario, [1]), ["ekf"], keep_traces=True)
+        reference = simulate(scenario, ["ekf"], seed=1)
+    assert reference.diverged_step["ekf"] == 0
+    assert batch.diverged_step["ekf"][0] == 0
+    assert np.isnan(batch.estimates["ekf"][0][0]).all()

@@ -343,8 +343,8 @@ def checked_gyro_delay(recording: Recording, delay_s) -> float:
 
 def delayed_gyro(recording: Recording, delay_s: float) -> np.ndarray:
     r"""The gyro as the estimators take it when its samples come ``delay_s``
-    late against the reference: the rate applied over the step from
-    :math:`t_k` is the recording's at :math:`t_k + \text{delay}`, linearly
+    late against the reference: the reading of sample :math:`k` is the
+    recording's at :math:`t_k + \text{delay}`, linearly
     interpolated (the first and last samples held at the ends). An IMU's
     internal low-pass filters and its clock against the motion capture's
     delay its rate by a few milliseconds; the estimators take each sample

@@ -110,17 +110,6 @@ def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _predict_step(run, k, x, P, w, half_dt, q_variance, F, scratch, diverged, traces,
-                  keep_traces, error_every, samples, check, health, factor):
-    """The predict, and where it leaves the state: diverged, or its health."""
-    _ekf_predict(x, P, w, half_dt, q_variance, F, scratch)
-    if not finite_state(x, 4, P, 4):
-        mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
-    if check:
-        check_health(x, True, P, 4, health, factor)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
 def _star_update(run, x, P, z, aligned, R, align_sign, scratch, check, health, factor,
                  streaming, nis_sum, nis_count, likelihood):
     """A star tracker reading: its sign turned to the estimate's where the
@@ -159,7 +148,7 @@ def _run_scratch(batch, run):
 @njit(cache=True, nogil=True, error_model="numpy")
 def advance_runs(first, last, block, sensors, state, record, row):
     """Runs ``first`` to ``last - 1`` through ``block``: update with each
-    reading, then predict."""
+    reading, then predict (with ``"end"``, predict to the step, then update)."""
     k0, steps, last_step, dt = block.k0, block.steps, block.last_step, block.dt
     q_true, star = borrowed((block.q_true, star_arrays(block)))
     (omega, gyro_std, normals, scale, has_scale, has_bias, bias_model, bias,
@@ -185,9 +174,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
             available, countdown, reading = star_step(z, dq, run, j, countdown, reading, q_true,
                                                       star)
             if end and k > 0:
-                _predict_step(run, k, x, P, w, half_dt, q_variance[run], F, scratch, diverged,
-                              traces, keep_traces, error_every, samples, check, health[run],
-                              factor)
+                _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
             for i in range(4):
                 prior[i] = x[i]
             if (streaming or keep_traces) and not posterior:
@@ -212,9 +199,11 @@ def advance_runs(first, last, block, sensors, state, record, row):
             record_error(run, k, q_true[j], prior, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not end:
-                _predict_step(run, k, x, P, w, half_dt, q_variance[run], F, scratch, diverged,
-                              traces, keep_traces, error_every, samples, check, health[run],
-                              factor)
+                _ekf_predict(x, P, w, half_dt, q_variance[run], F, scratch)
+            if not finite_state(x, 4, P, 4):     # the step's state, as the per-run class checks it
+                mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
+            if check:
+                check_health(x, True, P, 4, health[run], factor)
 
 
 #: Every run of the batch through a block, a share of the runs per core.
