@@ -60,11 +60,11 @@ AXES_THRESHOLDS = {"magnetometer": (AXES_DECLARED_BELOW, AXES_OTHER_ABOVE),
                    "accelerometer": (0.3, 0.75)}
 #: The reference check: a reference whose turning is left unexplained by
 #: more than this share (by any fixed rotation of the gyro's rates) is not
-#: the attitude of that gyro's body as declared (0.1 % to 1.1 % on BROAD's
+#: the attitude of that gyro's body as declared (0.03 % to 0.56 % on BROAD's
 #: 30 trials; 15 % to 120 % for the same trials read in the wrong order).
 REFERENCE_UNEXPLAINED = 0.1
 #: … and one whose axes are turned more than this from the gyro's, deg
-#: (0.2–1.6° on BROAD), is said to be: every score would include it.
+#: (0.1–1.5° on BROAD), is said to be: every score would include it.
 REFERENCE_TURNED_DEG = 5.0
 #: The reference's fit takes the gyro's bias as unknown, fitted with the
 #: rotation in turn this many times (a MEMS gyro's bias of degrees a second
