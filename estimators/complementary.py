@@ -25,7 +25,12 @@ a few degrees that would otherwise be scored as their error).
 
 Timing, as their C code: step ``k`` integrates rate ``k`` over the sample
 interval that ends at ``k``, corrects with the acc/mag readings of ``k``,
-and outputs the result. As there, a step without a field reading corrects
+and outputs the result. Step 0 integrates rate 0 too, from the start
+attitude (``rate_timing = "workshop"``, as dead reckoning's); where the
+start is the attitude *at* sample 0 (a recording's, TRIAD on its first
+sample), ``rate_timing = "end"`` leaves rate 0, the time before it, out:
+step 0 only corrects (a start in motion at 300 °/s is otherwise 1–2° off
+from its first sample). As there, a step without a field reading corrects
 with gravity alone (``MadgwickAHRSupdateIMU``, ``MahonyAHRSupdateIMU``: a
 6-axis IMU, or the samples between a slower magnetometer's readings), and
 a step without an accelerometer reading integrates the rate alone. The acc and mag readings come as vector readings
@@ -40,7 +45,7 @@ import math
 import numpy as np
 
 from dynamics.quaternion import IDENTITY, quat_conjugate, quat_multiply
-from dynamics.validation import finite_number
+from dynamics.validation import finite_number, one_of
 from estimators import sensing
 from estimators.base import AttitudeEstimator
 from estimators.tunable import Tunable
@@ -52,6 +57,8 @@ ENU_TO_NWU = NWU_TO_ENU * np.array([1.0, -1.0, -1.0, -1.0])
 
 #: A reading that is absent: the steps below then only integrate the rate.
 NO_READING = (0.0, 0.0, 0.0)
+#: Whether step 0 integrates rate 0 (module docstring).
+RATE_TIMINGS = ("workshop", "end")
 
 
 def madgwick_step(q, gyro, acc, mag, beta: float, dt: float, halved_field: bool):
@@ -233,8 +240,15 @@ class ComplementaryFilter(MagneticFrame, AttitudeEstimator):
     reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
     needs = (frozenset({sensing.ACCELEROMETER}),)
 
+    #: Whether step 0 integrates rate 0 (module docstring).
+    rate_timing = "workshop"
+
+    def _set_rate_timing(self, rate_timing: str) -> None:
+        self.rate_timing = one_of("rate_timing", rate_timing, RATE_TIMINGS)
+
     def reset(self) -> None:
         self._turn, self._turn_learnt = None, False
+        self._started = False
         self._start_from(self.initial_attitude)
 
     def _start_from(self, q_reference) -> None:
@@ -264,9 +278,16 @@ class ComplementaryFilter(MagneticFrame, AttitudeEstimator):
         acc, mag = acc_mag(vectors)
         if mag is not None:
             self.learn_frame(field_reference(vectors))
-        self.update(tuple(float(x) for x in omega_meas_radps), acc or NO_READING,
-                    mag or NO_READING)
+        rate = tuple(float(x) for x in omega_meas_radps) if self.takes_next_rate else NO_READING
+        self._started = True
+        self.update(rate, acc or NO_READING, mag or NO_READING)
         return self.attitude
+
+    @property
+    def takes_next_rate(self) -> bool:
+        """Whether the next step integrates its rate: every step but, with
+        ``rate_timing = "end"``, the first (module docstring)."""
+        return self._started or self.rate_timing == "workshop"
 
 
 class Madgwick(ComplementaryFilter):
@@ -279,8 +300,9 @@ class Madgwick(ComplementaryFilter):
                        description="the gradient step's gain (rad/s)"),)
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, beta: float = 0.1,
-                 on_invalid: str = "raise"):
+                 rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+        self._set_rate_timing(rate_timing)
         self.beta = finite_number("beta", beta, minimum=0.0)
         self.reset()
 
@@ -310,8 +332,9 @@ class Mahony(ComplementaryFilter):
                        description="the integral gain (1/s²)"))
 
     def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, kp: float = 0.5,
-                 ki: float = 0.001, on_invalid: str = "raise"):
+                 ki: float = 0.001, rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+        self._set_rate_timing(rate_timing)
         self.kp = finite_number("kp", kp, minimum=0.0)
         self.ki = finite_number("ki", ki, minimum=0.0)
         self.reset()

@@ -63,11 +63,13 @@ INITIAL_BIAS_SIGMA_RADPS = 0.01
 #: How the estimators take a recorded IMU's gyro: each reading the mean rate
 #: over the interval before its sample (an IMU filters its rate inside the
 #: sensor), reading 0 the time before the start: the filters'
-#: ``rate_interpolation = "end"``, dead reckoning's ``rate_timing = "end"``.
-#: ``broad``'s inputs take them too.
+#: ``rate_interpolation = "end"``, dead reckoning's, Madgwick's and Mahony's
+#: ``rate_timing = "end"`` (``madgwick-broad`` stays the BROAD authors' code
+#: as they ran it). ``broad``'s inputs take them too.
 RECORDED_GYRO = {"mekf": {"rate_interpolation": "end"}, "usque": {"rate_interpolation": "end"},
                  "ekf": {"rate_interpolation": "end"}, "dead-reckoning": {"rate_timing": "end"},
-                 "dead-reckoning-resets": {"rate_timing": "end"}}
+                 "dead-reckoning-resets": {"rate_timing": "end"},
+                 "madgwick": {"rate_timing": "end"}, "mahony": {"rate_timing": "end"}}
 #: The six-state filters start on the first reference attitude, within this.
 INITIAL_ATTITUDE_SIGMA_RAD = math.radians(1.0)
 SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "final_deg",
