@@ -23,7 +23,12 @@ one), so the filters' :math:`Q` is unchanged. A reading off the gyro grid, at
 :math:`t_k + \tau`, is reached with the rate extrapolated from the last two
 readings (:math:`\tilde\omega_k + (\tilde\omega_k - \tilde\omega_{k-1})\,
 \tau/\Delta t`), and the rest of the step is propagated at :math:`t_{k+1}`
-with the mean of that rate and :math:`\tilde\omega_{k+1}`.
+with the mean of that rate and :math:`\tilde\omega_{k+1}`. With
+``rate_interpolation = "end"`` (an IMU's reading, the mean rate over the
+step before it), the part is reached with that mean extrapolated half a
+step on, :math:`\tilde\omega_k + (\tilde\omega_k - \tilde\omega_{k-1})
+(\Delta t + \tau)/(2\Delta t)`, and the rest turns by what is left of
+:math:`\tilde\omega_{k+1}\Delta t`: the step turns by its reading's angle.
 
 Markley & Crassidis (2014), §6.2.2 (the discrete propagation of the MEKF
 and its rate over the step); the trapezoidal rule is the second-order
@@ -71,11 +76,18 @@ class SampledRate:
 
     def _catch_up(self, omega_meas_radps: np.ndarray) -> None:
         """Propagate from the state's time to this step's with the mean of
-        the rates at both ends (nothing before the first reading)."""
+        the rates at both ends (nothing before the first reading); with
+        ``"end"``, with what is left of this reading's turn over the step
+        (all of it, where no reading split the step)."""
         if self._rate_at_state is None:
             return
-        mean = (omega_meas_radps if self.rate_interpolation == "end"
-                else 0.5 * (self._rate_at_state + omega_meas_radps))
+        if self.rate_interpolation != "end":
+            mean = 0.5 * (self._rate_at_state + omega_meas_radps)
+        elif self._time_left == self.dt:
+            mean = omega_meas_radps
+        else:           # the step's turn ω Δt, less the part a reading within it took
+            taken = self.dt - self._time_left
+            mean = (omega_meas_radps * self.dt - self._rate_at_state * taken) / self._time_left
         self.propagate(mean, None if self._time_left == self.dt else self._time_left)
 
     def _step(self, omega_meas_radps, star_tracker_quat=None, vectors=()) -> np.ndarray:
@@ -97,6 +109,16 @@ class SampledRate:
         estimate = self._estimate_at_step(None, vectors)
         slope = (np.zeros(3) if self._previous_rate is None
                  else (omega_meas_radps - self._previous_rate) / self.dt)
+        if self.rate_interpolation == "end":
+            # readings are means over the step before them, half a step back:
+            # the mean over the part to the reading, extrapolated, is also
+            # the rate :meth:`_catch_up` takes out of the next reading's turn
+            part = omega_meas_radps + slope * 0.5 * (self.dt + offset_s)
+            self.propagate(part, offset_s)
+            self._correct_logged(star_tracker_quat)
+            self._rate_at_state, self._time_left = part, self.dt - offset_s
+            self._previous_rate = omega_meas_radps
+            return estimate
         at_reading = omega_meas_radps + slope * offset_s
         self.propagate(0.5 * (omega_meas_radps + at_reading), offset_s)
         self._correct_logged(star_tracker_quat)
