@@ -257,3 +257,28 @@ def test_the_complementary_filters_leave_out_the_rate_before_a_recordings_start(
         first[options.get("rate_timing", "end")] = errors_deg(
             compiled.estimates[:1], part.reference_quat[:1])["total"][0]
     assert first["end"] < 0.1 < 0.5 < first["workshop"]
+
+
+@pytest.mark.parametrize("name", ["madgwick", "mahony"])
+@pytest.mark.parametrize("timing", ["workshop", "end"])
+def test_the_compiled_complementary_loops_keep_to_their_class_at_the_edges(name, timing):
+    """Without any vector reading (the gyro integrated alone) the compiled
+    loop is its class to 1e-12 (its readings' arrays had been empty, read
+    past their end); a first gyro reading that is not finite is a divergence
+    at step 0 with either timing (leaving rate 0 out had hidden it)."""
+    from benchmarks.engine.recorded import run_recorded
+    from estimators import resolve_estimator
+    motion = HandheldMotion(rate_hz=100.0, rest_s=0.5, moving_s=4.0, final_rest_s=0.5)
+    recording = simulated_recording(5, motion, PERFECT)
+    n = recording.n_samples
+
+    def make():
+        return resolve_estimator(name)(dt=recording.dt, rate_timing=timing,
+                                       initial_attitude=recording.reference_quat[0])
+    compiled = run_recorded(make(), recording.gyro_radps)
+    assert compiled.path == "compiled"
+    per_run = make().run(recording.gyro_radps, recording.reference_quat, np.zeros(n, bool))
+    np.testing.assert_allclose(compiled.estimates, per_run, rtol=0, atol=1e-12)
+    broken = recording.gyro_radps.copy()
+    broken[0, 1] = np.nan
+    assert run_recorded(make(), broken).diverged_step == 0

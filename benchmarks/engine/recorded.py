@@ -105,7 +105,7 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
                        attitude_covariance=covariance)
     if path == "compiled" and _frame_learnt(estimator, vectors):
         from benchmarks.engine.kernels import complementary
-        acc, has_acc, mag, has_mag = _channels(vectors)
+        acc, has_acc, mag, has_mag = _channels(vectors, len(omega))
         states = complementary.run(estimator, omega, acc, has_acc, mag, has_mag)
         return _finished(estimator.in_reference_frame(quat_multiply(NWU_TO_ENU, states)), path)
     if path == "compiled":
@@ -165,11 +165,10 @@ def _finished(estimates: np.ndarray, path: str) -> RecordedRun:
     return RecordedRun(estimates=estimates, diverged_step=first, path=path)
 
 
-def _channels(vectors) -> tuple:
-    """The accelerometer's and magnetometer's readings and flags, zeros and
-    False where a sensor is absent."""
+def _channels(vectors, n: int) -> tuple:
+    """The accelerometer's and magnetometer's readings and flags over the
+    ``n`` samples, zeros and False where a sensor is absent."""
     found = {v.sensor: v for v in vectors}
-    n = len(vectors[0].body) if vectors else 0
     out = []
     for name in ("accelerometer", "magnetometer"):
         v = found.get(name)

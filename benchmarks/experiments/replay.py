@@ -64,12 +64,14 @@ INITIAL_BIAS_SIGMA_RADPS = 0.01
 #: over the interval before its sample (an IMU filters its rate inside the
 #: sensor), reading 0 the time before the start: the filters'
 #: ``rate_interpolation = "end"``, dead reckoning's, Madgwick's and Mahony's
-#: ``rate_timing = "end"`` (``madgwick-broad`` stays the BROAD authors' code
-#: as they ran it). ``broad``'s inputs take them too.
+#: ``rate_timing = "end"`` (``broad --case-study`` runs the BROAD authors'
+#: filters as they ran them, each step's rate integrated). ``broad``'s
+#: inputs take them too.
 RECORDED_GYRO = {"mekf": {"rate_interpolation": "end"}, "usque": {"rate_interpolation": "end"},
                  "ekf": {"rate_interpolation": "end"}, "dead-reckoning": {"rate_timing": "end"},
                  "dead-reckoning-resets": {"rate_timing": "end"},
-                 "madgwick": {"rate_timing": "end"}, "mahony": {"rate_timing": "end"}}
+                 **{name: {"rate_timing": "end"} for name in ("madgwick", "madgwick-broad",
+                                                              "mahony")}}
 #: The six-state filters start on the first reference attitude, within this.
 INITIAL_ATTITUDE_SIGMA_RAD = math.radians(1.0)
 SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "final_deg",

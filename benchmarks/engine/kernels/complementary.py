@@ -64,7 +64,7 @@ def run(estimator, gyro: np.ndarray, acc: np.ndarray, has_acc: np.ndarray, mag: 
     q = tuple(float(x) for x in estimator.q_nwu)
     if not estimator.takes_next_rate and len(gyro):     # rate 0 left out, as the class does
         gyro = gyro.copy()
-        gyro[0] = 0.0
+        gyro[0] = np.where(np.isfinite(gyro[0]), 0.0, gyro[0])    # one not finite still diverges
     if estimator.name == "mahony":
         mahony_run(q, tuple(float(x) for x in estimator.integral), gyro, acc, has_acc, mag,
                    has_mag, float(estimator.kp), float(estimator.ki), float(estimator.dt), out)
