@@ -240,9 +240,6 @@ class ComplementaryFilter(MagneticFrame, AttitudeEstimator):
     reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
     needs = (frozenset({sensing.ACCELEROMETER}),)
 
-    #: Whether step 0 integrates rate 0 (module docstring).
-    rate_timing = "workshop"
-
     def _set_rate_timing(self, rate_timing: str) -> None:
         self.rate_timing = one_of("rate_timing", rate_timing, RATE_TIMINGS)
 

@@ -93,10 +93,10 @@ class DeadReckoning(AttitudeEstimator):
         omega = np.asarray(omega_meas_radps, float)
         step, self._next_dt = self._next_dt, self.dt
         started, self._started = self._started, True
-        if self.rate_timing == "workshop" or (self.rate_timing == "end" and started):
-            self.attitude = propagate(self.attitude, omega, step)
+        if self.rate_timing == "end" and not started:     # reading 0: the time before the start
             return
-        if self.rate_timing == "end":          # reading 0: the time before the start
+        if self.rate_timing != "step-average":
+            self.attitude = propagate(self.attitude, omega, step)
             return
         if self._pending_rate is not None:
             self.attitude = propagate(self.attitude, self._pending_rate, step)

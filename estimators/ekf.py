@@ -244,8 +244,8 @@ class QuaternionEKF(SampledRate, KalmanEstimator):
         self.initial_covariance = finite_number("initial_covariance", initial_covariance,
                                                 strictly_positive=True)
         self.output = one_of("output", output, OUTPUTS)
-        self._set_rate_interpolation(one_of("rate_interpolation", rate_interpolation,
-                                            EKF_RATE_INTERPOLATIONS))
+        self.rate_interpolation = one_of("rate_interpolation", rate_interpolation,
+                                         EKF_RATE_INTERPOLATIONS)
         self.filter.R = covariance_matrix("measurement_covariance", measurement_covariance)
         self.filter.Q = math.exp(self.pc_exponent) * _IDENTITY_4
         self.reset()

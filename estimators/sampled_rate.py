@@ -113,15 +113,12 @@ class SampledRate:
             # readings are means over the step before them, half a step back:
             # the mean over the part to the reading, extrapolated, is also
             # the rate :meth:`_catch_up` takes out of the next reading's turn
-            part = omega_meas_radps + slope * 0.5 * (self.dt + offset_s)
-            self.propagate(part, offset_s)
-            self._correct_logged(star_tracker_quat)
-            self._rate_at_state, self._time_left = part, self.dt - offset_s
-            self._previous_rate = omega_meas_radps
-            return estimate
-        at_reading = omega_meas_radps + slope * offset_s
-        self.propagate(0.5 * (omega_meas_radps + at_reading), offset_s)
+            part = at_state = omega_meas_radps + slope * 0.5 * (self.dt + offset_s)
+        else:
+            at_state = omega_meas_radps + slope * offset_s      # the rate at the reading
+            part = 0.5 * (omega_meas_radps + at_state)
+        self.propagate(part, offset_s)
         self._correct_logged(star_tracker_quat)
-        self._rate_at_state, self._time_left = at_reading, self.dt - offset_s
+        self._rate_at_state, self._time_left = at_state, self.dt - offset_s
         self._previous_rate = omega_meas_radps
         return estimate

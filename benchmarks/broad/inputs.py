@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from benchmarks.experiments.replay import RECORDED_GYRO, checked_gyro_delay, delayed_gyro
+from benchmarks.experiments.replay import checked_gyro_delay, delayed_gyro, recorded_options
 from benchmarks.scenario import Scenario
 from benchmarks.simulation import SensorData
 from dynamics.environment import STANDARD_GRAVITY_MPS2
@@ -338,12 +338,10 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         # model out of use (an outage throughout) because its own vector
         # sensors are simulated ones, and these readings are recorded.
         star_tracker_model="rotation", star_tracker_outages_s=((0.0, n * dt),),
-        estimator_options={**RECORDED_GYRO,
-                           **{name: {**RECORDED_GYRO[name], **priors, **IMU_MODELS}
-                              for name in ("mekf", "usque")},
-                           "ekf": {**RECORDED_GYRO["ekf"],
-                                   "gate_probability": GATE_PROBABILITY},
-                           **_vqf_options(usable, dt)})
+        estimator_options=recorded_options({"mekf": {**priors, **IMU_MODELS},
+                                            "usque": {**priors, **IMU_MODELS},
+                                            "ekf": {"gate_probability": GATE_PROBABILITY},
+                                            **_vqf_options(usable, dt)}))
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
                          available=np.zeros(n, dtype=bool), vectors=vectors)

@@ -78,6 +78,13 @@ SUMMARY_COLUMNS = ("estimator", "rms_movement_deg", "mean_deg", "max_deg", "fina
                    "final_bias_error_degps")
 
 
+def recorded_options(sections: dict) -> dict:
+    """A recording's ``estimator_options``: :data:`RECORDED_GYRO`'s sections,
+    each estimator's settings in ``sections`` (name → settings) added."""
+    return {name: {**RECORDED_GYRO.get(name, {}), **sections.get(name, {})}
+            for name in {**RECORDED_GYRO, **sections}}
+
+
 def open_dataset(dataset: str) -> tuple[Recording, str | None]:
     """The recording ``dataset`` names — ``broad-02``, ``broad-07``, a path
     to an ``.npz``, or a ``[recording]`` ``.toml`` declaring a logger's file
@@ -227,8 +234,7 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
         time_between_measurements=interval, star_tracker_outages_s=gaps,
         measurement_covariance=(sigma_rad / 2) ** 2 * np.eye(4),
         pc_exponent=math.log(max(q_variance, 1e-300)),
-        estimator_options={**RECORDED_GYRO, "mekf": {**RECORDED_GYRO["mekf"], **six_state},
-                           "usque": {**RECORDED_GYRO["usque"], **six_state}})
+        estimator_options=recorded_options({"mekf": six_state, "usque": six_state}))
 
 
 #: What a replay gives the estimators: the gyro, and the pseudo star tracker.
