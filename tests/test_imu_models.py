@@ -287,20 +287,22 @@ def test_a_new_constant_field_becomes_the_reference_after_its_time_in_motion():
 
 
 def _replaced_after(support_s: float, disagreement_s: float = 0.0,
-                    dt: float = 0.02) -> float | None:
-    """Seconds from a change of field until the new field replaces a first
-    reference (a magnet's, 80 µT at 40°) that readings agreed with for
-    ``support_s``, a disagreement of ``disagreement_s`` interrupting the new
-    field 1 s after it began (None: not within 3 FIRST_FIELD_S)."""
-    state = heading.first_state(80.0, math.radians(40.0))
+                    dt: float = 0.02, first_norm: float = 60.0,
+                    new_norm: float = 45.0) -> float | None:
+    """Seconds from a change of field until the new field (``new_norm`` µT at
+    60°) replaces a first reference (a magnet's, ``first_norm`` µT at 40°)
+    that readings agreed with for ``support_s``, a disagreement of
+    ``disagreement_s`` interrupting the new field 1 s after it began (None:
+    not within 3 FIRST_FIELD_S)."""
+    state = heading.first_state(first_norm, math.radians(40.0))
     rate = math.radians(45.0)
     for _ in range(round(support_s / dt)):
-        heading.trust_step(80.0, math.radians(40.0), rate, dt, state)
+        heading.trust_step(first_norm, math.radians(40.0), rate, dt, state)
     k_break = round(1.0 / dt)
     for k in range(round(3 * heading.FIRST_FIELD_S / dt)):
         off = k_break <= k < k_break + round(disagreement_s / dt)
-        heading.trust_step(50.0, math.radians(75.0 if off else 60.0), rate, dt, state)
-        if state[heading.REF_NORM] < 60.0:
+        heading.trust_step(new_norm, math.radians(75.0 if off else 60.0), rate, dt, state)
+        if abs(state[heading.REF_NORM] - new_norm) < 0.05 * new_norm:
             return (k + 1) * dt
     return None
 
@@ -316,6 +318,25 @@ def test_an_unconfirmed_first_field_loses_to_a_field_seen_longer():
     # ...and a first field confirmed (agreed with for FIRST_FIELD_S) needs
     # NEW_FIELD_S of the new one, more than this run's 15 s.
     assert _replaced_after(heading.FIRST_FIELD_S + 1.0, dt=dt) is None
+
+
+def test_a_first_field_no_place_on_earth_has_loses_to_an_earthly_one_at_once():
+    # A first field of 80 µT (above the Earth's 67, EARTH_FIELD_NORM_UT: a
+    # magnet's) is replaced by an earthly field once that has outlasted the
+    # old field's candidate and been seen the hold time, however long readings
+    # agreed with the first (it is never confirmed by them)...
+    dt, hold = 0.02, heading.MIN_UNDISTURBED_S
+    for support in (dt, 2.0, 2 * heading.FIRST_FIELD_S):
+        assert _replaced_after(support, dt=dt, first_norm=80.0) == pytest.approx(
+            2 * hold, abs=3 * dt), support
+    # ...while an unearthly candidate races it as any other field does (the
+    # Earth's field itself may read a little above 67 µT with a scale error)...
+    assert _replaced_after(2.0, dt=dt, first_norm=80.0, new_norm=100.0) == pytest.approx(
+        hold + 2.0 + hold, abs=3 * dt)
+    # ...and an earthly first field is confirmed by agreement as before.
+    assert _replaced_after(2 * heading.FIRST_FIELD_S, dt=dt) is None
+    assert [heading._earthly(norm) for norm in (21.9, 22.0, 67.0, 67.1)] == [
+        False, True, True, False]
 
 
 def test_a_candidate_for_the_first_field_outlives_a_brief_disagreement_not_a_lasting_one():
@@ -352,10 +373,10 @@ def test_a_first_field_replaced_by_a_close_one_keeps_the_heading():
 def test_the_heading_is_forgotten_once_when_the_first_field_is_replaced():
     # The start's heading came from the first field: replaced before it was
     # confirmed, the heading learnt from it is forgotten, once.
-    state, dt = heading.first_state(80.0, math.radians(40.0)), 0.02
+    state, dt = heading.first_state(60.0, math.radians(40.0)), 0.02
     forgotten = []
     for _ in range(round(3 * heading.FIRST_FIELD_S / dt)):
-        heading.trust_step(50.0, math.radians(60.0), 0.0, dt, state)
+        heading.trust_step(45.0, math.radians(60.0), 0.0, dt, state)
         forgotten.append(heading.forget_heading(state))
     assert sum(forgotten) == 1 and state[heading.CONFIRMED]
     # A confirmed reference replaced by a new field (after NEW_FIELD_S) keeps it.
