@@ -75,14 +75,19 @@ reference is confirmed, a new field needs VQF's unbroken agreement for
 :data:`NEW_FIELD_S` in motion, and the heading is kept.
 
 **A first field no place on Earth has.** The Earth's field is 22 to 67 µT
-at its surface (:data:`EARTH_FIELD_NORM_UT`); a first reading outside that
-is a magnet's or a steel's. Its reference is never confirmed by readings
-that agree with it, and an earthly candidate replaces it once seen
-:data:`MIN_UNDISTURBED_S`, whatever the first field's lead (an unearthly
-candidate races it as before: a scale error may lift the Earth's own field a
-little above 67 µT). BROAD's trials 28 and 29, cut at their first movement
-beside a magnet (70 and 72 µT): 8.04° → 6.96° and 7.03° → 6.65°; the 30
-cut trials' mean 2.942° → 2.893°, nothing else changed.
+at its surface (:data:`EARTH_FIELD_NORM_UT`); an unconfirmed reference
+outside that is likelier a magnet's or a steel's, and loses its lead in the
+race: an earthly candidate replaces it once seen :data:`MIN_UNDISTURBED_S`
+(after the hold time by which the old field's own candidate outlives it),
+however long the readings had agreed with it. It is otherwise a first
+reference like any other: confirmed by :data:`FIRST_FIELD_S` of agreement,
+and raced by unearthly candidates as before, because a field read in
+another unit, or the Earth's own lifted above 67 µT by a scale error, is as
+likely as a magnet; then the rule costs at most a brief earthly disturbance
+in the first seconds taken for the field (and given back). BROAD's trials 28
+and 29, cut at their first movement beside a magnet (70 and 72 µT): 8.04°
+→ 6.96° and 7.03° → 6.65°; the 30 cut trials' mean 2.942° → 2.893°,
+nothing else changed.
 
 A trust state is :func:`new_state`; every function works on plain arrays.
 """
@@ -115,11 +120,12 @@ REJECTION_FACTOR = 2.0
 STEADY_TIME_CONSTANT_S = 0.5
 STEADY_TOLERANCE = 0.2
 
-#: The norms the Earth's field has at its surface, µT (a recording's field
-#: is read in µT, :data:`sensors.declared_units.UNITS`): from about 22 over
-#: South America to about 67 near the south magnetic pole (IGRF-13: Alken et
-#: al., "International Geomagnetic Reference Field: the thirteenth
-#: generation", *Earth, Planets and Space* 73:49, 2021, Fig. 3).
+#: The norms the Earth's field has at its surface, µT (as a recording holds
+#: its field, :attr:`sensors.recording.Recording.magnetometer_uT`): from about
+#: 22 over South America to about 67 near the south magnetic pole (the IGRF:
+#: Alken et al., *Earth, Planets and Space* 73:49, 2021; ppigrf's model at
+#: 2025.0 on a 2° grid at sea level gives 22.1 to 66.9 µT,
+#: ``tests/test_imu_models.py``).
 EARTH_FIELD_NORM_UT = (22.0, 67.0)
 
 #: The heading's σ once the first field, which the start's heading came
@@ -203,8 +209,7 @@ def trust_step(norm: float, dip: float, rate_lp_norm: float, dt: float, state,
     if close:
         state[UNDISTURBED_S] += dt
         state[SUPPORT_S] += dt
-        if state[SUPPORT_S] >= FIRST_FIELD_S and state[CONFIRMED] == 0.0 and \
-                _earthly(state[REF_NORM]):
+        if state[SUPPORT_S] >= FIRST_FIELD_S and state[CONFIRMED] == 0.0:
             state[CONFIRMED] = 1.0
             state[CANDIDATE_S] = 0.0     # time at rest counts toward a new field no more
         if state[UNDISTURBED_S] >= MIN_UNDISTURBED_S:
@@ -230,8 +235,9 @@ def _candidate_step(norm: float, dip: float, rate_lp_norm: float, dt: float, gai
     :data:`NEW_FIELD_S` in motion becomes the reference; while the first
     reference is unconfirmed, one seen (at any rate of turn)
     :data:`MIN_UNDISTURBED_S` longer than it was, at most
-    :data:`FIRST_FIELD_S`, replaces it and asks the filter to forget the
-    heading it gave (FORGET), and a candidate outlives a disagreement shorter
+    :data:`FIRST_FIELD_S` (an earthly one against a reference that is not:
+    :data:`MIN_UNDISTURBED_S`), replaces it and asks the filter to forget
+    the heading it gave (FORGET), and a candidate outlives a disagreement shorter
     than :data:`MIN_UNDISTURBED_S` (module docstring)."""
     agrees = steady and _close(norm, dip, state[CANDIDATE_NORM], state[CANDIDATE_DIP])
     if agrees:
