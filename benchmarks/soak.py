@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from benchmarks.metrics import ARCSEC_PER_DEG
 from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
 from benchmarks.output import progress
 from benchmarks.scenario import Scenario
@@ -98,7 +99,7 @@ def report(scenario, batch, seconds: float) -> list[str]:
               f"{'NEES first':>11} {'NEES last':>10}  verdict (|z| < {STATIONARY_Z:g})"]
     for name in batch.estimators:
         (ms_first, se_first), (ms_last, se_last) = (
-            batch_mean(part ** 2) for part in tenths(batch.error_samples[name] * 3600.0))
+            batch_mean(part ** 2) for part in tenths(batch.error_samples[name] * ARCSEC_PER_DEG))
         z = (ms_last - ms_first) / np.hypot(se_first, se_last)
         nees = "" if batch.consistency is None or name not in batch.consistency else \
             "{:>11.2f} {:>10.2f}".format(*(np.mean(part) for part in

@@ -48,6 +48,7 @@ from dynamics.quaternion import IDENTITY, quat_conjugate, quat_multiply
 from dynamics.validation import finite_number, one_of
 from estimators import sensing
 from estimators.base import AttitudeEstimator
+from estimators.settings import DEFAULT_DT_S
 from estimators.tunable import Tunable
 
 #: ENU from NWU: a quarter turn about the vertical, q_ENU = NWU_TO_ENU ⊗ q_NWU.
@@ -296,7 +297,7 @@ class Madgwick(ComplementaryFilter):
     tunable = (Tunable("beta", "log", (1e-6, 10.0), span=1.0,
                        description="the gradient step's gain (rad/s)"),)
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, beta: float = 0.1,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY, beta: float = 0.1,
                  rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self._set_rate_timing(rate_timing)
@@ -328,7 +329,7 @@ class Mahony(ComplementaryFilter):
                Tunable("ki", "log", (1e-12, 10.0), span=1.0,
                        description="the integral gain (1/s²)"))
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, kp: float = 0.5,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY, kp: float = 0.5,
                  ki: float = 0.001, rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self._set_rate_timing(rate_timing)

@@ -31,6 +31,7 @@ from dynamics.quaternion import IDENTITY
 from dynamics.validation import one_of
 from estimators.base import AttitudeEstimator
 from estimators.model import propagate
+from estimators.settings import DEFAULT_DT_S
 
 RATE_TIMINGS = ("workshop", "step-average", "end")
 
@@ -60,7 +61,7 @@ class DeadReckoning(AttitudeEstimator):
     name = "dead-reckoning"
     label = "Dead Reckoning"
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
                  rate_timing: str = "workshop", on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self.rate_timing = one_of("rate_timing", rate_timing, RATE_TIMINGS)

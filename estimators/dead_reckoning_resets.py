@@ -21,6 +21,7 @@ from dynamics.validation import boolean
 from estimators import sensing
 from estimators.dead_reckoning import DeadReckoning
 from estimators.model import propagate
+from estimators.settings import DEFAULT_DT_S
 
 
 class DeadReckoningWithResets(DeadReckoning):
@@ -45,7 +46,7 @@ class DeadReckoningWithResets(DeadReckoning):
     reads = frozenset({sensing.STAR_TRACKER})
     needs = (frozenset({sensing.STAR_TRACKER}),)
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
                  rate_timing: str = "workshop", align_sign: bool = True,
                  on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, rate_timing=rate_timing,

@@ -85,6 +85,7 @@ from dynamics.validation import (
 from estimators.base import (OUTPUTS, AttitudeEstimator, KalmanEstimator, finite_state,
                              gate_probability_setting)
 from estimators.sampled_rate import SampledRate
+from estimators.settings import DEFAULT_DT_S
 from estimators.tunable import GATE_PROBABILITY, MEASUREMENT_SCALE, Tunable
 
 _IDENTITY_4 = np.eye(4)
@@ -224,7 +225,7 @@ class QuaternionEKF(SampledRate, KalmanEstimator):
         settings["output"] = "prior" if scenario.is_workshop_sensors else "posterior"
         return settings
 
-    def __init__(self, *, dt: float = 0.01, pc_exponent: float = -8.7,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, pc_exponent: float = -8.7,
                  measurement_covariance=1.0, initial_attitude=IDENTITY,
                  initial_covariance: float = 1e-12, output: str = "prior",
                  align_sign: bool = True, gate_probability: float | None = None,

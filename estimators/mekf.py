@@ -153,6 +153,8 @@ from estimators.base import (AttitudeAndBiasEstimator, AttitudeEstimator, finite
 from estimators.imu.updates import ErrorStateUpdates
 from estimators.magnetometer_bias import (CORE_STATES, MAGNETOMETER_BIAS_SIGMA,
                                           MagnetometerBiasStates, estimates_hard_iron)
+from estimators.settings import (DEFAULT_ATTITUDE_SIGMA_RAD, DEFAULT_BIAS_SIGMA_RADPS,
+                                 DEFAULT_DT_S, DEFAULT_GYRO_NOISE, DEFAULT_MEASUREMENT_COVARIANCE)
 from estimators.tunable import GRAVITY_DENSITY, HEADING_DENSITY
 
 #: The names other modules import from here, wherever each is defined (the
@@ -301,10 +303,12 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
     #: The filters' tunables, and the IMU models' densities (named only).
     tunable = AttitudeAndBiasEstimator.tunable + (GRAVITY_DENSITY, HEADING_DENSITY)
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
-                 gyro_bias_random_walk: float = 0.0, measurement_covariance=1e-4,
-                 initial_bias_radps=(0.0, 0.0, 0.0), initial_attitude_sigma_rad=0.1,
-                 initial_bias_sigma_radps=1e-4, output: str = "posterior",
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
+                 gyro_noise: float = DEFAULT_GYRO_NOISE, gyro_bias_random_walk: float = 0.0,
+                 measurement_covariance=DEFAULT_MEASUREMENT_COVARIANCE,
+                 initial_bias_radps=(0.0, 0.0, 0.0),
+                 initial_attitude_sigma_rad=DEFAULT_ATTITUDE_SIGMA_RAD,
+                 initial_bias_sigma_radps=DEFAULT_BIAS_SIGMA_RADPS, output: str = "posterior",
                  gate_probability: float | None = None,
                  magnetic_norm_tolerance: float | None = None, rate_interpolation: str = "hold",
                  gravity_model: str = "reading", magnetometer_model: str = "vector",

@@ -35,15 +35,13 @@ import importlib
 
 import numpy as np
 
+from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.quaternion import IDENTITY, quat_multiply
 from dynamics.validation import InvalidParameterError, finite_number
 from estimators import sensing
 from estimators.base import AttitudeEstimator, InvalidMeasurementError
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
-
-#: m/s² per g, as Fusion takes the accelerometer.
-STANDARD_GRAVITY = 9.80665
-
+from estimators.settings import DEFAULT_DT_S
 
 def _package(estimator: str, module: str):
     try:
@@ -64,7 +62,8 @@ class PeerFilter(MagneticFrame, AttitudeEstimator):
     reads = frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER})
     needs = (frozenset({sensing.ACCELEROMETER}),)
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise"):
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
+                 on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
         self.reset()
 
@@ -138,8 +137,8 @@ class VQF9D(PeerFilter):
     output = "getQuat9D"
     skips_zero_readings = True      # vqf.cpp, updateAcc/updateMag: "ignore [0 0 0] samples"
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise",
-                 accelerometer_interval_s: float | None = None,
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
+                 on_invalid: str = "raise", accelerometer_interval_s: float | None = None,
                  magnetometer_interval_s: float | None = None):
         self.accelerometer_interval_s, self.magnetometer_interval_s = (
             None if value is None else finite_number(name, value, strictly_positive=True)
@@ -186,7 +185,8 @@ class OfflineVQF(VQF9D):
     mode = "offline"
     needs = (frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER}),)
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, on_invalid: str = "raise"):
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
+                 on_invalid: str = "raise"):
         # offlineVQF takes every channel at the gyro's rate (a slower one held).
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
 
@@ -267,7 +267,8 @@ class Fusion(PeerFilter):
         with all three), from a fresh filter: :meth:`update`'s calls in a
         plain loop (imufusion has no batch call), the turn to ENU at once."""
         self.reset()
-        gyro_dps, acc_g = np.degrees(gyro), np.asarray(acc, dtype=float) / STANDARD_GRAVITY
+        # Fusion takes the accelerometer in g.
+        gyro_dps, acc_g = np.degrees(gyro), np.asarray(acc, dtype=float) / STANDARD_GRAVITY_MPS2
         mag = np.asarray(mag, dtype=float)
         nwu = np.empty((len(gyro), 4))
         for k in range(len(gyro)):
@@ -278,7 +279,7 @@ class Fusion(PeerFilter):
     def update(self, gyro, acc, mag):
         # Fusion takes degrees per second and g; a channel not read is held.
         if acc is not None:
-            self._acc_g = np.asarray(acc, dtype=float) / STANDARD_GRAVITY
+            self._acc_g = np.asarray(acc, dtype=float) / STANDARD_GRAVITY_MPS2
         if mag is not None:
             self._mag = np.asarray(mag, dtype=float)
         self.filter.update(np.degrees(gyro), self._acc_g, self._mag)

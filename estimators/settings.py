@@ -29,6 +29,16 @@ from dynamics.validation import axis_standard_deviations
 ON_INVALID = ("raise", "skip")
 #: Which estimate a filter's step returns: before or after that step's reading.
 OUTPUTS = ("prior", "posterior")
+#: The constructors' defaults, where neither a scenario nor the caller gives
+#: a setting (the workshop's: :class:`benchmarks.scenario.Scenario`): the
+#: gyro's step (100 Hz), its angle random walk's density σ_v² (rad²/s), and
+#: the filters' tracker variance per axis and priors on the attitude (rad)
+#: and on the bias (rad/s).
+DEFAULT_DT_S = 0.01
+DEFAULT_GYRO_NOISE = 1e-5
+DEFAULT_MEASUREMENT_COVARIANCE = 1e-4
+DEFAULT_ATTITUDE_SIGMA_RAD = 0.1
+DEFAULT_BIAS_SIGMA_RADPS = 1e-4
 
 
 class SettingsFromScenario:

@@ -40,6 +40,7 @@ from dynamics.quaternion import IDENTITY, quat_from_rotvec, quat_multiply, rotat
 from dynamics.validation import finite_number, one_of
 from estimators import sensing, triad, wahba
 from estimators.base import AttitudeEstimator, axis_sigmas, finite_state
+from estimators.settings import DEFAULT_ATTITUDE_SIGMA_RAD, DEFAULT_DT_S, DEFAULT_GYRO_NOISE
 from estimators.tunable import MAGNETOMETER_WEIGHT
 
 BETWEEN = ("propagate", "hold")
@@ -76,8 +77,9 @@ class StaticAttitude(AttitudeEstimator):
     solver = staticmethod(wahba.svd)
     scenario_defaults = {"initial_attitude": "initial_state", "gyro_noise": "gyro_noise"}
 
-    def __init__(self, *, dt: float = 0.01, initial_attitude=IDENTITY, gyro_noise: float = 1e-5,
-                 initial_attitude_sigma_rad=0.1, between: str = "propagate",
+    def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
+                 gyro_noise: float = DEFAULT_GYRO_NOISE,
+                 initial_attitude_sigma_rad=DEFAULT_ATTITUDE_SIGMA_RAD, between: str = "propagate",
                  min_separation_deg: float = 1.0, magnetometer_weight: float = 1.0,
                  on_invalid: str = "raise"):
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)

@@ -14,6 +14,7 @@ from dynamics.validation import InvalidParameterError
 from sensors.recording_keys import choice, refuse
 from sensors.turning import (clock_offset, first_fitting, offset_advice, reference_advice,
                              reference_fit, reference_fits, reference_problem)
+from sensors.vector import readings_taken
 
 #: The reference is interpolated between readings at most this many of its
 #: typical intervals apart (a longer one is a gap: the markers were not seen).
@@ -133,7 +134,7 @@ def check_gravity_up(path: Path, reference: np.ndarray, specific_force: np.ndarr
     accelerometer (a log of acceleration, as Apple's Core Motion gives it,
     not of specific force) or a reference in the other frame, which no
     turning of either with the gyro tells apart."""
-    seen = np.isfinite(reference).all(axis=1) & np.any(specific_force != 0.0, axis=1)
+    seen = np.isfinite(reference).all(axis=1) & readings_taken(specific_force)
     if not seen.any():
         return
     from dynamics.quaternion import to_rotation
@@ -162,7 +163,7 @@ def check_field_north(path: Path, reference: np.ndarray, field: np.ndarray) -> N
     into the world by the reference points, horizontally, more than
     :data:`NORTH_TOLERANCE_DEG` from north (a motion-capture room's axes),
     and every heading score includes that offset (30° of a 30.3° score)."""
-    seen = np.isfinite(reference).all(axis=1) & np.any(field != 0.0, axis=1)
+    seen = np.isfinite(reference).all(axis=1) & readings_taken(field)
     if np.count_nonzero(seen) < 2:
         return
     from dynamics.quaternion import to_rotation

@@ -25,6 +25,7 @@ from sensors.turning import (AXES_THRESHOLDS, MIRRORED_CORRELATION, TURNING_CORR
                              TURNING_FACTOR, TURNING_WINDOW_S, field_correlation,
                              gravity_turning, rates_fit, reference_fit, reference_fits,
                              reference_scale, turning_scale)
+from sensors.vector import readings_taken
 
 #: Each time unit in seconds; ``time_unit`` may also be a number, the
 #: seconds of one tick of the times (an Xsens ``SampleTimeFine``: 1e-4).
@@ -47,11 +48,12 @@ UNIT_ALIASES = {"µT": "uT", "μT": "uT", "m/s²": "m/s^2", "m/s2": "m/s^2", "°
 TIME_ALIASES = {"µs": "us", "μs": "us", "sec": "s", "msec": "ms", "usec": "us", "nsec": "ns",
                 "min": 60.0}
 #: Plausible medians of each vector sensor's norm in its toolkit unit: in
-#: motion an accelerometer's median stays near g; the Earth's field is 25 to
-#: 65 µT, a room's or a vehicle's disturbances allowed for.
+#: motion an accelerometer's median stays near g; the Earth's field is 22 to
+#: 67 µT (:data:`estimators.imu.heading.EARTH_FIELD_NORM_UT`), a room's or a
+#: vehicle's disturbances allowed for.
 PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
 #: Each vector sensor's typical norm in its toolkit unit: g, and a middle
-#: Earth's field (25 to 65 µT). Raw counts' scale is hinted to it, and
+#: Earth's field (22 to 67 µT). Raw counts' scale is hinted to it, and
 #: ``inspect`` tells a headerless file's accelerometer from its
 #: magnetometer by it.
 TYPICAL_NORMS = {"accelerometer": STANDARD_GRAVITY_MPS2, "magnetometer": 45.0}
@@ -277,7 +279,7 @@ def check_norm(path: Path, name: str, values: np.ndarray, unit: str,
     """A vector sensor's median norm, where it read, plausible in its unit;
     an accelerometer without gravity (:data:`GRAVITY_FREE_RATIO`) refused, or
     noted where its median is in place."""
-    norms = np.linalg.norm(values[np.any(values != 0.0, axis=1)], axis=1)
+    norms = np.linalg.norm(values[readings_taken(values)], axis=1)
     if not len(norms):
         refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
                 "the gyro's span: no reading at all")

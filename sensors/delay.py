@@ -57,6 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
+from sensors.vector import readings_taken
 
 #: Delays are searched within ±MAX_DELAY_S s of none.
 MAX_DELAY_S = 0.1
@@ -234,7 +235,7 @@ def recording_fit(recording) -> DelayFit | None:
     (:class:`sensors.recording.Recording`; its readings the rows that are
     not exactly zero, which on a gyro's grid is no reading)."""
     field = recording.magnetometer_uT
-    return delay_fit(recording.gyro_radps, field, np.any(field != 0.0, axis=1), recording.dt)
+    return delay_fit(recording.gyro_radps, field, readings_taken(field), recording.dt)
 
 
 #: What a clear delay's note advises (``broad``, ``inspect``).

@@ -32,13 +32,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.handheld import HandheldMotion, simulate_handheld
 from dynamics.quaternion import to_rotation
 from dynamics.validation import InvalidParameterError, finite_number, standard_deviation
 from sensors.recording import Recording
 
-#: Standard gravity, m/s² (the readings' gravity; the filters take their own).
-GRAVITY_MPS2 = 9.80665
+#: The readings' gravity, m/s²: the standard value (the filters take their own).
+GRAVITY_MPS2 = STANDARD_GRAVITY_MPS2
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
+from sensors.vector import readings_taken
 
 #: Equal-area cells of the sphere whose share the readings' directions hit
 #: is the coverage (a Fibonacci lattice: each direction in its nearest).
@@ -94,7 +95,7 @@ class MagnetometerCalibration:
         """The field of each reading (a row of zeros, no reading, kept)."""
         readings = np.asarray(readings, dtype=float)
         field = np.linalg.solve(self.soft_iron, (readings - self.hard_iron).T).T
-        return np.where(np.any(readings != 0, axis=1, keepdims=True), field, 0.0)
+        return np.where(readings_taken(readings)[:, None], field, 0.0)
 
     def describe(self, unit: str = "uT") -> str:
         """One line: what was fitted, how well, from what."""
@@ -119,7 +120,7 @@ def fit_ellipsoid(readings: np.ndarray, field_norm: float | None = None,
                                    not (math.isfinite(field_norm) and field_norm > 0)):
         raise InvalidParameterError(f"{name} field_norm", field_norm, "must be a positive number")
     readings = np.asarray(readings, dtype=float)
-    readings = readings[np.any(readings != 0, axis=1) & np.all(np.isfinite(readings), axis=1)]
+    readings = readings[readings_taken(readings) & np.all(np.isfinite(readings), axis=1)]
     if len(readings) < MIN_READINGS:
         raise InvalidParameterError(name, f"{len(readings)} readings",
                                     f"an ellipsoid fit needs at least {MIN_READINGS}")

@@ -97,10 +97,15 @@ class Recording:
         """The initial rest: every sample before the movement phase starts."""
         return slice(0, int(np.argmax(self.movement)) if self.movement.any() else self.n_samples)
 
+    def rest_gyro_radps(self) -> np.ndarray:
+        """``(R, 3)``: the gyro's readings over the initial rest (none where
+        the recording moves from its first sample), rad/s."""
+        return self.gyro_radps[self.rest_samples]
+
     def rest_gyro_mean_radps(self) -> np.ndarray:
         """The gyro's mean over the initial rest: its bias at switch-on (rad/s);
         NaN where the recording has none (it moves from its first sample)."""
-        rest = self.gyro_radps[self.rest_samples]
+        rest = self.rest_gyro_radps()
         return rest.mean(axis=0) if len(rest) else np.full(3, np.nan)
 
     def reference_gaps(self) -> list[tuple[int, int]]:

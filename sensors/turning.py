@@ -31,6 +31,8 @@ import warnings
 
 import numpy as np
 
+from sensors.vector import readings_taken
+
 #: Both channels are averaged over blocks this long, s.
 TURNING_WINDOW_S = 0.1
 #: The unit check: where the accelerometer's turning and the gyro's agree
@@ -84,7 +86,7 @@ def _block_means(values: np.ndarray, steps: int) -> np.ndarray:
 def held_readings(vectors: np.ndarray) -> np.ndarray:
     """A vector channel read at some of the gyro's samples (zeros between
     readings) held from each reading to the next (zeros before the first)."""
-    read = np.any(vectors != 0.0, axis=1)
+    read = readings_taken(vectors)
     last = np.maximum.accumulate(np.where(read, np.arange(len(vectors)), 0))
     return vectors[last]
 
@@ -96,7 +98,7 @@ def _turning(rates: np.ndarray, vectors: np.ndarray, dt: float, offset: bool = F
     gyro predicts, -ω × v at the block's mean; with ``offset``, -ω × (v - h)
     for the constant ``h`` that fits best (a hard iron: linear in ``h``).
     None where there are too few blocks."""
-    read = np.flatnonzero(np.any(vectors != 0.0, axis=1))
+    read = np.flatnonzero(readings_taken(vectors))
     if len(read) > 1 and np.median(np.diff(read)) * dt > window_s:
         summed = np.concatenate([np.zeros((1, 3)), np.cumsum(rates, axis=0)])
         steps = np.diff(read)[:, None]
@@ -134,7 +136,7 @@ def gravity_turning(rates: np.ndarray, specific_force: np.ndarray, dt: float,
     rad/s); None where there is too little of it. A correlation near −1 is
     a frame mirrored between the two: columns in a left-handed order
     (``ω × v`` changes its sign under a reflection of both)."""
-    read = np.flatnonzero(np.any(specific_force != 0.0, axis=1))
+    read = np.flatnonzero(readings_taken(specific_force))
     if len(read) < 0.9 * len(specific_force) and (
             len(read) < 2 or np.median(np.diff(read)) * dt <= window_s):
         # an accelerometer on its own clock (a phone logger's own timestamps

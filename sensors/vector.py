@@ -33,6 +33,15 @@ from dynamics.quaternion import rotation_matrix
 from sensors.star_tracker import steps_between_readings
 
 
+def readings_taken(vectors: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: which of a recorded sensor's ``(N, 3)`` readings were
+    taken. A reading of exactly zero on all three axes is a dropout (no
+    accelerometer reads no gravity, no magnetometer no field), not a reading;
+    any other is one, a reading that is not finite included (what uses it
+    decides)."""
+    return np.any(vectors != 0.0, axis=1)
+
+
 @dataclass(frozen=True)
 class VectorObservation:
     """One reading of one vector sensor, as an estimator's step takes it.

@@ -221,7 +221,8 @@ def test_an_estimator_that_needs_a_field_is_refused_by_name(tmp_path, capsys):
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
     assert main(["broad", "--broad", toml, "--magnetometer-sigma", "3", "--out",
                  str(tmp_path / "out"), "--quiet"]) == 2
-    assert "--magnetometer-sigma: these trials have no magnetometer" in capsys.readouterr().err
+    assert ("--magnetometer-sigma = 3.0: needs a magnetometer, and these trials have none"
+            in capsys.readouterr().err)
 
 
 def test_a_log_without_an_accelerometer_is_refused_naming_it(tmp_path, capsys):

@@ -234,6 +234,14 @@ class BroadDataset:
                                   path)
 
 
+def refuse_field_flag(flag: str, value, present) -> None:
+    """A magnetometer's setting ``flag`` (given as ``value``) refused where
+    the trials' vector sensors ``present`` (:meth:`BroadDataset.sensors`)
+    have no magnetometer."""
+    if "magnetometer" not in present:
+        raise InvalidParameterError(flag, value, "needs a magnetometer, and these trials have none")
+
+
 def broad_folder(given: Path | None = None) -> Path:
     """``--broad DIR``, else :data:`ENVIRONMENT_VARIABLE`, else the shipped subset."""
     if given is not None:

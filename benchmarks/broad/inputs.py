@@ -52,9 +52,10 @@ from dynamics.quaternion import from_rotation
 from dynamics.validation import InvalidParameterError, standard_deviation
 from estimators import sensing, wahba
 from estimators.imu import GYRO_NOISE_DENSITY
+from estimators.imu.heading import NORM_TOLERANCE
 from sensors.recording import Recording, reading_interval_s
 from sensors.turning import held_readings
-from sensors.vector import VectorReadings
+from sensors.vector import VectorReadings, readings_taken
 
 #: The smallest σ per axis the filters that read the vectors take: m/s², µT.
 MOTION_SIGMAS = {"accelerometer": 0.3, "magnetometer": 4.0}
@@ -78,8 +79,9 @@ MIN_SEPARATION_DEG = 1.0
 #: EKF here; the textbook MEKF of :mod:`benchmarks.broad.ablation`).
 GATE_PROBABILITY = 0.9999
 #: The textbook MEKF's magnetic disturbance test: a field reading more than
-#: 10 % off the reference's magnitude is rejected (VQF's ``magNormTh``).
-MAGNETIC_NORM_TOLERANCE = 0.1
+#: 10 % off the reference's magnitude is rejected (VQF's ``magNormTh``, as the
+#: heading model's own test, :data:`estimators.imu.heading.NORM_TOLERANCE`).
+MAGNETIC_NORM_TOLERANCE = NORM_TOLERANCE
 #: The MEKF's and USQUE's settings on an IMU recording (module docstring).
 IMU_MODELS = {"gravity_model": "lowpass", "magnetometer_model": "heading",
               "rest_updates": True, "hard_iron_fit": True}
@@ -134,7 +136,7 @@ def heading_reference(recording: Recording) -> bool:
 def usable_readings(recording: Recording) -> dict:
     """``sensor → (N,)`` bool: the readings that are not exactly zero (a
     dropout, module docstring)."""
-    return {name: np.any(channel != 0.0, axis=1) for name, channel in channels(recording).items()}
+    return {name: readings_taken(channel) for name, channel in channels(recording).items()}
 
 
 #: The VQF estimators told their channels' intervals (the offline one
@@ -186,7 +188,7 @@ def start_pair(recording: Recording) -> tuple | None:
     magnetometer, the first accelerometer reading, and None for the field."""
     acc = held_readings(recording.accelerometer_mps2)
     if not heading_reference(recording):
-        found = np.flatnonzero(np.any(acc != 0.0, axis=1))
+        found = np.flatnonzero(readings_taken(acc))
         return (int(found[0]), acc[found[0]], None) if len(found) else None
     mag = held_readings(recording.magnetometer_uT)
     found = np.flatnonzero(_sine_between(acc, mag) >= math.sin(math.radians(MIN_SEPARATION_DEG)))
@@ -236,7 +238,7 @@ def field_reference(recording: Recording) -> np.ndarray:
         # sensors on their own clocks: each field reading with the latest
         # accelerometer reading before it
         acc = held_readings(np.where(usable["accelerometer"][:, None], acc, 0.0))
-        usable = {**usable, "accelerometer": np.any(acc != 0.0, axis=1)}
+        usable = {**usable, "accelerometer": readings_taken(acc)}
     both = np.flatnonzero(usable["accelerometer"] & usable["magnetometer"])[:window]
     acc, mag = acc[both], recording.magnetometer_uT[both]
     norm = float(np.median(np.linalg.norm(mag, axis=1)))

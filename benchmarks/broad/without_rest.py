@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.broad.dataset import open_broad, trial_label
+from benchmarks.broad.dataset import open_broad, refuse_field_flag, trial_label
 from benchmarks.broad.trial_notes import applied_delay
 from benchmarks.broad.inputs import imu_inputs
 from benchmarks.broad.metric import rmse_deg
@@ -107,10 +107,9 @@ def trial_rows(args, name: str, scores, check=lambda: None):
     folder = args.broad or shipped_file("datasets/broad/trials.json").parent
     try:
         dataset = replace(open_broad(folder), magnetometer_delay=args.magnetometer_delay)
-        if args.magnetometer_delay != 0.0 and \
-                "magnetometer" not in dataset.sensors(dataset.available):
-            raise InvalidParameterError("--magnetometer-delay", args.magnetometer_delay,
-                                        "needs a magnetometer, and these trials have none")
+        if args.magnetometer_delay != 0.0:
+            refuse_field_flag("--magnetometer-delay", args.magnetometer_delay,
+                              dataset.sensors(dataset.available))
         check()
         rows = [row for trial in progress(dataset.available, desc="trials", quiet=args.quiet)
                 for row in scores(dataset, trial)]

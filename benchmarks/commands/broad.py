@@ -147,10 +147,12 @@ def run(args, _scenario):
 def _check_magnetometer_flags(args, present) -> None:
     """The magnetometer's flags refused where the trials (their vector
     sensors ``present``) have none, and its delay with a moved gyro."""
-    for flag, given in (("--magnetometer-sigma", args.magnetometer_sigma is not None),
-                        ("--magnetometer-delay", args.magnetometer_delay != 0.0)):
-        if given and "magnetometer" not in present:
-            raise UsageError(f"{flag}: these trials have no magnetometer")
+    from benchmarks.broad.dataset import refuse_field_flag
+    for flag, value, given in (
+            ("--magnetometer-sigma", args.magnetometer_sigma, args.magnetometer_sigma is not None),
+            ("--magnetometer-delay", args.magnetometer_delay, args.magnetometer_delay != 0.0)):
+        if given:
+            refuse_field_flag(flag, value, present)
     if args.gyro_delay and args.magnetometer_delay != 0.0:
         raise UsageError("--magnetometer-delay is the magnetometer's against the gyro as "
                          "recorded, and --gyro-delay moves the gyro: give one of them")

@@ -21,6 +21,7 @@ from benchmarks import experiments
 from benchmarks.shipped import FLIGHT_SCENARIO, shipped_file
 from benchmarks.experiments import consistency
 from benchmarks.bounds import posterior_crb
+from benchmarks.metrics import ARCSEC_PER_DEG
 from benchmarks.engine import make_runs, run_batch
 from benchmarks.output import write_figure, write_text
 from benchmarks.output import progress
@@ -111,9 +112,9 @@ def flight_side_by_side(flight: Scenario, out: Path, quiet: bool) -> tuple[Secti
         band = ("–" if np.isnan(row["anees"])
                 else f"[{row['anees_low']:.2f}, {row['anees_high']:.2f}]")
         anees = "–" if np.isnan(row["anees"]) else f"{row['anees']:.2f}"
-        rows.append(f"| {name} | {row['runs']} | {row['rms_deg'] * 3600:.2f} | "
-                    f"{row['bound_rms_deg'] * 3600:.2f} | {row['efficiency']:.2f} | {anees} | "
-                    f"{band} | {row['verdict']} |")
+        rms, bound = row["rms_deg"] * ARCSEC_PER_DEG, row["bound_rms_deg"] * ARCSEC_PER_DEG
+        rows.append(f"| {name} | {row['runs']} | {rms:.2f} | {bound:.2f} | "
+                    f"{row['efficiency']:.2f} | {anees} | {band} | {row['verdict']} |")
     summary = result.summary
     body = f"""The flight scenario (`scenarios/flight.toml`, here its first
 {flight.tstop:g} s): a spacecraft at orbital rate, a navigation-grade gyro
@@ -126,8 +127,8 @@ MEKF and the UKF (USQUE) estimate the bias; the additive EKF cannot.
 {chr(10).join(rows)}
 
 (The engine runs {FLIGHT_ENGINE_RUNS} seeds of each estimator. Started from the
-same prior, the MEKF's RMS error is {summary['mekf']['rms_deg'] * 3600:.3f} arcsec
-and USQUE's {summary['usque']['rms_deg'] * 3600:.3f}: on a full-attitude reading
+same prior, the MEKF's RMS error is {summary['mekf']['rms_deg'] * ARCSEC_PER_DEG:.3f} arcsec
+and USQUE's {summary['usque']['rms_deg'] * ARCSEC_PER_DEG:.3f}: on a full-attitude reading
 the two are the same filter to first order.)
 
 {_mekf_text(summary['mekf']['efficiency'])}, and both multiplicative filters are judged by their ANEES
@@ -147,7 +148,7 @@ def convergence_and_cost(flight: Scenario) -> tuple[Section, dict]:
     result = simulate(flight, FILTERS, seed=0)
     times, costs = {}, {}
     for name in FILTERS:
-        above = np.flatnonzero(result.error_deg[name] * 3600 > CONVERGED_ARCSEC)
+        above = np.flatnonzero(result.error_deg[name] * ARCSEC_PER_DEG > CONVERGED_ARCSEC)
         times[name] = 0.0 if not len(above) else float(result.time_s[min(
             above[-1] + 1, len(result.time_s) - 1)])
     short = flight.replace(tstop=30.0)

@@ -27,6 +27,7 @@ from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UN
                                     clock_turning_scale, tick_name, tick_seconds)
 from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits
+from sensors.vector import readings_taken
 
 def time_unit(intervals: np.ndarray) -> str:
     """The unit that makes an IMU's sample interval most like one: the
@@ -353,7 +354,7 @@ def _motion(recording) -> list[str]:
     if recording.accelerometer_mps2 is None:
         return ["rest, gravity: no accelerometer"]
     force = recording.accelerometer_mps2
-    read = np.any(force != 0, axis=1)
+    read = readings_taken(force)
     # The accelerometer may read at fewer samples than the gyro: its own step.
     step = reading_interval_s(read, recording.dt)
     periods = rest_periods(recording.gyro_radps[read], force[read], step)
@@ -366,7 +367,7 @@ def _motion(recording) -> list[str]:
              "(median norm)"]
     if recording.magnetometer_uT is not None:
         field = recording.magnetometer_uT
-        both = read & np.any(field != 0, axis=1)
+        both = read & readings_taken(field)
         if not both.any():
             return lines + ["field: the accelerometer and the magnetometer never read at the "
                             "same sample: no dip to tell"]

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.metrics import attitude_error_deg
+from benchmarks.metrics import ARCSEC_PER_DEG, attitude_error_deg
 from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.output import progress
 from benchmarks.scenario import Scenario
@@ -44,6 +44,7 @@ from dynamics.rigid_body import RigidBodyTruth
 from dynamics.validation import InvalidParameterError, finite_number
 from estimators.imu import GYRO_NOISE_DENSITY
 from sensors.recording import Recording, load_recording
+from sensors.vector import readings_taken
 
 #: ``--dataset`` name → the shipped file.
 DATASETS = {"broad-02": "datasets/broad/02_undisturbed_slow_rotation_B.npz",
@@ -126,7 +127,7 @@ def with_found_rest(recording: Recording) -> Recording:
     from sensors.turning import held_readings
     force = (np.zeros_like(recording.gyro_radps) if recording.accelerometer_mps2 is None
              else held_readings(recording.accelerometer_mps2))
-    read = np.flatnonzero(np.any(force != 0.0, axis=1))
+    read = np.flatnonzero(readings_taken(force))
     if len(read):                    # before its first reading, the accelerometer's first
         force[:read[0]] = force[read[0]]
     periods = rest_periods(recording.gyro_radps, force, recording.dt)
@@ -211,7 +212,7 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
                                     f"must be at most {MAX_NOISE_DEG:g}°: beyond it a reading "
                                     "says nothing of the attitude")
     dt = recording.dt
-    rest = recording.gyro_radps[recording.rest_samples] if rest is None else rest
+    rest = recording.rest_gyro_radps() if rest is None else rest
     noise_power = (float(np.mean(rest.var(axis=0)) * dt) if len(rest) > 1
                    else GYRO_NOISE_DENSITY ** 2)
     bias = rest.mean(axis=0) if len(rest) else np.zeros(3)
@@ -230,7 +231,7 @@ def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S
         tstop=(recording.n_samples - 1) * dt, dt=dt, initial_state=first,
         initial_attitude_quat=first,
         gyro_noise=noise_power, gyro_bias_random_walk=BIAS_RANDOM_WALK,
-        star_tracker_model="rotation", star_tracker_sigma_arcsec=[noise_deg * 3600.0] * 3,
+        star_tracker_model="rotation", star_tracker_sigma_arcsec=[noise_deg * ARCSEC_PER_DEG] * 3,
         time_between_measurements=interval, star_tracker_outages_s=gaps,
         measurement_covariance=(sigma_rad / 2) ** 2 * np.eye(4),
         pc_exponent=math.log(max(q_variance, 1e-300)),
@@ -319,11 +320,11 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
-    whole_rest = recording.gyro_radps[recording.rest_samples]
+    whole_rest = recording.rest_gyro_radps()
     start = int(np.argmax(recording.has_reference))
     recording = recording.from_sample(start)
     # the rest within the scored part; where the reference begins after it, the rest before
-    own_rest = recording.gyro_radps[recording.rest_samples]
+    own_rest = recording.rest_gyro_radps()
     scenario = replay_scenario(recording, interval_s, noise_deg,
                                own_rest if len(own_rest) > 1 else whole_rest)
     if settings is not None:
