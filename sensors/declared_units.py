@@ -19,7 +19,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.validation import MAX_MEASURED_RATE_RADPS
-from sensors.recording import VECTOR_LIMITS
+from sensors.recording import PLAUSIBLE_NORMS, VECTOR_LIMITS
 from sensors.recording_keys import axes_matrix, axes_names, refuse
 from sensors.turning import (AXES_THRESHOLDS, MIRRORED_CORRELATION, TURNING_CORRELATION,
                              TURNING_FACTOR, TURNING_WINDOW_S, field_correlation,
@@ -47,11 +47,6 @@ UNIT_ALIASES = {"µT": "uT", "μT": "uT", "m/s²": "m/s^2", "m/s2": "m/s^2", "°
 #: How else ``time_unit`` is written: a named unit, or a tick of seconds.
 TIME_ALIASES = {"µs": "us", "μs": "us", "sec": "s", "msec": "ms", "usec": "us", "nsec": "ns",
                 "min": 60.0}
-#: Plausible medians of each vector sensor's norm in its toolkit unit: in
-#: motion an accelerometer's median stays near g; the Earth's field is 22 to
-#: 67 µT (:data:`estimators.imu.heading.EARTH_FIELD_NORM_UT`), a room's or a
-#: vehicle's disturbances allowed for.
-PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
 #: Each vector sensor's typical norm in its toolkit unit: g, and a middle
 #: Earth's field (22 to 67 µT). Raw counts' scale is hinted to it, and
 #: ``inspect`` tells a headerless file's accelerometer from its

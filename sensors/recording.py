@@ -23,6 +23,7 @@ import numpy as np
 from dynamics.validation import MAX_MEASURED_RATE_RADPS, InvalidParameterError
 from sensors.turning import (first_fitting, reference_advice, reference_fit, reference_fits,
                              reference_problem)
+from sensors.vector import readings_taken
 
 #: The archive's keys: the gyro (N, 3) rad/s, the reference (N, 4), the
 #: movement flags (N,) and the sampling rate; ``info`` is optional.
@@ -38,6 +39,14 @@ VECTOR_KEYS = ("imu_acc_mps2", "imu_mag_uT")
 #: larger finite reading (1e300) is a corrupt file, and its square, which
 #: every filter and every variance takes, overflows.
 VECTOR_LIMITS = {"imu_acc_mps2": (2e4, "m/s²"), "imu_mag_uT": (5e4, "µT")}
+#: Plausible medians of each vector sensor's norm in its toolkit unit: in
+#: motion an accelerometer's median stays near g; the Earth's field is 22 to
+#: 67 µT (:data:`estimators.imu.heading.EARTH_FIELD_NORM_UT`), a room's or a
+#: vehicle's disturbances allowed for. Outside them the unit is wrong (a
+#: field in nT or gauss, an acceleration in g), not the sensor.
+PLAUSIBLE_NORMS = {"accelerometer": (4.0, 20.0), "magnetometer": (5.0, 500.0)}
+#: The sensor of each vector channel.
+VECTOR_SENSORS = {"imu_acc_mps2": "accelerometer", "imu_mag_uT": "magnetometer"}
 #: A reference quaternion may be off unit length by this much (rounding of
 #: the recording, not a different convention or scale).
 UNIT_TOLERANCE = 1e-6
@@ -262,6 +271,11 @@ def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:
     if len(huge):
         refuse(f"{key} must be within ±{limit:g} {unit} (ten times any such sensor's range); "
                f"row {huge[0]} is {array[huge[0]].tolist()}")
+    norms = np.linalg.norm(array[readings_taken(array)], axis=1)
+    (low, high), sensor = PLAUSIBLE_NORMS[VECTOR_SENSORS[key]], VECTOR_SENSORS[key]
+    if len(norms) and not low <= np.median(norms) <= high:
+        refuse(f"{key}'s median norm is {np.median(norms):.4g} {unit}, where an IMU's {sensor} "
+               f"reads {low:g} to {high:g} {unit}: are its readings in another unit?")
     return array
 
 

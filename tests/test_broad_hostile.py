@@ -128,6 +128,19 @@ def test_a_huge_reading_is_refused_before_anything_overflows(tmp_path, capsys, k
                  f"sensor's range); row {row} is [1e+300, -1e+300, 1e+300]")
 
 
+@pytest.mark.parametrize("key, factor, median", [
+    ("imu_mag_uT", 1e3, "4.454e+04 µT"), ("imu_mag_uT", 1e-2, "0.4454 µT"),
+    ("imu_acc_mps2", 1 / 9.80665, "1.002 m/s²")])
+def test_a_channel_in_another_unit_is_refused_by_its_median_norm(tmp_path, capsys, key, factor,
+                                                                  median):
+    # A field in nT or gauss, an acceleration in g, under a key that names
+    # µT or m/s²: the median norm (trial 02's: 44.5 µT, 9.8 m/s²) says so.
+    def other_unit(arrays):
+        arrays[key] = arrays[key] * factor
+    folder = _folder(tmp_path, _on(TRIAL_02, other_unit))
+    _refused(tmp_path, capsys, folder, f"{key}'s median norm is {median}")
+
+
 def test_a_field_ten_times_stronger_than_earths_is_still_a_reading(tmp_path):
     # The bound refuses corrupt values, not a magnet near the sensor.
     def magnet(arrays):
