@@ -386,7 +386,10 @@ def _check_increasing(path: Path, key: str, column, times: np.ndarray) -> None:
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         row = int(back[0]) + 1
-        restart = times[row] < times[row - 1] - GAP_FACTOR * np.median(np.abs(np.diff(times)))
+        # A clock that restarted stays behind; one reading stamped out of turn does not.
+        behind = times[row:row + 2] < times[row - 1] - GAP_FACTOR * np.median(
+            np.abs(np.diff(times)))
+        restart = bool(behind.all())
         refuse(path, key, column, f"goes back or repeats at reading {row} ({times[row]:.9g} s "
                f"after {times[row - 1]:.9g} s); times must increase" + (
                    " (the logger's clock restarted there: split the file)" if restart else ""))
@@ -396,8 +399,8 @@ def _check_clock(path: Path, column, times: np.ndarray) -> None:
     """The gyro's times: increasing, two at least."""
     _check_increasing(path, "recording.gyro.time", column, times)
     if len(times) < 2:
-        refuse(path, "recording.gyro.columns", None, "hold one reading; a recording needs "
-                "at least two")
+        refuse(path, "recording.gyro.time", column, "holds one reading; a recording needs "
+               "at least two")
 
 
 def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:

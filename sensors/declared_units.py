@@ -276,8 +276,8 @@ def check_norm(path: Path, name: str, values: np.ndarray, unit: str,
     noted where its median is in place."""
     norms = np.linalg.norm(values[readings_taken(values)], axis=1)
     if not len(norms):
-        refuse(path, f"recording.{name}.columns", None, "hold only zeros, or no reading in "
-                "the gyro's span: no reading at all")
+        refuse(path, f"recording.{name}.columns", section_columns, "hold only zeros, or no "
+               "reading in the gyro's span: no reading at all")
     median = float(np.median(norms))
     low, high = PLAUSIBLE_NORMS[name]
     limit, shown = VECTOR_LIMITS["imu_acc_mps2" if name == "accelerometer" else "imu_mag_uT"]

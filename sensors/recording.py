@@ -230,7 +230,7 @@ def checked_recording(data: dict, name: str, refuse) -> Recording:
         row = int(np.flatnonzero(present)[off[0]])
         refuse(f"opt_quat must hold unit quaternions [w, x, y, z]; row {row} has norm "
                f"{norms[off[0]]:.6g}")
-    _check_reference_turning(gyro, reference, float(rate), refuse)
+    _check_reference_turning(gyro, reference, float(rate), refuse, name)
     info = str(data["info"]) if "info" in data and data["info"].shape == () else ""
     vectors = {key: _checked_channel(key, data[key], n, refuse)
                for key in VECTOR_KEYS if key in data}
@@ -241,7 +241,7 @@ def checked_recording(data: dict, name: str, refuse) -> Recording:
 
 
 def _check_reference_turning(gyro: np.ndarray, reference: np.ndarray, rate: float,
-                             refuse) -> None:
+                             refuse, name: str) -> None:
     """Refuse a reference that turns unlike the gyro (:func:`sensors.turning.
     reference_fit`) where it would fit scalar last or inverted; warn where
     neither fits."""
@@ -253,7 +253,7 @@ def _check_reference_turning(gyro: np.ndarray, reference: np.ndarray, rate: floa
     fitting = first_fitting(gyro, candidates.items(), 1.0 / rate)
     if fitting:
         refuse(f"opt_quat {reference_problem(fit)}; {fitting} it would fit")
-    warnings.warn(f"opt_quat {reference_problem(fit)}: "
+    warnings.warn(f"{name}: opt_quat {reference_problem(fit)}: "
                   f"{reference_advice(fit, gyro, reference, 1.0 / rate)}", stacklevel=3)
 
 
@@ -273,7 +273,10 @@ def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:
                f"row {huge[0]} is {array[huge[0]].tolist()}")
     norms = np.linalg.norm(array[readings_taken(array)], axis=1)
     (low, high), sensor = PLAUSIBLE_NORMS[VECTOR_SENSORS[key]], VECTOR_SENSORS[key]
-    if len(norms) and not low <= np.median(norms) <= high:
+    if not len(norms):
+        refuse(f"{key} holds only zeros: no {sensor} reading at all (an IMU without one: "
+               "leave the key out)")
+    if not low <= np.median(norms) <= high:
         refuse(f"{key}'s median norm is {np.median(norms):.4g} {unit}, where an IMU's {sensor} "
                f"reads {low:g} to {high:g} {unit}: are its readings in another unit?")
     return array

@@ -71,10 +71,11 @@ def _on(trial, change):
 
 
 def _run(tmp_path, capsys, folder, *argv, estimators="madgwick,mekf"):
-    """``broad`` on ``folder``: its exit status, stdout, stderr and output folder."""
+    """``broad`` on ``folder`` (``estimators`` None: its default list): its
+    exit status, stdout, stderr and output folder."""
     out = tmp_path / "out"
-    status = main(["broad", "--broad", str(folder), "--estimators", estimators,
-                   "--out", str(out), "--quiet", *argv])
+    named = ["--estimators", estimators] if estimators is not None else []
+    status = main(["broad", "--broad", str(folder), *named, "--out", str(out), "--quiet", *argv])
     captured = capsys.readouterr()
     return status, captured.out, captured.err, out
 
@@ -139,6 +140,16 @@ def test_a_channel_in_another_unit_is_refused_by_its_median_norm(tmp_path, capsy
         arrays[key] = arrays[key] * factor
     folder = _folder(tmp_path, _on(TRIAL_02, other_unit))
     _refused(tmp_path, capsys, folder, f"{key}'s median norm is {median}")
+
+
+@pytest.mark.parametrize("key", ["imu_acc_mps2", "imu_mag_uT"])
+def test_a_channel_of_zeros_is_refused_as_no_reading(tmp_path, capsys, key):
+    # Every row zero is no reading at all (it had loaded, and failed later
+    # on the start attitude's rule, or run the filters on nothing).
+    def zeros(arrays):
+        arrays[key] = np.zeros_like(arrays[key])
+    folder = _folder(tmp_path, _on(TRIAL_02, zeros))
+    _refused(tmp_path, capsys, folder, f"{key} holds only zeros: no ")
 
 
 def test_a_field_ten_times_stronger_than_earths_is_still_a_reading(tmp_path):
@@ -278,7 +289,7 @@ def test_a_damaged_case_study_file_is_one_line(tmp_path, capsys, content, messag
     (folder / "case_study").mkdir()
     (folder / "case_study" / "results_mahony_average_rmse.json").write_text(content)
     _refused(tmp_path, capsys, folder, f"results_mahony_average_rmse.json': {message}",
-             "--case-study")
+             "--case-study", estimators=None)
 
 
 # --- the sigmas -------------------------------------------------------------------------

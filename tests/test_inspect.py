@@ -1,5 +1,6 @@
 """``attitude-bench inspect``: what a logged file holds, and the [recording]
 declaration it suggests, which then runs as written (issue 30)."""
+import os
 from pathlib import Path
 
 import numpy as np
@@ -119,10 +120,10 @@ def test_inspect_says_what_it_cannot_tell(tmp_path, capsys):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.floats(25.0, 65.0), st.sampled_from(sorted(UNITS["magnetometer"])),
+@given(st.floats(22.0, 67.0), st.sampled_from(sorted(UNITS["magnetometer"])),
        st.integers(0, 2**32 - 1))
 def test_the_unit_that_puts_an_earth_field_in_place_is_found(norm_uT, unit, seed):
-    # Any field of the Earth's size (25 to 65 µT), in any direction, written
+    # Any field of the Earth's size (22 to 67 µT), in any direction, written
     # in any of the units: the unit is recovered (they differ by 10 or more).
     directions = np.random.default_rng(seed).standard_normal((50, 3))
     field = norm_uT * directions / np.linalg.norm(directions, axis=1)[:, None]
@@ -292,3 +293,39 @@ def test_inspect_times_the_magnetometer_against_the_gyro(tmp_path, capsys):
             assert "--magnetometer-delay auto" in line
         else:
             assert "on time as far as its turning tells" in line, line
+
+
+def test_inspect_counts_rows_of_zeros_as_no_reading(phone_csv, tmp_path, capsys):
+    # The magnetometer logs zeros for its second half (a logger that writes
+    # a row even where the sensor gave nothing): as the loader, inspect
+    # counts only its readings (it had counted the zeros too).
+    path, _ = phone_csv
+    frame = pd.read_csv(path)
+    mag, second = ["mag_x", "mag_y", "mag_z"], frame.index >= len(frame) // 2
+    frame.loc[second, mag] = frame.loc[second, mag] * 0.0     # its readings zero, NaN kept
+    frame.to_csv(tmp_path / "zeros.csv", index=False, float_format="%.17g")
+    assert main(["inspect", str(tmp_path / "zeros.csv"), "--out", str(tmp_path / "o")]) == 0
+    counts = {line.split()[0]: int(line.split()[1].replace(",", ""))
+              for line in capsys.readouterr().out.splitlines() if "readings," in line}
+    assert counts["magnetometer"] == np.count_nonzero(frame.loc[~second, "mag_x"].notna())
+    assert counts["gyro"] == len(frame)
+
+
+def test_inspect_refuses_a_read_only_folder_beside_the_file_before_any_work(phone_csv, tmp_path,
+                                                                           capsys, monkeypatch):
+    # Without --out the declaration goes beside the file: a folder that
+    # cannot take it is refused first, naming --out (the report had been
+    # printed, then a temporary file's name given as the error). The folder
+    # is read-only as the system says (os.access), whoever runs the test.
+    path, _ = phone_csv
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    (folder / "phone.csv").write_bytes(path.read_bytes())
+    access = os.access
+    monkeypatch.setattr(os, "access", lambda where, mode: Path(where) != folder
+                        and access(where, mode))
+    assert main(["inspect", str(folder / "phone.csv")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.strip().splitlines()) == 1
+    assert "is not writable" in captured.err and "give --out DIR" in captured.err
+    assert not (folder / "phone.toml").exists()

@@ -173,6 +173,9 @@ def test_a_shipped_replay_carries_the_attribution(tmp_path):
     ({"sampling_rate_hz": np.array(-285.0)}, "must be one positive number"),
     ({"imu_gyr_radps": np.full((8000, 3), np.nan)}, "imu_gyr_radps must be finite; row 0"),
     ({"opt_quat": np.full((8000, 4), np.nan)}, "has no reference attitude"),
+    ({"movement": np.zeros(8000, dtype=bool)}, "nothing to score: it never moves"),
+    ({"opt_quat": np.where(np.arange(8000)[:, None] < 400, [[1.0, 0, 0, 0]], np.nan)},
+     "nothing to score: it has no reference during its movement"),
 ])
 def test_bad_recordings_are_refused_in_one_line(tmp_path, capsys, changes, message):
     path = _user_recording(tmp_path, **changes)

@@ -314,3 +314,17 @@ def test_samples_before_the_accelerometers_first_reading_are_left_out(tmp_path, 
     assert (scores["samples"] == recording.n_samples - late).all()
     assert scores.loc["mekf", "inclination_rmse_deg"] < 3.0
     assert scores.loc["dead-reckoning", "inclination_rmse_deg"] < 10.0
+
+
+def test_an_npz_beside_declared_logs_is_named_where_it_is_left_out(tmp_path, capsys):
+    # Without a trials.json a folder's [recording] .toml files are its trials:
+    # an .npz beside them that none declares is left out, and said (it had
+    # been left out without a word, the group of one trial scored).
+    recording = simulated_recording(4, MOTION)
+    _declared_log(tmp_path / "logs", recording, magnetometer=True)
+    (tmp_path / "logs" / "other.npz").write_bytes(b"")
+    assert main(["broad", "--broad", str(tmp_path / "logs"), "--estimators", "mekf",
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "left out other.npz: without a trials.json" in err
+    assert 'declare one with file = "other.npz"' in err

@@ -30,7 +30,7 @@ import numpy as np
 from benchmarks.broad.inputs import runnable_rule
 from benchmarks.broad.trial_notes import (from_start, magnetometer_timed, note_clipping,
                                           note_dropouts)
-from benchmarks.broad.metric import scored_samples, unscored_reason
+from benchmarks.broad.metric import recording_unscored
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
 from sensors.clocks import GAP_FACTOR
@@ -167,9 +167,7 @@ class BroadDataset:
 
     def unscored(self, name: str) -> str | None:
         """Why trial ``name`` has nothing to score, loaded (None: it has)."""
-        recording = self.load(name)
-        return unscored_reason(int(np.count_nonzero(recording.movement)), int(np.count_nonzero(
-            scored_samples(recording.reference_quat, recording.movement))))
+        return recording_unscored(self.load(name))
 
     def members(self, group: str) -> list[str]:
         """The trials present that belong to ``group``."""
@@ -319,6 +317,7 @@ def open_broad(folder, parameter: str = "broad") -> BroadDataset:
     if not index.is_file():
         declared = sorted(folder.glob("*.toml"))
         if declared:
+            _note_undeclared(folder, declared)
             return declared_dataset(declared, folder, parameter)
         refuse("has no trials.json (the dataset's index of trials and groups) and no "
                "[recording] .toml files")
@@ -331,6 +330,18 @@ def open_broad(folder, parameter: str = "broad") -> BroadDataset:
                                 parameter=parameter)
     refuse("holds none of the trials its trials.json names (looked in data_mat/*.mat, "
            "data_hdf5/*.hdf5 and *.npz)")
+
+
+def _note_undeclared(folder: Path, declared) -> None:
+    """A note naming the .npz recordings beside ``declared`` [recording]
+    files that none of them reads: without a trials.json, only the
+    declarations are run."""
+    named = {Path(str(read_declaration(path).get("file", ""))).name for path in declared}
+    left = [path.name for path in sorted(folder.glob("*.npz")) if path.name not in named]
+    if left:
+        warnings.warn(f"{folder}: left out {', '.join(left)}: without a trials.json a folder's "
+                      "[recording] .toml files are its trials (declare one with "
+                      f"file = \"{left[0]}\", or move it)", stacklevel=3)
 
 
 #: The one group of a dataset of declared recordings.

@@ -83,6 +83,13 @@ def unscored_reason(movement_samples: int, scored: int) -> str | None:
     return None
 
 
+def recording_unscored(recording) -> str | None:
+    """Why ``recording`` (:class:`sensors.recording.Recording`) has nothing
+    to score (:func:`unscored_reason`; None: it has)."""
+    return unscored_reason(int(np.count_nonzero(recording.movement)), int(np.count_nonzero(
+        scored_samples(recording.reference_quat, recording.movement))))
+
+
 def rmse_deg(estimate: np.ndarray, reference: np.ndarray, movement: np.ndarray) -> dict:
     """:data:`METRICS` of ``estimate`` against ``reference`` over the
     ``movement`` samples (those without a reference left out)."""

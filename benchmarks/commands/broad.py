@@ -243,7 +243,9 @@ def _case_study(args, dataset, trials):
                         ("--accelerometer-sigma", args.accelerometer_sigma),
                         ("--magnetometer-sigma", args.magnetometer_sigma),
                         ("--tune", args.tune != "none"),
-                        ("--train", args.train is not None)):
+                        ("--train", args.train is not None),
+                        ("--agreement", args.agreement),
+                        ("--estimators", not getattr(args, "estimators_by_default", False))):
         if given:
             raise UsageError(f"{flag} does not apply to --case-study: it runs the "
                              "authors' filters on the data as they ran them")

@@ -29,6 +29,18 @@ def arguments(commands, defaults) -> None:
     add_divergence_option(inspect)
 
 
+def _check_beside(target: Path) -> None:
+    """Refuse, before any work, a file's folder that cannot take the
+    declaration suggested beside it (``target``)."""
+    from benchmarks.output import check_output_folder
+    from dynamics.validation import InvalidParameterError
+    try:
+        check_output_folder(target.parent, (target.name,))
+    except InvalidParameterError as err:
+        raise UsageError(f"{err}: inspect writes its suggested declaration beside the file; "
+                         "give --out DIR") from None
+
+
 def run(args, _scenario):
     from sensors.declared import (SENSORS, data_file, declared_recordings, read_declaration,
                                   sensor_tables)
@@ -45,6 +57,8 @@ def run(args, _scenario):
         table, notes = (read_table(data) if data else {}), []
     else:
         target = (args.out or args.file.parent) / f"{args.file.stem}.toml"
+        if args.out is None:          # a given --out was checked before any work (cli)
+            _check_beside(target)
         if target.exists():
             raise UsageError(f"out = {str(target.parent)!r}: already holds {target.name}; "
                              "inspect does not overwrite it: remove it or give --out DIR")

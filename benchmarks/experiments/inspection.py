@@ -20,6 +20,7 @@ import numpy as np
 from benchmarks.experiments.columns import (column_values, columns_by_values, headerless,
                                             sensor_columns, time_columns, time_for)
 from dynamics.validation import InvalidParameterError
+from estimators.imu.heading import EARTH_FIELD_NORM_UT
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
 from sensors.clocks import GAP_FACTOR, clock_period, unwrapped
 from sensors.declared import SENSORS, declared_recordings
@@ -277,7 +278,10 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
         section, table = declaration[sensor], tables[sensor]
         values = column_values(table, section["columns"])
         times = unwrapped(np.asarray(table[section["time"]]).reshape(-1)).astype(float)
-        times = times[~np.isnan(values).all(axis=1)] * seconds
+        taken = ~np.isnan(values).all(axis=1)
+        if sensor != "gyro":          # a gyro's zeros are a rate; a vector's, or a quaternion's, none
+            taken &= readings_taken(values)
+        times = times[taken] * seconds
         clock_of = clock(times)
         if "interval" not in clock_of:
             lines.append(f"{sensor:<14} {clock_of['readings']:>9,} reading(s): no rate to tell")
@@ -375,5 +379,5 @@ def _motion(recording) -> list[str]:
         norms = np.linalg.norm(field[both], axis=1)
         dip = np.degrees(-np.arcsin(np.clip(np.sum(field[both] * up, axis=1) / norms, -1, 1)))
         lines.append(f"field: {np.median(norms):.1f} µT, dip {np.median(dip):.1f}° (medians "
-                     "where both read; the Earth's: 25 to 65 µT)")
+                     "where both read; the Earth's: {:g} to {:g} µT)".format(*EARTH_FIELD_NORM_UT))
     return lines

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.broad.metric import recording_unscored
 from benchmarks.metrics import ARCSEC_PER_DEG, attitude_error_deg
 from benchmarks.output import write_csv, write_figure, write_text
 from benchmarks.output import progress
@@ -317,6 +318,9 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     ``gyro_delay_s`` is how late the gyro's samples are against the
     reference (:func:`delayed_gyro`)."""
     recording, attribution = open_dataset(dataset)
+    unscored = recording_unscored(recording)
+    if unscored is not None:
+        raise InvalidParameterError("dataset", dataset, f"nothing to score: it {unscored}")
     delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
     rest_bias = recording.rest_gyro_mean_radps()
