@@ -386,10 +386,11 @@ def _check_increasing(path: Path, key: str, column, times: np.ndarray) -> None:
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         row = int(back[0]) + 1
-        # A clock that restarted stays behind; one reading stamped out of turn does not.
-        behind = times[row:row + 2] < times[row - 1] - GAP_FACTOR * np.median(
-            np.abs(np.diff(times)))
-        restart = bool(behind.all())
+        # A clock that restarted stays behind the readings before it; one
+        # reading stamped out of turn (early, late or last) does not tell so.
+        step = GAP_FACTOR * np.median(np.abs(np.diff(times)))
+        later, before = times[row:row + 2], times[max(row - 2, 0):row]
+        restart = len(later) == 2 and bool((later < before.min() - step).all())
         refuse(path, key, column, f"goes back or repeats at reading {row} ({times[row]:.9g} s "
                f"after {times[row - 1]:.9g} s); times must increase" + (
                    " (the logger's clock restarted there: split the file)" if restart else ""))

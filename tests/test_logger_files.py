@@ -546,15 +546,17 @@ def test_a_loggers_everyday_slips_are_mended_and_said(trial, tmp_path):
     with pytest.raises(InvalidParameterError, match=r"goes back or repeats at reading 1000 .*"
                        r"the logger's clock restarted there"):
         load_declared(path)
-    # One reading stamped ten steps early, the clock going on: refused, but
-    # not called a restart (the file is not to be split there).
-    early = lines[1010].split(",")[0]
-    stray = lines[:1020] + [",".join([early] + lines[1020].split(",")[1:])] + lines[1021:]
-    (tmp_path / "log.csv").write_text("\n".join(stray) + "\n")
-    with pytest.raises(InvalidParameterError, match=r"goes back or repeats at reading 1019 ") \
-            as refused:
-        load_declared(path)
-    assert "restarted" not in str(refused.value)
+    # One reading stamped ten steps early, or ten late, the clock going on:
+    # refused, but not called a restart (the file is not to be split there;
+    # after a late one, the readings are behind it, not behind the one before).
+    for stamp_from, row in ((1010, 1019), (1030, 1020)):
+        stamp = lines[stamp_from].split(",")[0]
+        stray = lines[:1020] + [",".join([stamp] + lines[1020].split(",")[1:])] + lines[1021:]
+        (tmp_path / "log.csv").write_text("\n".join(stray) + "\n")
+        with pytest.raises(InvalidParameterError,
+                           match=rf"goes back or repeats at reading {row} ") as refused:
+            load_declared(path)
+        assert "restarted" not in str(refused.value)
 
 
 def test_iso_times_are_read_as_nanoseconds(tmp_path):

@@ -268,3 +268,18 @@ def test_a_rest_before_the_reference_begins_is_the_rest(tmp_path):
     noise = float(np.mean(recording.gyro_radps[:4 * 200].var(axis=0))) * recording.dt
     assert data.scenario.gyro_noise == pytest.approx(noise, rel=0.2)
     assert math.isfinite(data.scenario.gyro_noise)
+
+
+@pytest.mark.slow          # 40 s: a tuning of the EKF by its likelihood
+def test_a_training_recording_with_nothing_to_score_still_tunes_by_likelihood(tmp_path):
+    # Tuning by the innovations' likelihood reads no reference: a training
+    # recording that never moves is one to tune on (the scored recording is
+    # refused where it has nothing to score, not the training one).
+    (tmp_path / "train").mkdir()
+    (tmp_path / "test").mkdir()
+    train = _user_recording(tmp_path / "train", movement=np.zeros(8000, dtype=bool))
+    test = _user_recording(tmp_path / "test")
+    argv = ["replay", "--dataset", str(test), "--estimators", "ekf", "--tuned", "likelihood",
+            "--train-dataset", str(train), "--out", str(tmp_path / "o"), "--quiet"]
+    assert main(argv) == 0
+    assert (tmp_path / "o" / "summary.csv").exists()

@@ -336,8 +336,9 @@ def _note_undeclared(folder: Path, declared) -> None:
     """A note naming the .npz recordings beside ``declared`` [recording]
     files that none of them reads: without a trials.json, only the
     declarations are run."""
-    named = {Path(str(read_declaration(path).get("file", ""))).name for path in declared}
-    left = [path.name for path in sorted(folder.glob("*.npz")) if path.name not in named]
+    read = {file.resolve() for path in declared
+            for file in data_files(path, read_declaration(path))}
+    left = [path.name for path in sorted(folder.glob("*.npz")) if path.resolve() not in read]
     if left:
         warnings.warn(f"{folder}: left out {', '.join(left)}: without a trials.json a folder's "
                       "[recording] .toml files are its trials (declare one with "

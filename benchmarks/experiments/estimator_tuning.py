@@ -308,8 +308,10 @@ def cases_of(scenario: Scenario | None, seeds=None, datasets=None, what: str = "
                 twin = datasets[sources.index(source)]
                 raise InvalidParameterError(f"{what} datasets", datasets[i], f"holds the same "
                                             f"recording as {twin}: name each recording once")
+        # Scored or not by the objective (objectives.Objective: nis and likelihood read no
+        # reference), not refused here for having nothing to score.
         return [recording_case(load_replay(name, settings=settings, allow_imports=allow_imports,
-                                           **(replay or {})), name, source)
+                                           scored=False, **(replay or {})), name, source)
                 for name, source in zip(datasets, sources)]
     return seed_cases(scenario, seeds)
 

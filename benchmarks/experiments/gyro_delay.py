@@ -32,7 +32,7 @@ def likeliest_gyro_delay(dataset: str, estimator: str = "mekf",
 
     def loss(samples: float) -> float:
         data = load_replay(dataset, interval_s, noise_deg, seed, settings, allow_imports,
-                           gyro_delay_s=samples * dt)
+                           gyro_delay_s=samples * dt, scored=False)   # no reference read
         return Objective(estimator, "likelihood", [recording_case(data, dataset)])({})
 
     with progress(desc="gyro delay", unit="eval", quiet=quiet) as bar:

@@ -279,7 +279,9 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
         values = column_values(table, section["columns"])
         times = unwrapped(np.asarray(table[section["time"]]).reshape(-1)).astype(float)
         taken = ~np.isnan(values).all(axis=1)
-        if sensor != "gyro":          # a gyro's zeros are a rate; a vector's, or a quaternion's, none
+        # Zeros are no reading of a vector or a quaternion (declared.py reads
+        # them so); a gyro's are a rate, Euler angles' an attitude.
+        if sensor in ("accelerometer", "magnetometer") or values.shape[1] == 4:
             taken &= readings_taken(values)
         times = times[taken] * seconds
         clock_of = clock(times)

@@ -310,16 +310,19 @@ class ReplayData:
 
 def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
                 noise_deg: float = DEFAULT_NOISE_DEG, seed: int = 0,
-                settings=None, allow_imports=(), gyro_delay_s: float = 0.0) -> ReplayData:
+                settings=None, allow_imports=(), gyro_delay_s: float = 0.0,
+                scored: bool = True) -> ReplayData:
     """``dataset`` (see :func:`open_dataset`) made ready for any estimator;
     ``settings``, a TOML file of ``[estimators.NAME]`` sections, overrides
     what :func:`replay_scenario` derives (importing only the users' modules
     named in ``allow_imports``, see :meth:`Scenario.from_toml`);
     ``gyro_delay_s`` is how late the gyro's samples are against the
-    reference (:func:`delayed_gyro`)."""
+    reference (:func:`delayed_gyro`). ``scored``: the recording is to be
+    scored against its reference, and is refused where it has nothing to
+    score (a recording read only by the filters' innovations need not)."""
     recording, attribution = open_dataset(dataset)
     unscored = recording_unscored(recording)
-    if unscored is not None:
+    if scored and unscored is not None:
         raise InvalidParameterError("dataset", dataset, f"nothing to score: it {unscored}")
     delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
