@@ -696,6 +696,7 @@ def test_gravity_turned_down_by_the_reference_is_refused_in_one_line(trial, tmp_
     assert "axes = [\"-x\", \"-y\", \"-z\"]" in message
 
 
+@pytest.mark.slow        # 4 s: three files written and a trial scored
 def test_one_file_per_sensor_is_one_recording(trial, tmp_path, capsys):
     """A logger that writes one file per sensor (phone apps' Gyroscope.csv,
     Accelerometer.csv, …, integer nanosecond times): each section names its

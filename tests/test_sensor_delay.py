@@ -71,6 +71,7 @@ def test_a_gyro_that_reads_the_interval_after_each_sample_is_a_sample_early(bris
     assert abs(_fit(after, late_field(after, 0.0)).delay_s - brisk.dt) < 1e-3
 
 
+@pytest.mark.slow        # 5-6 s: three simulated recordings' delay fits
 def test_the_simulated_magnetometer_is_on_time_against_its_gyro():
     # The simulated IMU's gyro reads the interval before each sample, as the
     # filters take it (sensors.handheld): its own field is on time. It had
@@ -213,6 +214,7 @@ def test_the_delay_is_said_once_the_inputs_are_checked(tmp_path, capsys, monkeyp
     assert len(err.strip().splitlines()) == 1 and refusal in err, err
 
 
+@pytest.mark.slow        # 6-7 s: a local Dask cluster's start
 def test_a_workers_notes_are_said_as_the_commands_own(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(trial_notes, "_NOTED", set())
     # Run on a Dask worker, a trial's notes come back with its results and
