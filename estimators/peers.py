@@ -43,6 +43,7 @@ from estimators.base import AttitudeEstimator, InvalidMeasurementError
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
 from estimators.settings import DEFAULT_DT_S
 
+
 def _package(estimator: str, module: str):
     try:
         return importlib.import_module(module)

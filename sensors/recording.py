@@ -271,13 +271,14 @@ def _checked_channel(key: str, array: np.ndarray, n: int, refuse) -> np.ndarray:
     if len(huge):
         refuse(f"{key} must be within ±{limit:g} {unit} (ten times any such sensor's range); "
                f"row {huge[0]} is {array[huge[0]].tolist()}")
+    sensor = VECTOR_SENSORS[key]
     norms = np.linalg.norm(array[readings_taken(array)], axis=1)
-    (low, high), sensor = PLAUSIBLE_NORMS[VECTOR_SENSORS[key]], VECTOR_SENSORS[key]
     if not len(norms):
         refuse(f"{key} holds only zeros: no {sensor} reading at all (an IMU without one: "
                "leave the key out)")
-    if not low <= np.median(norms) <= high:
-        refuse(f"{key}'s median norm is {np.median(norms):.4g} {unit}, where an IMU's {sensor} "
+    median, (low, high) = float(np.median(norms)), PLAUSIBLE_NORMS[sensor]
+    if not low <= median <= high:
+        refuse(f"{key}'s median norm is {median:.4g} {unit}, where an IMU's {sensor} "
                f"reads {low:g} to {high:g} {unit}: are its readings in another unit?")
     return array
 

@@ -30,6 +30,7 @@ from sensors.recording import reading_interval_s
 from sensors.turning import reference_fit, reference_fits
 from sensors.vector import readings_taken
 
+
 def time_unit(intervals: np.ndarray) -> str:
     """The unit that makes an IMU's sample interval most like one: the
     unit whose reading of the median interval is nearest (on a log scale)
@@ -380,6 +381,7 @@ def _motion(recording) -> list[str]:
         up = force[both] / np.linalg.norm(force[both], axis=1)[:, None]
         norms = np.linalg.norm(field[both], axis=1)
         dip = np.degrees(-np.arcsin(np.clip(np.sum(field[both] * up, axis=1) / norms, -1, 1)))
+        low, high = EARTH_FIELD_NORM_UT
         lines.append(f"field: {np.median(norms):.1f} µT, dip {np.median(dip):.1f}° (medians "
-                     "where both read; the Earth's: {:g} to {:g} µT)".format(*EARTH_FIELD_NORM_UT))
+                     f"where both read; the Earth's: {low:g} to {high:g} µT)")
     return lines

@@ -321,8 +321,8 @@ def load_replay(dataset: str, interval_s: float = DEFAULT_INTERVAL_S,
     scored against its reference, and is refused where it has nothing to
     score (a recording read only by the filters' innovations need not)."""
     recording, attribution = open_dataset(dataset)
-    unscored = recording_unscored(recording)
-    if scored and unscored is not None:
+    unscored = recording_unscored(recording) if scored else None
+    if unscored is not None:
         raise InvalidParameterError("dataset", dataset, f"nothing to score: it {unscored}")
     delay = checked_gyro_delay(recording, gyro_delay_s)
     interval_steps(recording, interval_s)       # named against the whole recording
