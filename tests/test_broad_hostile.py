@@ -216,6 +216,47 @@ def test_a_dropout_at_the_start_changes_the_scores_by_next_to_nothing(tmp_path, 
             pytest.approx(row["total_rmse_deg"], abs=0.01)
 
 
+def test_a_sensor_that_stops_is_said_with_when_and_what_the_filters_do(tmp_path, capsys):
+    # The magnetometer stops 4,000 samples in (its last 2,000, 7 s at 285.7
+    # Hz, are zeros); the accelerometer is lost for 1.5 s in the middle.
+    # Both are said, with when, how long and the filters' gyro-only stretch;
+    # the trial is still scored.
+    def stop(arrays):
+        arrays["imu_mag_uT"][4000:] = 0.0
+        arrays["imu_acc_mps2"][2000:2429] = 0.0
+    status, _, err, out = _run(tmp_path, capsys, _folder(tmp_path, _on(TRIAL_02, stop),
+                                                         names=(TRIAL_02,)))
+    assert status == 0, err
+    dt = 1.0 / 285.7
+    assert (f"trial 02_undisturbed_slow_rotation_B: its magnetometer reads nothing from "
+            f"{4000 * dt:.1f} s to the end ({2000 * dt:.3g} s) (33% of the trial): the "
+            "filters hold the heading with the gyro alone there") in err
+    assert (f"its accelerometer reads nothing from {2000 * dt:.1f} s to {2429 * dt:.1f} s "
+            f"({429 * dt:.3g} s) (7% of the trial): the filters hold the inclination with "
+            "the gyro alone there") in err
+    assert len(pd.read_csv(out / "broad_trials.csv")) == 2
+
+
+def test_silences_are_the_stretches_long_against_the_sensors_own_interval():
+    from benchmarks.broad.trial_notes import silences
+    dt = 0.01
+    read = np.zeros(1000, dtype=bool)
+    read[::20] = True            # every 0.2 s: a stretch of 19 samples is its own pace
+    assert silences(read, dt) == []
+    read[300:700] = False        # 4 s without a reading (>= 10 intervals of 0.2 s, >= 1 s)
+    assert silences(read, dt) == [(281, 700)]
+    read[900:] = False           # and from 8.81 s to the end: 1.19 s, under 10 intervals
+    assert silences(read, dt) == [(281, 700)]
+    every = np.ones(1000, dtype=bool)
+    every[500:599] = False       # 0.99 s: under a second
+    assert silences(every, dt) == []
+    every[500:600] = False       # 1 s
+    assert silences(every, dt) == [(500, 600)]
+    every[0:150] = False         # the longest first
+    assert silences(every, dt) == [(0, 150), (500, 600)]
+    assert silences(np.zeros(50, dtype=bool), dt) == [(0, 50)]
+
+
 def test_a_trial_with_no_usable_pair_is_refused_with_the_rule(tmp_path, capsys):
     # Every other reading of both a dropout, the others' field parallel to
     # gravity: the latest readings of the two are parallel at every sample.

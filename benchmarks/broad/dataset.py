@@ -29,7 +29,7 @@ import numpy as np
 
 from benchmarks.broad.inputs import runnable_rule
 from benchmarks.broad.trial_notes import (from_start, magnetometer_timed, note_clipping,
-                                          note_dropouts)
+                                          note_dropouts, note_silences)
 from benchmarks.broad.metric import recording_unscored
 from benchmarks.shipped import shipped_file
 from dynamics.validation import InvalidParameterError
@@ -228,8 +228,9 @@ class BroadDataset:
         if path.suffix != ".toml":       # there, a sensor on its own clock reads at some samples
             note_dropouts(recording, path)
         note_clipping(recording, path)
-        return magnetometer_timed(from_start(recording, path, refuse), self.magnetometer_delay,
-                                  path)
+        recording = from_start(recording, path, refuse)
+        note_silences(recording, path)
+        return magnetometer_timed(recording, self.magnetometer_delay, path)
 
 
 def refuse_field_flag(flag: str, value, present) -> None:

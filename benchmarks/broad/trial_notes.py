@@ -1,6 +1,7 @@
 """What ``broad`` says of a trial as it loads it (:meth:`benchmarks.broad.
 dataset.BroadDataset.load`), once per trial: readings that are exactly
-zero, a channel at its rail, and the samples before the first an attitude
+zero, a channel at its rail, a sensor that reads nothing for a while
+(:func:`note_silences`), and the samples before the first an attitude
 can be taken at, which it leaves out (:func:`from_start`); and, once the
 run's inputs are checked, how late its magnetometer reads against its gyro
 (:func:`magnetometer_timed` takes the readings at their times as the trial
@@ -17,7 +18,7 @@ from benchmarks.broad.inputs import heading_reference, runnable_rule, start_samp
     usable_readings
 from sensors.delay import AUTO_ADVICE, at_sample_times, described, hard_iron_at, \
     recording_fit
-from sensors.recording import Recording
+from sensors.recording import Recording, reading_interval_s
 
 _NOTED = set()
 
@@ -60,6 +61,50 @@ def note_dropouts(recording: Recording, path: Path) -> None:
         dropped = " and ".join(f"{count} {name} reading{'s' * (count > 1)}"
                                for name, count in counts.items() if count)
         note_once(path, f"trial {recording.name}: {dropped} exactly zero (dropouts), left out")
+
+
+#: A vector sensor's stretch without a reading is said where it lasts at
+#: least this long, s, and this many of the sensor's own reading intervals
+#: (a sensor that stops, or a logger that lost it for a while: the filters
+#: then run on the gyro alone, and a table would not show it).
+SILENCE_MIN_S, SILENCE_MIN_INTERVALS = 1.0, 10
+#: What a filter does while the sensor is silent.
+SILENCE_HARM = {"accelerometer": "hold the inclination with the gyro alone",
+                "magnetometer": "hold the heading with the gyro alone"}
+#: At most this many of a sensor's silent stretches are named.
+SILENCES_NAMED = 3
+
+
+def silences(read: np.ndarray, dt: float) -> list[tuple[int, int]]:
+    """``[(first, stop), ...]``: the stretches of samples without a reading
+    (``read``: ``(N,)`` bool) long enough to say (:data:`SILENCE_MIN_S`,
+    :data:`SILENCE_MIN_INTERVALS`), the longest first; one running to the
+    end has ``stop = N``. Every stretch of a sensor that never reads."""
+    taken = np.flatnonzero(read)
+    if not len(taken):
+        return [(0, len(read))] if len(read) else []
+    starts = np.concatenate(([0], taken + 1))
+    stops = np.concatenate((taken, [len(read)]))
+    shortest = max(SILENCE_MIN_S / dt, SILENCE_MIN_INTERVALS * reading_interval_s(read, dt) / dt)
+    long = [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= shortest]
+    return sorted(long, key=lambda stretch: stretch[0] - stretch[1])
+
+
+def note_silences(recording: Recording, path: Path) -> None:
+    """A note for an accelerometer or magnetometer that reads nothing for a
+    while (:func:`silences`): when, for how long, and what the filters do then."""
+    dt, n = recording.dt, len(recording.gyro_radps)
+    for name, read in usable_readings(recording).items():
+        found = silences(read, dt)
+        if not found:
+            continue
+        spans = [f"from {a * dt:.1f} s " + ("to the end" if b == n else f"to {b * dt:.1f} s")
+                 + f" ({(b - a) * dt:.3g} s)" for a, b in found[:SILENCES_NAMED]]
+        more = len(found) - SILENCES_NAMED
+        silent = sum(b - a for a, b in found) / n
+        note_once(path, f"trial {recording.name}: its {name} reads nothing "
+                  f"{', '.join(spans)}{f' and {more} more stretches' if more > 0 else ''} "
+                  f"({silent:.0%} of the trial): the filters {SILENCE_HARM[name]} there")
 
 
 def from_start(recording: Recording, path: Path, refuse) -> Recording:
