@@ -395,8 +395,6 @@ def trial_02_case():
 def test_madgwick_is_tuned_on_the_authors_grid_to_its_minimum(trial_02_case):
     from benchmarks.broad.tuning import TrialsScore, tune_on
     found = tune_on("madgwick-broad", [trial_02_case])
-    assert found["evaluations"] == len(case_study.MADGWICK_BETAS) + 1
-    assert found["values"]["beta"] in case_study.MADGWICK_BETAS
     score = TrialsScore("madgwick-broad", [trial_02_case])
     # The minimum of the grid: no grid point the search saw is better, the
     # authors' chosen β (0.12, published 1.49682° on this trial) included.
@@ -415,8 +413,11 @@ def test_the_mekf_tuner_lowers_its_training_loss(trial_02_case, monkeypatch):
     found = tuning.tune_on("mekf", [trial_02_case])
     assert set(found["values"]) == {"gyro_noise", "gyro_bias_random_walk", "gravity_density",
                                     "heading_density"}
-    assert found["evaluations"] <= 14 + 1
-    assert found["loss"] <= found["loss_default"]
+    # It searched, and found settings strictly better on its training trial
+    # than the defaults (the search starts from them and keeps the best: a
+    # search that never moved would return the defaults' loss itself).
+    assert 1 < found["evaluations"] <= 14 + 1
+    assert found["loss"] < found["loss_default"] - 1e-3
 
 
 @pytest.mark.slow      # two tunings, each scored on the other trial: 4 s
@@ -484,7 +485,8 @@ def test_tuning_halves_reads_no_reference_and_is_judged_on_the_second_half(tmp_p
     # Only the Kalman filter tunes without a reference (Madgwick has no innovations).
     assert list(tuned["estimator"]) == ["mekf"]
     row = tuned.iloc[0]
-    assert row["evaluations"] <= 8 + 1 and row["training_loss"] <= row["training_loss_default"]
+    assert 1 < row["evaluations"] <= 8 + 1
+    assert row["training_loss"] < row["training_loss_default"]
     assert row["held_out_verdict"] in ("better", "not better: keep the defaults")
     assert (row["held_out_verdict"] == "better") == (row["held_out_loss"]
                                                       < row["held_out_loss_default"])

@@ -339,7 +339,7 @@ def test_a_damaged_case_study_file_is_one_line(tmp_path, capsys, content, messag
     ("--magnetometer-sigma", "1e300", "magnetometer_sigma = 1e+300: must be below 1.34e+154 "
                                       "so that its square (a variance) is finite"),
     ("--accelerometer-sigma", "inf", "accelerometer_sigma = inf: must be finite"),
-    ("--accelerometer-sigma", "nan", "accelerometer_sigma"),
+    ("--accelerometer-sigma", "nan", "accelerometer_sigma = nan: must be finite"),
 ])
 def test_a_sigma_whose_square_is_not_finite_is_one_line(tmp_path, capsys, flag, value, message):
     _refused(tmp_path, capsys, _folder(tmp_path, names=(TRIAL_02,)), message, flag, value)

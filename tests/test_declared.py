@@ -126,6 +126,8 @@ def test_the_same_data_in_any_format_is_the_same_recording(trial, tmp_path):
     for file, declared in files.items():
         assert declared.rate_hz == pytest.approx(recording.rate_hz, rel=1e-9), file
         assert np.array_equal(declared.gyro_radps, recording.gyro_radps[:keep]), file
+        assert np.array_equal(declared.accelerometer_mps2,
+                              recording.accelerometer_mps2[:keep]), file
         assert np.array_equal(declared.magnetometer_uT, recording.magnetometer_uT[:keep]), file
         reference = recording.reference_quat[:keep]
         seen = ~np.isnan(reference).any(axis=1)

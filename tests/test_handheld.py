@@ -67,6 +67,11 @@ def test_a_perfect_imu_reads_the_truth():
     truth = simulate_handheld(SHORT, np.random.default_rng(3))
     np.testing.assert_array_equal(recording.reference_quat, truth.q_true)
     np.testing.assert_allclose(recording.gyro_radps, rate_before(truth.omega_radps), atol=1e-15)
+    # ...which is the rotation between each sample and the one before it,
+    # over its interval, read off the truth's attitudes themselves.
+    attitudes = to_rotation(truth.q_true)
+    turned = (attitudes[:-1].inv() * attitudes[1:]).as_rotvec() * recording.rate_hz
+    np.testing.assert_allclose(recording.gyro_radps[1:], turned, atol=1e-9)
     to_world = to_rotation(recording.reference_quat)
     np.testing.assert_allclose(to_world.apply(recording.magnetometer_uT),
                                np.tile(PERFECT.field_world(), (len(truth.q_true), 1)), atol=1e-9)

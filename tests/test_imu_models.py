@@ -15,7 +15,8 @@ from hypothesis import given, settings, strategies as st
 from scipy.signal import lfilter, lfilter_zi
 
 from benchmarks.broad.metric import errors_deg
-from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_body_frame
+from dynamics.quaternion import (quat_from_rotvec, quat_multiply, relative_rotation,
+                                 rotvec_from_quat, to_body_frame)
 from estimators import USQUE, MekfSmoother, MultiplicativeEKF
 from estimators.imu import ImuModels, gravity, heading, lowpass, rest
 from estimators.smoother import fuse, reversed_rates
@@ -215,15 +216,20 @@ def test_a_heading_update_leaves_the_inclination_unchanged(attitude, bias, psi, 
     L = np.eye(6) * 0.1
     L[3:, :3] = np.reshape(correlation, (3, 2)).repeat(2, axis=1)[:, :3] * 0.05
     mekf.filter.P = L @ L.T + 1e-6 * np.eye(6)
-    before = _inclination(mekf.q_hat)
+    before, q_before = _inclination(mekf.q_hat), mekf.q_hat.copy()
     v = to_body_frame(mekf.q_hat, np.array([0.0, 0.0, 1.0]))
     H = np.zeros((1, 6))
     H[0, :3] = v
+    P = mekf.filter.P.copy()
     mekf._error_update(np.array([psi]), H, np.array([[1e-4]]), 1, "magnetometer",
                        heading_axis=v, bias=True)
     np.testing.assert_allclose(_inclination(mekf.q_hat), before, atol=1e-12)
-    # ...and it does turn the heading, by a share of psi of psi's sign.
-    assert abs(psi) < 1e-9 or np.linalg.norm(mekf.q_hat[1:]) > 0
+    # ...and it turns the heading about v by the Kalman share of psi,
+    # vᵀP v / (vᵀP v + R), between 0 and 1: δθ = K ψ with K = P Hᵀ / S.
+    share = v @ P[:3, :3] @ v / (v @ P[:3, :3] @ v + 1e-4)
+    assert 0.0 < share < 1.0
+    np.testing.assert_allclose(rotvec_from_quat(relative_rotation(q_before, mekf.q_hat)),
+                               share * psi * v, atol=1e-12)
 
 
 @settings(max_examples=40, deadline=None)
@@ -241,12 +247,16 @@ def test_usques_heading_update_leaves_the_inclination_unchanged(attitude, psi, c
     usque.filter.P = L @ L.T + 1e-6 * np.eye(6)
     usque._updated = True                       # sigma points from this P
     before, bias = _inclination(usque.q_hat), usque.filter.x[3:].copy()
+    v = before
     field = to_body_frame(usque.q_hat, np.array([0.0, 20.0, -40.0]))
     usque._heading_update(psi, 1e-4, validated, field, np.array([0.0, 20.0, -40.0]))
     np.testing.assert_allclose(_inclination(usque.q_hat), before, atol=1e-12)
-    # It turns the heading toward the reading, and the bias only for a validated field.
-    assert abs(psi) < 1e-6 or np.linalg.norm(usque.q_hat - quat_from_rotvec(
-        np.array(attitude))) > 1e-9
+    # It turns the heading toward the reading (about v, by a share of psi of
+    # psi's sign), and the bias only for a validated field.
+    turn = rotvec_from_quat(relative_rotation(quat_from_rotvec(np.array(attitude)),
+                                              usque.q_hat))
+    np.testing.assert_allclose(np.cross(turn, v), 0.0, atol=1e-12)
+    assert abs(psi) < 1e-6 or 0.0 < (turn @ v) / psi < 1.0
     if not validated:
         np.testing.assert_array_equal(usque.filter.x[3:], bias)
 

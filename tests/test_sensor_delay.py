@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Slerp
+from scipy.stats import chi2
 
 from benchmarks.broad import trial_notes
 from benchmarks.broad.dataset import open_broad
@@ -18,7 +19,8 @@ from benchmarks.shipped import shipped_file
 from dynamics.handheld import HandheldMotion
 from dynamics.quaternion import to_rotation
 from dynamics.validation import InvalidParameterError
-from sensors.delay import at_sample_times, delay_fit, described, hard_iron_at
+from sensors.delay import (JACKKNIFE_BLOCKS, at_sample_times, delay_fit, described,
+                           hard_iron_at)
 from sensors.handheld import HandheldImu, simulated_recording
 
 SHIPPED = shipped_file("datasets/broad/trials.json").parent
@@ -240,23 +242,28 @@ def test_gaps_in_the_readings_leave_the_fit_as_it_was(brisk):
 
 
 def test_the_stated_error_is_the_fits_scatter(brisk):
-    # Over 12 draws of the magnetometer's noise (σ 2 µT) the fit scatters
-    # as its stated error says: the RMS error over the stated mean within
-    # [0.4, 2] (χ² with 12 degrees of freedom puts the ratio of a sample's
-    # RMS to its σ within [0.53, 1.45] at 99 %; the stated error is itself an
-    # estimate, a jackknife's over 20 stretches).
+    # Over 48 draws of the magnetometer's noise (σ 2 µT) the fit scatters as
+    # its stated error says. The RMS of n errors over their σ is √(χ²_n / n):
+    # within [0.743, 1.266] at 99 % for n = 48 (scipy's χ² quantiles), the
+    # band widened by the stated error's own scatter (the mean of n
+    # jackknife errors over 20 stretches: relative σ 1/√(2·19·n), three of
+    # them). A stated error half or twice the true one falls outside it.
     errors, stated = [], []
     noisy = replace(IMU, magnetometer_sigma_uT=2.0)
     t = np.arange(brisk.n_samples) * brisk.dt
     truth = Slerp(t, to_rotation(brisk.reference_quat))
     field = truth(np.clip(t - 0.03, 0.0, t[-1])).inv().apply(noisy.field_world())
-    for seed in range(12):
+    draws = 48
+    for seed in range(draws):
         rng = np.random.default_rng(100 + seed)
         fit = _fit(brisk, field + 2.0 * rng.standard_normal(field.shape))
         errors.append(fit.delay_s - 0.03)
         stated.append(fit.standard_error_s)
+    spread = 3.0 / math.sqrt(2 * (JACKKNIFE_BLOCKS - 1) * draws)
+    low, high = np.sqrt(chi2.ppf([0.005, 0.995], draws) / draws) * [1 - spread, 1 + spread]
     ratio = np.sqrt(np.mean(np.square(errors))) / np.mean(stated)
-    assert 0.4 < ratio < 2.0, (ratio, errors, stated)
+    assert low < ratio < high, (ratio, low, high)
+    assert not low < ratio / 2 < high and not low < ratio * 2 < high
 
 
 def test_a_delay_beyond_the_search_is_never_clear(brisk):
