@@ -229,11 +229,11 @@ def test_a_sensor_that_stops_is_said_with_when_and_what_the_filters_do(tmp_path,
     assert status == 0, err
     dt = 1.0 / 285.7
     assert (f"trial 02_undisturbed_slow_rotation_B: its magnetometer reads nothing from "
-            f"{4000 * dt:.1f} s to the end ({2000 * dt:.3g} s) (33% of the trial): the "
-            "filters hold the heading with the gyro alone there") in err
+            f"{4000 * dt:.1f} s to the end ({2000 * dt:.3g} s): 33% of the trial, where the "
+            "filters hold the heading with the gyro alone") in err
     assert (f"its accelerometer reads nothing from {2000 * dt:.1f} s to {2429 * dt:.1f} s "
-            f"({429 * dt:.3g} s) (7% of the trial): the filters hold the inclination with "
-            "the gyro alone there") in err
+            f"({429 * dt:.3g} s): 7% of the trial, where the filters hold the inclination "
+            "with the gyro alone") in err
     assert len(pd.read_csv(out / "broad_trials.csv")) == 2
 
 

@@ -103,8 +103,8 @@ def note_silences(recording: Recording, path: Path) -> None:
         more = len(found) - SILENCES_NAMED
         silent = sum(b - a for a, b in found) / n
         note_once(path, f"trial {recording.name}: its {name} reads nothing "
-                  f"{', '.join(spans)}{f' and {more} more stretches' if more > 0 else ''} "
-                  f"({silent:.0%} of the trial): the filters {SILENCE_HARM[name]} there")
+                  f"{', '.join(spans)}{f' and {more} more stretches' if more > 0 else ''}: "
+                  f"{silent:.0%} of the trial, where the filters {SILENCE_HARM[name]}")
 
 
 def from_start(recording: Recording, path: Path, refuse) -> Recording:
