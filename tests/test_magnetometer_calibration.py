@@ -100,7 +100,8 @@ def test_a_field_that_changes_is_refused():
     moved = np.vstack([_readings(directions[:1500], noise_uT=0.3),
                        _readings(directions[1500:], hard=HARD_uT + [15.0, 0.0, 0.0],
                                  noise_uT=0.3)])
-    with pytest.raises(InvalidParameterError):
+    with pytest.raises(InvalidParameterError, match=r"a residual of [\d.]+% of the field': "
+                       r"must be within 5%: the field was not constant"):
         fit_ellipsoid(moved)
 
 

@@ -82,15 +82,21 @@ def test_the_mekf_stays_consistent_and_at_the_bound_off_the_grid():
     # 40 seeds on the per-run path (the engine hands off-grid readings to
     # it). The ANEES of 40 runs must lie in its 99 % band χ²(120)/40; the
     # efficiency, RMS over the bound that processes each reading at its time,
-    # at least 0.97 (40 runs' RMS has a Monte Carlo error of about 2 %).
+    # within 0.97 and 1.10 (40 runs' RMS has a Monte Carlo error of about
+    # 2 %: the bound's 1 within 1.5 of it below, within 5 above). The same
+    # MEKF applying each reading at its gyro step fails both (measured:
+    # ANEES 1,800, efficiency 18; the MEKF 3.1 and 1.03).
     scenario = Scenario.from_toml("scenarios/smallsat.toml").replace(
         tstop=100.0, time_between_measurements=0.5)
     assert "off the gyro's time grid" in engine_limitation(scenario)
+    at_step = f"{__name__}:AtTheStep"
     with pytest.warns(UserWarning, match="per-run path"):
-        result = run_consistency(scenario, ["mekf"], 40, level=0.99)
+        result = run_consistency(scenario, ["mekf", at_step], 40, level=0.99)
     row = result.summary["mekf"]
     assert row["anees_low"] < row["anees"] < row["anees_high"]
-    assert row["efficiency"] >= 0.97
+    assert 0.97 <= row["efficiency"] <= 1.10
+    late = result.summary[at_step]
+    assert late["anees"] > late["anees_high"] and late["efficiency"] > 1.10
 
 
 def test_the_runner_takes_off_grid_runs_to_the_per_run_path(tmp_path, capsys):
