@@ -224,20 +224,6 @@ def _vector_information(scenario, truth) -> dict | None:
     return information
 
 
-def riccati(phi: np.ndarray, q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.ndarray,
-            steps: int) -> np.ndarray:
-    """The prior covariance after ``steps`` of the time-invariant Riccati
-    recursion with a reading every step (the bound's recursion, in the limit
-    where :func:`solve_discrete_are` applies)."""
-    P = P0.copy()
-    R_inverse = np.linalg.inv(R)
-    for _ in range(steps):
-        posterior = np.linalg.inv(np.linalg.inv(P) + H.T @ R_inverse @ H)
-        P = phi @ posterior @ phi.T + q
-        P = 0.5 * (P + P.T)
-    return P
-
-
 def periodic_steady_state(gyro_noise: float, dt: float, steps_between: int, R: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:
     """Per phase ``j = 0 … m-1`` of the star tracker period, the steady-state

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from benchmarks import Scenario, simulate
 from benchmarks.cli import main
@@ -99,13 +100,19 @@ def test_efficiency_and_anees_are_honest_on_the_users_scenario(tmp_path):
     # the bound's RMS, both over the same steps after the settle time, the
     # bound posterior as both filters output: ≥ 1 in expectation, and the
     # Monte Carlo error of 100 runs' RMS is well under 1 % (per-run RMS
-    # spread ~15 %, /√100), so ≥ 0.98 holds with margin. The MEKF's ANEES
-    # must lie inside its 99 % χ²(300)/100 band, [2.41, 3.67].
+    # spread ~15 %, /√100), so ≥ 0.98 holds with margin, and the MEKF, which
+    # models this gyro and tracker, stays within 1.03 of it (measured 0.997).
+    # The additive EKF is not efficient here (measured 1.37, ANEES 4.3: its
+    # additive update and normalisation), held under 1.5: told an R a
+    # hundred times its tracker's it scores 5.7. The MEKF's ANEES must lie
+    # inside its 99 % χ²(300)/100 band, [2.41, 3.67].
     result = run_consistency(user_scenario(tmp_path), ["ekf", "mekf"], 100, level=0.99)
-    for name in ("ekf", "mekf"):
-        assert result.summary[name]["efficiency"] >= 0.98, name
+    for name, most in (("ekf", 1.5), ("mekf", 1.03)):
+        assert 0.98 <= result.summary[name]["efficiency"] <= most, name
         assert result.summary[name]["output"] == "posterior"
     mekf = result.summary["mekf"]
+    np.testing.assert_allclose([mekf["anees_low"], mekf["anees_high"]],
+                               chi2.ppf([0.005, 0.995], 300) / 100, rtol=1e-12)
     assert mekf["anees_low"] < mekf["anees"] < mekf["anees_high"]
     assert mekf["verdict"].startswith("consistent")
     # A gyro that samples the rate at the step's start (the workshop's model):

@@ -293,12 +293,19 @@ def test_montecarlo_shows_rms_in_arcsec_on_a_log_axis_when_estimators_differ():
     assert fig.axes[0].get_ylabel() == "arcsec (log scale)"
 
 
-def test_sweep_and_animation_name_their_units(tmp_path):
+def test_sweep_and_animation_name_their_units(tmp_path, monkeypatch):
     from benchmarks.cli import main
+    from benchmarks.experiments import runs
+    drawn, real = [], runs.figure_bytes
+    monkeypatch.setattr(runs, "figure_bytes",
+                        lambda path, figure, *args: drawn.append(figure) or real(path, figure,
+                                                                                 *args))
     assert main(["sweep", "--estimator", "ekf", "--param", "gyro-noise", "--values",
                  "1e-5,2e-5", "--tstop", "2", "--out", str(tmp_path), "--quiet"]) == 0
-    from benchmarks.experiments.runs import SWEEP_PARAMETERS
-    assert SWEEP_PARAMETERS["gyro-noise"].unit == "rad^2/s"
+    # Each curve of the figure's legend names its value with the unit.
+    legends = drawn[0].legends + [ax.get_legend() for ax in drawn[0].axes if ax.get_legend()]
+    texts = [text.get_text() for legend in legends for text in legend.get_texts()]
+    assert sum(text.endswith(" rad^2/s") for text in texts) == 2, texts
     from matplotlib.figure import Figure
     from benchmarks.figures.animation import AttitudeView
     view = AttitudeView(Figure(), with_estimate=False)

@@ -251,12 +251,15 @@ def test_usques_heading_update_leaves_the_inclination_unchanged(attitude, psi, c
     field = to_body_frame(usque.q_hat, np.array([0.0, 20.0, -40.0]))
     usque._heading_update(psi, 1e-4, validated, field, np.array([0.0, 20.0, -40.0]))
     np.testing.assert_allclose(_inclination(usque.q_hat), before, atol=1e-12)
-    # It turns the heading toward the reading (about v, by a share of psi of
-    # psi's sign), and the bias only for a validated field.
+    # It turns the heading about v, toward the reading: by a share of psi of
+    # psi's sign, where psi outweighs the sigma points' own mean heading
+    # error (their tilts of σ 0.1 rad swing a field dipping 63° by up to
+    # tan²(63°) σ² ≈ 0.04 rad on average, which the unscented innovation
+    # also holds); and the bias only for a validated field.
     turn = rotvec_from_quat(relative_rotation(quat_from_rotvec(np.array(attitude)),
                                               usque.q_hat))
     np.testing.assert_allclose(np.cross(turn, v), 0.0, atol=1e-12)
-    assert abs(psi) < 1e-6 or 0.0 < (turn @ v) / psi < 1.0
+    assert abs(psi) < 0.1 or 0.0 < (turn @ v) / psi < 1.0
     if not validated:
         np.testing.assert_array_equal(usque.filter.x[3:], bias)
 

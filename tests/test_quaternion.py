@@ -72,5 +72,5 @@ def test_attitude_error_is_sign_invariant_rotation_angle(rng):
 
 @pytest.mark.parametrize("bad", [[1, 0, 0], [[1, 0, 0, 0, 0]]])
 def test_wrong_shape_rejected_by_scipy_conversion(bad):
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="shape"):
         to_rotation(bad)

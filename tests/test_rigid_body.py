@@ -33,14 +33,16 @@ def test_closed_form_parameter_is_the_textbook_one():
     # workshop tumble, so the rates have the period 4 K(0.5) / λ.
     moments, omega0 = np.array([1.0, 2.0, 3.0]), np.array([0.05, 0.05, 0.0])
     two_e, m_sq = np.sum(moments * omega0**2), np.sum((moments * omega0) ** 2)
-    k_sq = (3 - 2) * (m_sq - two_e * 1) / ((2 - 1) * (two_e * 3 - m_sq))
-    assert k_sq == pytest.approx(0.5)
+    k_sq = (3 - 2) * (m_sq - two_e * 1) / ((2 - 1) * (two_e * 3 - m_sq))   # 0.5 here
     from scipy.special import ellipk
     rate = np.sqrt((3 - 2) * (two_e * 3 - m_sq) / (1 * 2 * 3))
     period = 4 * ellipk(k_sq) / rate
-    t = np.array([0.0, period])
+    t = np.array([0.0, period / 2, period])
     rates = closed_form_body_rates(moments, omega0, t)
-    assert np.allclose(rates[1], rates[0], atol=1e-15)
+    assert np.allclose(rates[2], rates[0], atol=1e-15)
+    # ...and not a shorter one: half a period on, the rate about the
+    # intermediate axis has turned sign (dn's and cn's half periods).
+    assert np.allclose(rates[1], [0.05, -0.05, 0.0], atol=1e-12)
 
 
 def test_invariants_conserved_and_quaternion_unit():

@@ -131,6 +131,14 @@ def test_gravity_alone_is_scored_on_the_inclination(tmp_path):
     total = attitude_error_deg(result.truth.q_true, result.estimates["mekf"])
     assert result.error_deg["mekf"][-1] < 0.2
     assert np.all(result.error_deg["mekf"] <= total + 1e-9)
+    # The score leaves the heading out: the total error ends at 2.8° (the
+    # start's heading, which gravity cannot see), and a pure turn about the
+    # vertical scores nothing.
+    assert total[-1] > 10 * result.error_deg["mekf"][-1]
+    from benchmarks.metrics import inclination_error_deg
+    from dynamics.quaternion import quat_from_rotvec, quat_multiply
+    yawed = quat_multiply(quat_from_rotvec(np.array([0.0, 0.0, 0.7])), result.truth.q_true[-1])
+    assert inclination_error_deg(result.truth.q_true[-1:], yawed[None]) < 1e-6
 
 
 USER_MODULE = textwrap.dedent('''
