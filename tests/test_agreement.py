@@ -94,6 +94,7 @@ def unreferenced(tmp_path_factory):
     return folder / "log.toml"
 
 
+@pytest.mark.slow      # 5 s
 def test_a_recording_without_a_reference_is_ranked_by_agreement_and_says_so(
         unreferenced, tmp_path, capsys):
     out = tmp_path / "out"
@@ -155,6 +156,7 @@ def test_an_estimator_without_a_heading_is_scored_on_its_inclination_only():
     assert np.allclose(curves["six"], 0.0)
 
 
+@pytest.mark.slow      # 3 s
 def test_without_a_reference_tuning_on_the_first_half_is_judged_on_the_second(
         unreferenced, tmp_path, capsys, monkeypatch):
     from benchmarks.broad import tuning

@@ -512,6 +512,7 @@ def test_a_folder_given_as_dot_is_named_in_the_attribution(tmp_path, monkeypatch
         dataset_attribution(Path("."))
 
 
+@pytest.mark.slow      # 5 s
 def test_the_trials_table_puts_a_filters_claimed_errors_beside_its_rmse(tmp_path):
     """broad_trials.csv: heading_sd_deg and inclination_sd_deg for a filter
     that keeps a covariance (the MEKF, its smoother), NaN for one that keeps

@@ -187,7 +187,8 @@ class _Terminal(io.StringIO):
 @pytest.mark.parametrize("argv, bar", [
     (["run", "--estimator", "mekf", "--tstop", "2"], "mekf:"),
     (["compare", "--tstop", "2"], "compare:"),
-    (["convergence", "--tstop", "2", "--seeds", "0", "--angles", "90"], "convergence:"),
+    pytest.param(["convergence", "--tstop", "2", "--seeds", "0", "--angles", "90"],
+                 "convergence:", marks=pytest.mark.slow),    # 4 s
 ])
 def test_long_commands_draw_a_progress_bar_on_a_terminal_and_none_when_quiet(
         tmp_path, monkeypatch, argv, bar):

@@ -40,6 +40,7 @@ def test_help_and_refusals_import_nothing_heavy(argv):
     assert not loaded & set(HEAVY), f"{argv} imported {sorted(loaded & set(HEAVY))}"
 
 
+@pytest.mark.slow      # 4 s
 def test_the_probe_sees_a_heavy_import_when_a_command_runs(tmp_path):
     """The check above can fail: a command that runs imports them."""
     status, loaded = _loaded(["run", "--estimator", "ekf", "--tstop", "0.05", "--out",

@@ -316,6 +316,7 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
     assert not out.exists()
 
 
+@pytest.mark.slow      # 4 s
 def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, capsys):
     # The gyro's clock stops for 2 s: the file is two parts, each a trial of
     # its own, each scored exactly as the same samples in the toolkit's .npz.
@@ -528,6 +529,7 @@ def test_an_empty_archive_is_said_to_have_no_column(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow      # 3 s
 def test_a_sensor_mostly_rejected_is_noted_below_the_table(trial, tmp_path, capsys):
     """A field whose norm swings ±50 % every 2 s (a magnet carried beside the
     IMU) is rejected most of the time by the MEKF's norm test; the table's
@@ -607,6 +609,7 @@ def test_the_clock_is_fitted_through_rounded_times_and_dropped_samples(rate, qua
     assert abs(clock_period(times) - period) * span <= 1.5 * quantum + 1e-6 * period * span + 1e-9
 
 
+@pytest.mark.slow      # 4 s
 def test_a_clock_in_integer_milliseconds_scores_as_the_exact_one(trial, tmp_path, capsys):
     """BROAD's 286 Hz in whole milliseconds (intervals of 3 and 4 ms, median
     3): the rate is fitted (286 Hz, not 333), and the scores are those of
@@ -651,6 +654,7 @@ def test_a_part_shorter_than_a_turning_block_loads(trial, tmp_path):
     assert [part.n_samples for part in parts] == [600, 10, len(table["t"]) - 610]
 
 
+@pytest.mark.slow      # 3.5 s
 def test_an_accelerometer_and_a_magnetometer_never_on_one_sample_run(trial, tmp_path):
     """The accelerometer at half the gyro's rate, the magnetometer at a
     quarter, on samples the accelerometer skips: no sample holds both, and

@@ -67,6 +67,7 @@ def registered(monkeypatch):
     monkeypatch.setitem(KERNELS, "frozen", TOY_KERNEL)
 
 
+@pytest.mark.slow      # its kernel compiled: 4-5 s
 def test_a_toy_kernel_registered_from_a_test_file_runs_in_batches(registered):
     scenario = Scenario(tstop=3.0)
     batch = run_batch(scenario, make_runs(scenario, [0, 1, 2]), ["ekf", "frozen"],

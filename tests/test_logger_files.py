@@ -488,6 +488,7 @@ def _with_reference(trial, folder: Path, turn) -> Path:
     return path
 
 
+@pytest.mark.slow      # 3 s
 def test_a_reference_whose_north_is_a_rooms_is_said(trial, tmp_path):
     # A motion-capture world turned 30° about the vertical from ENU: every
     # heading score includes the 30° (30.3° scored with no word); the field's
@@ -498,6 +499,7 @@ def test_a_reference_whose_north_is_a_rooms_is_said(trial, tmp_path):
         load_declared(path)
 
 
+@pytest.mark.slow      # 3 s
 def test_a_y_up_world_is_refused_with_the_frame_that_fits_and_declared_it_loads(trial,
                                                                                  tmp_path):
     # OptiTrack Motive's default world is Y-up: gravity along its y axis was

@@ -14,6 +14,7 @@ def canonical_scenario():
                     star_tracker_sigma_arcsec=[2000, 2000, 2000])
 
 
+@pytest.mark.slow      # 4 s
 def test_a_canonical_sign_tracker_no_longer_breaks_the_additive_ekf():
     scenario = canonical_scenario()
     truth_w = simulate(scenario, [], seed=0).truth.q_true[:, 0]

@@ -77,6 +77,7 @@ def test_a_filter_fed_noise_free_readings_off_the_grid_tracks_the_truth():
     assert np.radians(run.error_deg["mekf-at-step"]).max() > 1e-3
 
 
+@pytest.mark.slow      # 40 runs of two filters on the per-run path: 6 s
 def test_the_mekf_stays_consistent_and_at_the_bound_off_the_grid():
     # The user's tumble (2.5 °/s, 5 Hz integrating gyro) with a 2 Hz tracker:
     # 40 seeds on the per-run path (the engine hands off-grid readings to

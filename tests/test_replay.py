@@ -157,6 +157,7 @@ def test_a_recording_that_moves_from_its_first_sample_replays(tmp_path, capsys):
     assert (tmp_path / "o" / "replay.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow      # 3.5 s
 def test_a_shipped_replay_carries_the_attribution(tmp_path):
     assert main(["replay", "--dataset", "broad-07", "--estimators", "dead-reckoning",
                  "--out", str(tmp_path), "--quiet"]) == 0

@@ -166,6 +166,7 @@ def mekf_runs(tmp_path_factory):
                    for delay in ("0", "auto")}
 
 
+@pytest.mark.slow      # broad on trial 07 twice: 5 s
 def test_broad_with_the_delay_fitted_scores_the_readings_at_their_times(mekf_runs):
     codes, tables = mekf_runs
     assert codes == {"0": 0, "auto": 0}
@@ -373,6 +374,7 @@ def _phone_log(folder, delay_s: float) -> str:
     return str(folder / "log.toml")
 
 
+@pytest.mark.slow      # 5 s
 def test_a_phones_late_magnetometer_taken_at_its_times_helps_the_mekf(tmp_path, capsys,
                                                                        monkeypatch):
     # A 50 Hz magnetometer 40 ms late on its own clock: the default run notes

@@ -22,6 +22,7 @@ def short_cubesat(tmp_path, tstop=120.0) -> Path:
     return path
 
 
+@pytest.mark.slow      # 3 s
 def test_compare_on_the_cubesat_runs_the_vector_estimators_by_default(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["compare", "--scenario", str(short_cubesat(tmp_path)), "--out", str(out),

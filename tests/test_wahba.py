@@ -306,7 +306,7 @@ def _error_angles(solver, q, body_true, reference, sigmas, draws, rng):
     return errors
 
 
-@pytest.mark.parametrize("name", ["quest", "triad"])
+@pytest.mark.parametrize("name", ["quest", pytest.param("triad", marks=pytest.mark.slow)])
 def test_the_covariance_is_the_sample_covariance_of_the_error(name, rng):
     # N = 3000 noisy solutions of one geometry (directions 60° apart and a
     # third, σ of 1 mrad to 5 mrad): the NEES with the solver's covariance,
