@@ -96,10 +96,25 @@ def test_flight_bound_has_the_bias_states_and_sits_under_the_mekf():
     # Roll (about the boresight, 40") is the weak axis: its bound is the largest.
     late = bound.posterior[-1]
     assert late[2, 2] > 10 * late[0, 0]
-    rms = run_batch(scenario, make_runs(scenario, np.arange(20)), ["mekf"]).statistics["mekf"]
-    # Second-half comparison is not available from statistics; the whole run:
-    # the MEKF is within 10 % of the bound (its initial bias error is a fixed
-    # 0.49σ of the prior, so it can sit slightly under a bound that assumes a
-    # random one).
-    efficiency = np.sqrt(np.mean(rms["rms_deg"] ** 2)) / bound.rms_deg("posterior")
-    assert 0.9 < efficiency < 1.1
+    # From 300 s on, once the start's bias error (a fixed 0.49σ of the prior,
+    # where the bound takes a random one) is learnt, the MEKF is efficient:
+    # its RMS over 200 runs is the bound's within three of its own Monte
+    # Carlo errors (each run's mean square over the half is one draw; their
+    # spread gives the pooled RMS's error, 3.3 % here: measured 0.991). Told
+    # a star tracker a hundred times better than it is, it fails (1.21).
+    settled = 3000
+
+    def efficiency_and_error(options):
+        case = scenario.replace(estimator_options={
+            "mekf": {**scenario.estimator_options.get("mekf", {}), **options}})
+        batch = run_batch(case, make_runs(case, np.arange(200)), ["mekf"], error_every=1)
+        squares = np.mean(np.radians(batch.error_samples["mekf"][:, settled:]) ** 2, axis=1)
+        rms_deg = np.degrees(np.sqrt(squares.mean()))
+        return (rms_deg / bound.rms_deg("posterior", settled),
+                squares.std() / squares.mean() / 2 / np.sqrt(len(squares)))
+
+    efficiency, error = efficiency_and_error({})
+    assert abs(efficiency - 1.0) < 3 * error
+    too_sure = scenario.star_tracker_attitude_covariance_rad2 / 100
+    efficiency, error = efficiency_and_error({"measurement_covariance": too_sure.tolist()})
+    assert abs(efficiency - 1.0) > 3 * error
