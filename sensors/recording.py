@@ -119,9 +119,7 @@ class Recording:
 
     def reference_gaps(self) -> list[tuple[int, int]]:
         """Runs of samples without a reference, as ``[start, stop)`` index pairs."""
-        missing = np.concatenate([[False], ~self.has_reference, [False]])
-        edges = np.flatnonzero(np.diff(missing.astype(np.int8)))
-        return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+        return true_runs(~self.has_reference)
 
     def from_sample(self, start: int) -> "Recording":
         """The recording from sample ``start`` on."""
@@ -138,6 +136,12 @@ class Recording:
                        reference_quat=self.reference_quat[:stop], movement=self.movement[:stop],
                        accelerometer_mps2=_rows_to(self.accelerometer_mps2, stop),
                        magnetometer_uT=_rows_to(self.magnetometer_uT, stop))
+
+
+def true_runs(flags) -> list[tuple[int, int]]:
+    """The runs of true ``flags`` ``(N,)``, as ``[start, stop)`` index pairs."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(flags).astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 def reading_interval_s(read: np.ndarray, dt: float) -> float:

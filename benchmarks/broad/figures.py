@@ -9,6 +9,7 @@ import numpy as np
 
 from benchmarks.broad.benchmark import BroadResult, group_header, group_notes, shown_labels
 from benchmarks.broad.metric import METRICS
+from sensors.recording import true_runs
 
 #: The trial figure's curves: the total error's RMS over windows this long, s.
 CURVE_WINDOW_S = 1.0
@@ -108,12 +109,6 @@ def curve_windows(time_s: np.ndarray, error_deg: np.ndarray, window_s: float):
     return time_s[:count * size].reshape(count, size).mean(axis=1), rms
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """Runs of true ``flags`` as ``[start, stop)`` index pairs."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
-
-
 def trial_figure(result: BroadResult):
     """The first scored trial's total error over time, every estimator: its
     RMS over each :data:`CURVE_WINDOW_S` (the metric's statistic, over the
@@ -145,7 +140,7 @@ def trial_figure(result: BroadResult):
         axis = figure.subplots()
     time_s = next(iter(result.curves.values()))[0]
     if result.curve_movement is not None:
-        for i, (start, stop) in enumerate(_runs(np.asarray(result.curve_movement, dtype=bool))):
+        for i, (start, stop) in enumerate(true_runs(np.asarray(result.curve_movement, dtype=bool))):
             axis.axvspan(time_s[start], time_s[stop - 1], color="0.85", alpha=0.6, linewidth=0,
                          label=None if i else "movement (scored where the reference is)")
     shown, part = shown_labels(result), result.metric.split("_")[0]

@@ -18,7 +18,7 @@ from benchmarks.broad.inputs import heading_reference, runnable_rule, start_samp
     usable_readings
 from sensors.delay import AUTO_ADVICE, at_sample_times, described, hard_iron_at, \
     recording_fit
-from sensors.recording import Recording, reading_interval_s
+from sensors.recording import Recording, reading_interval_s, true_runs
 
 _NOTED = set()
 
@@ -80,13 +80,11 @@ def silences(read: np.ndarray, dt: float) -> list[tuple[int, int]]:
     (``read``: ``(N,)`` bool) long enough to say (:data:`SILENCE_MIN_S`,
     :data:`SILENCE_MIN_INTERVALS`), the longest first; one running to the
     end has ``stop = N``. Every stretch of a sensor that never reads."""
-    taken = np.flatnonzero(read)
-    if not len(taken):
-        return [(0, len(read))] if len(read) else []
-    starts = np.concatenate(([0], taken + 1))
-    stops = np.concatenate((taken, [len(read)]))
+    stretches = true_runs(~read)
+    if not read.any():
+        return stretches
     shortest = max(SILENCE_MIN_S / dt, SILENCE_MIN_INTERVALS * reading_interval_s(read, dt) / dt)
-    long = [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= shortest]
+    long = [(a, b) for a, b in stretches if b - a >= shortest]
     return sorted(long, key=lambda stretch: stretch[0] - stretch[1])
 
 

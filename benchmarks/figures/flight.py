@@ -22,6 +22,7 @@ from benchmarks.figures.panels import (AXIS_NAMES, ENVELOPE_ALPHA, ENVELOPE_LABE
 from benchmarks.figures.plots import X_LABEL
 from benchmarks.figures.style import (coincidence_note, coinciding, estimator_styles, finite_max,
                                       legend_outside, log_axis, symlog_axis, with_coincidences)
+from sensors.recording import true_runs
 
 #: Heights (inches) of the per-axis figures' rows: the panel comparing every
 #: estimator, each estimator's own row, the bias row, and room for the legend.
@@ -229,9 +230,8 @@ def _shade_eclipses(axes, time_s, eclipse) -> None:
     """The Earth's shadow, shaded grey in each of ``axes``."""
     if eclipse is None or not np.any(eclipse):
         return
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(eclipse).astype(int), [0]])))
     for ax in axes:
-        for first, (start, stop) in enumerate(zip(edges[::2], edges[1::2])):
+        for first, (start, stop) in enumerate(true_runs(eclipse)):
             ax.axvspan(time_s[start], time_s[min(stop, len(time_s) - 1)], color="0.55",
                        alpha=0.18, linewidth=0, zorder=0,
                        label="Eclipse" if first == 0 else None)
