@@ -140,8 +140,35 @@ def test_the_without_rest_script_runs_on_simulated_recordings(tmp_path, capsys):
     assert "Simulated" in (tmp_path / "ATTRIBUTION.txt").read_text()
 
 
+def test_the_simulated_recordings_take_the_motion_and_imu_asked_for(tmp_path, capsys):
+    # Each FIELD=VALUE reaches the simulation: the table is the one made by
+    # hand from the same motion and IMU (a shorter rest moves the cut too).
+    from benchmarks.broad import without_rest
+    assert without_rest.main(["--simulated", "1", "--estimators", "mekf", "--quiet",
+                              "--motion", "rest_s=5", "--motion", "moving_s=20",
+                              "--motion", "final_rest_s=2", "--imu", "gyro_scale_percent=0",
+                              "--out", str(tmp_path)]) == 0
+    motion = HandheldMotion(rest_s=5.0, moving_s=20.0, final_rest_s=2.0)
+    expected = without_rest.recording_scores(
+        simulated_recording(0, motion, HandheldImu(gyro_scale_percent=0.0)), "handheld-0",
+        ["mekf"])
+    table = pd.read_csv(tmp_path / "without_rest.csv")
+    assert table["cut_at_sample"].tolist() == [1000]          # 5 s at 200 Hz
+    for column in ("whole_deg", "without_rest_deg"):
+        assert table[column].tolist() == [row[column] for row in expected]
+    assert "(rest_s=5, moving_s=20, final_rest_s=2, gyro_scale_percent=0)" in \
+        capsys.readouterr().out
+
+
 @pytest.mark.parametrize("argv, shown", [
     (["--simulated", "0"], "--simulated = 0: must be a whole number >= 1"),
+    (["--simulated", "1", "--motion", "rate=3"], "--motion = 'rate=3': must be FIELD=NUMBER "
+                                                 "with FIELD one of rate_hz, rest_s"),
+    (["--simulated", "1", "--imu", "dip_deg=north"], "--imu = 'dip_deg=north': must be "
+                                                     "FIELD=NUMBER"),
+    (["--simulated", "1", "--imu", "dip_deg=95"], "dip_deg = 95.0: must be within ±90°"),
+    (["--motion", "rate_rms_dps=250"], "--motion = 'rate_rms_dps=250': applies to "
+                                       "--simulated only"),
     (["--simulated", "1", "--broad", "x"], "--simulated = 1: cannot be given with --broad"),
     (["--simulated", "1", "--estimators", "nope"], "estimator = 'nope'"),
 ])

@@ -15,13 +15,18 @@ estimator's mean over the trials, whole and cut, and their ratio, and
 writes ``without_rest.csv`` (one row per trial and estimator) to ``--out``.
 ``--simulated N`` runs it on N simulated hand-held recordings instead
 (:mod:`sensors.handheld`): a uniform field and a true reference, where
-what an estimator loses without its rest is its own, not the room's.
+what an estimator loses without its rest is its own, not the room's;
+``--motion FIELD=VALUE`` and ``--imu FIELD=VALUE`` (each as often as
+needed) set any field of their :class:`~dynamics.handheld.HandheldMotion`
+and :class:`~sensors.handheld.HandheldImu`, e.g. a brisker hand
+(``--motion rate_rms_dps=250``) or a gyro without scale errors
+(``--imu gyro_scale_percent=0``).
 """
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -144,9 +149,16 @@ def write_table(out: Path, name: str, table: pd.DataFrame, attribution: str) -> 
 
 def simulated_rows(args, names):
     """The rows of ``args.simulated`` simulated hand-held recordings (seeds
-    0, 1, …: :func:`sensors.handheld.simulated_recording`), a uniform field
-    and a true reference: what an estimator loses there is its own."""
-    from sensors.handheld import simulated_recording
+    0, 1, …: :func:`sensors.handheld.simulated_recording`, with the fields
+    ``args.motion`` and ``args.imu`` set), a uniform field and a true
+    reference: what an estimator loses there is its own."""
+    from dynamics.handheld import HandheldMotion
+    from sensors.handheld import HandheldImu, simulated_recording
+    if args.simulated is None:
+        for flag, given in (("--motion", args.motion), ("--imu", args.imu)):
+            if given:
+                raise InvalidParameterError(flag, given[0], "applies to --simulated only")
+        return None
     if args.broad is not None:
         raise InvalidParameterError("--simulated", args.simulated, "cannot be given with --broad")
     if args.simulated < 1:
@@ -155,10 +167,32 @@ def simulated_rows(args, names):
         raise InvalidParameterError("--magnetometer-delay", args.magnetometer_delay,
                                     "applies to recorded trials; the simulated magnetometer "
                                     "reads on time")
+    motion = HandheldMotion(**field_values("--motion", args.motion, HandheldMotion))
+    imu = HandheldImu(**field_values("--imu", args.imu, HandheldImu))
     for name in names:
         resolve_estimator(name)
     return [row for seed in progress(range(args.simulated), desc="recordings", quiet=args.quiet)
-            for row in recording_scores(simulated_recording(seed), f"handheld-{seed}", names)]
+            for row in recording_scores(simulated_recording(seed, motion, imu),
+                                        f"handheld-{seed}", names)]
+
+
+def field_values(flag: str, pairs, cls) -> dict:
+    """``FIELD=VALUE`` strings (``pairs``, from ``flag``) as the keywords of
+    dataclass ``cls``: each field one of its own, each value a number (the
+    class then checks its range)."""
+    known = [field.name for field in fields(cls)]
+    values = {}
+    for pair in pairs or ():
+        name, _, text = pair.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+        if name.strip() not in known or value is None:
+            raise InvalidParameterError(flag, pair, "must be FIELD=NUMBER with FIELD one of "
+                                        + ", ".join(known))
+        values[name.strip()] = value
+    return values
 
 
 def main(argv=None) -> int:
@@ -167,16 +201,24 @@ def main(argv=None) -> int:
     parser.add_argument("--simulated", type=int, metavar="N",
                         help="N simulated hand-held recordings in a uniform field instead "
                              "of BROAD's trials")
+    parser.add_argument("--motion", action="append", metavar="FIELD=VALUE",
+                        help="with --simulated: a field of the hand's motion "
+                             "(dynamics.handheld.HandheldMotion), e.g. rate_rms_dps=250")
+    parser.add_argument("--imu", action="append", metavar="FIELD=VALUE",
+                        help="with --simulated: a field of the IMU's errors "
+                             "(sensors.handheld.HandheldImu), e.g. gyro_scale_percent=0")
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.estimators.split(",") if name.strip()]
-    if args.simulated is not None:
-        try:
-            rows = simulated_rows(args, names)
-        except InvalidParameterError as err:
-            print(f"without_rest: error: {err}", file=sys.stderr)
-            return 2
-        what, attribution = (f"{args.simulated} simulated hand-held recordings",
-                             SIMULATED_ATTRIBUTION)
+    try:
+        rows = simulated_rows(args, names)
+    except InvalidParameterError as err:
+        print(f"without_rest: error: {err}", file=sys.stderr)
+        return 2
+    if rows is not None:
+        changed = (args.motion or []) + (args.imu or [])
+        what = f"{args.simulated} simulated hand-held recordings" + (
+            f" ({', '.join(changed)})" if changed else "")
+        attribution = SIMULATED_ATTRIBUTION
     else:
         found = trial_rows(args, "without_rest",
                            lambda dataset, trial: scores(dataset, trial, names),
