@@ -139,8 +139,10 @@ class Recording:
 
 
 def true_runs(flags) -> list[tuple[int, int]]:
-    """The runs of true ``flags`` ``(N,)``, as ``[start, stop)`` index pairs."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(flags).astype(np.int8), [0]])))
+    """The runs of true ``flags`` ``(N,)`` (anything numpy reads as bool), as
+    ``[start, stop)`` index pairs."""
+    truth = np.asarray(flags, dtype=bool).astype(np.int8)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], truth, [0]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 

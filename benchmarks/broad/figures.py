@@ -140,7 +140,7 @@ def trial_figure(result: BroadResult):
         axis = figure.subplots()
     time_s = next(iter(result.curves.values()))[0]
     if result.curve_movement is not None:
-        for i, (start, stop) in enumerate(true_runs(np.asarray(result.curve_movement, dtype=bool))):
+        for i, (start, stop) in enumerate(true_runs(result.curve_movement)):
             axis.axvspan(time_s[start], time_s[stop - 1], color="0.85", alpha=0.6, linewidth=0,
                          label=None if i else "movement (scored where the reference is)")
     shown, part = shown_labels(result), result.metric.split("_")[0]

@@ -184,14 +184,15 @@ def field_values(flag: str, pairs, cls) -> dict:
     values = {}
     for pair in pairs or ():
         name, _, text = pair.partition("=")
+        name = name.strip()
         try:
             value = float(text)
         except ValueError:
             value = None
-        if name.strip() not in known or value is None:
+        if name not in known or value is None:
             raise InvalidParameterError(flag, pair, "must be FIELD=NUMBER with FIELD one of "
                                         + ", ".join(known))
-        values[name.strip()] = value
+        values[name] = value
     return values
 
 
