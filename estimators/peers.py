@@ -37,7 +37,7 @@ import numpy as np
 
 from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.quaternion import IDENTITY, quat_multiply
-from dynamics.validation import InvalidParameterError, finite_number
+from dynamics.validation import InvalidParameterError, boolean, finite_number
 from estimators import sensing
 from estimators.base import AttitudeEstimator, InvalidMeasurementError
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
@@ -187,9 +187,12 @@ class OfflineVQF(VQF9D):
     needs = (frozenset({sensing.ACCELEROMETER, sensing.MAGNETOMETER}),)
 
     def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
-                 on_invalid: str = "raise"):
+                 fit_magnetometer_delay: bool = True, on_invalid: str = "raise"):
         # offlineVQF takes every channel at the gyro's rate (a slower one held).
         super().__init__(dt=dt, initial_attitude=initial_attitude, on_invalid=on_invalid)
+        #: Whether its field is timed against the gyro first, as the
+        #: smoother's (:func:`benchmarks.engine.recorded.field_timed`).
+        self.fit_magnetometer_delay = boolean("fit_magnetometer_delay", fit_magnetometer_delay)
 
     def step(self, *args, **kwargs):
         raise TypeError(f"{self.name} is offline: it estimates from the whole recording "

@@ -38,6 +38,19 @@ as independent; their shared start makes :math:`P_s` a little optimistic
 near the record's end.) The forward pass outputs its posterior, the
 backward its prior, whatever ``output`` the settings give.
 
+**The field's timing** (``fit_magnetometer_delay``, on by default). A
+MEMS magnetometer filtered inside its sensor reads late against its gyro
+(BROAD's 12–14 ms; a phone's tens of milliseconds). Each pass then reads a
+field late in its own direction of time, and the two disagree by degrees in
+every fast turn. An offline filter has the whole record to time it: on a
+recording (:func:`benchmarks.engine.recorded.run_recorded`, which reads
+this setting, as for offline VQF's), the field's delay is fitted from how
+it turns against the gyro before the passes (no reference read) and, where
+the fit is clear, each reading is taken at its sample's time — what
+``--magnetometer-delay auto`` does for every estimator (:mod:`sensors.delay`);
+with the heading model only (a recording's IMU). :meth:`track` itself
+takes the readings as given.
+
 VQF's offline mode (Laidig & Seel 2023, §3.5, ``offlineVQF``) is the peer:
 forward and backward passes of its bias estimator, fused in information
 form, and zero-phase filtering; :class:`estimators.peers.OfflineVQF` runs it.
@@ -45,10 +58,12 @@ form, and zero-phase filtering; :class:`estimators.peers.OfflineVQF` runs it.
 from __future__ import annotations
 
 import copy
+import inspect
 from dataclasses import replace
 
 import numpy as np
 
+from dynamics.validation import boolean
 from estimators.base import (EstimateTrace, checked_vector_record, quiet_overflow,
                              observations_at)
 from estimators.mekf import MultiplicativeEKF
@@ -167,9 +182,21 @@ def filter_pass(mekf: MultiplicativeEKF, omega, star, available, vectors=None) -
     return quat, bias, covariance
 
 
+def _with_mekf_settings(init):
+    """``init`` (keyword-only settings of its own, then ``**settings``)
+    declared with the MEKF's settings and its own: the settings' tools read
+    a constructor's signature, and each setting stays declared once."""
+    own = [p for p in inspect.signature(init).parameters.values()
+           if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    signature = inspect.signature(MultiplicativeEKF.__init__)
+    init.__signature__ = signature.replace(parameters=[*signature.parameters.values(), *own])
+    return init
+
+
 class MekfSmoother(MultiplicativeEKF):
     """The MEKF forward and backward over a whole record, fused (module
-    docstring): offline. Its settings are the MEKF's: ``[estimators.mekf]``
+    docstring): offline. Its settings are the MEKF's and
+    ``fit_magnetometer_delay`` (module docstring): ``[estimators.mekf]``
     applies to it, and ``[estimators.mekf-smoother]`` over that. It runs on
     whole records only (:meth:`run`, :meth:`track`; on a recording the engine
     runs both passes through the MEKF's kernel,
@@ -185,6 +212,11 @@ class MekfSmoother(MultiplicativeEKF):
         section = MultiplicativeEKF.scenario_section(scenario)
         section.update(super().scenario_section(scenario))
         return section
+
+    @_with_mekf_settings
+    def __init__(self, *, fit_magnetometer_delay: bool = True, **settings):
+        self.fit_magnetometer_delay = boolean("fit_magnetometer_delay", fit_magnetometer_delay)
+        super().__init__(**settings)
 
     def step(self, *args, **kwargs):
         raise TypeError(f"{self.name} is offline: it estimates from the whole record "

@@ -239,7 +239,8 @@ def recording_fit(recording) -> DelayFit | None:
 
 
 #: What a clear delay's note advises (``broad``, ``inspect``).
-AUTO_ADVICE = "--magnetometer-delay auto takes each reading at its sample's time"
+AUTO_ADVICE = ("--magnetometer-delay auto takes each reading at its sample's time "
+               "for every estimator (the offline ones do so by default)")
 
 
 def _pairs(rates, vectors, available, dt: float) -> _Pairs | None:

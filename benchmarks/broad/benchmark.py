@@ -48,7 +48,7 @@ TRIAL_COLUMNS = ("trial", "estimator", "mode", *METRICS, *CLAIMED, "us_per_sampl
                  "samples", "movement_samples", "scored_samples",
                  "rejected_accelerometer", "rejected_magnetometer",
                  "rejected_accelerometer_share", "rejected_magnetometer_share",
-                 "diverged_step", "path", *AGREEMENT)
+                 "diverged_step", "path", "magnetometer_delay_ms", *AGREEMENT)
 GROUP_COLUMNS = ("group", "level", "estimator", "trials", "scored_trials", *METRICS,
                  "left_out", "nan_on")
 #: What the scores are taken against where a trial has a reference.
@@ -137,8 +137,7 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
                      "samples": recording.n_samples,
                      "movement_samples": int(np.count_nonzero(movement)),
                      "scored_samples": scored, **_rejections(estimator, run, readings),
-                     "diverged_step": -1 if run.diverged_step is None else run.diverged_step,
-                     "path": run.path})
+                     **_run_columns(run)})
         curves[name] = (recording.time_s, errors["total" if heading else "inclination"])
         labels[name] = estimator.label + ("" if heading else f" {INCLINATION_ONLY}") + (
             " [offline]" if estimator.mode == "offline" else "")
@@ -159,6 +158,16 @@ def run_trial(dataset: BroadDataset, trial: str, estimators, gyro_delay_s: float
             curves = {name: (recording.time_s[judged], curve)
                       for name, curve in agreement_curves.items()}
     return rows, curves, labels
+
+
+def _run_columns(run) -> dict:
+    """A run's own columns: where it diverged (-1: never), the path it took,
+    and the delay an offline estimator took out of its field's timing (ms;
+    NaN: none)."""
+    return {"diverged_step": -1 if run.diverged_step is None else run.diverged_step,
+            "path": run.path,
+            "magnetometer_delay_ms": math.nan if run.magnetometer_delay_s is None
+            else 1e3 * run.magnetometer_delay_s}
 
 
 #: A label's mark for an estimator scored on its inclination alone.

@@ -22,11 +22,18 @@ real IMU), by the fastest path that gives the per-run class's numbers.
   recording (missing readings, say).
 * Anything else runs on the per-run path (``estimator.run``).
 
+An offline estimator that asks for it (``fit_magnetometer_delay``: the
+smoother's and offline VQF's setting, on by default) reads the field taken
+at its samples' times wherever its delay against the gyro is clear
+(:func:`field_timed`): having the whole recording, it can time it.
+
 Every path reads its settings and its start off the per-run object after
 its reset; the tests hold each to the per-run path to 1e-9 at every sample.
 """
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -58,6 +65,59 @@ class RecordedRun:
     #: error), where the filter keeps one (a kernel that reports one, the
     #: smoother's fusion, a per-run class's ``track``); None elsewhere.
     attitude_covariance: np.ndarray | None = None
+    #: The magnetometer's delay against the gyro (s) taken out of its
+    #: readings first (:func:`field_timed`); None where none was.
+    magnetometer_delay_s: float | None = None
+
+
+def field_timed(estimator, omega: np.ndarray, vectors: tuple) -> tuple:
+    """``vectors`` as ``estimator`` reads them, and the delay fit applied
+    (None where none was): where its ``fit_magnetometer_delay`` asks and it
+    reads the field as a heading or alone (a recording's IMU), the
+    magnetometer's readings taken at their samples' times if their delay
+    against the gyro ``omega`` is clear — what ``--magnetometer-delay auto``
+    does (:func:`sensors.delay.delay_fit`, :func:`~sensors.delay.at_sample_times`)."""
+    if not (getattr(estimator, "fit_magnetometer_delay", False)
+            and getattr(estimator, "magnetometer_model", "heading") == "heading"):
+        return vectors, None
+    timed, applied = [], None
+    for readings in vectors:
+        if readings.sensor == "magnetometer":
+            body, fit = _timed_field(omega, readings.body, readings.available, estimator.dt)
+            if fit is not None:
+                applied, readings = fit, replace(readings, body=body)
+        timed.append(readings)
+    return tuple(timed), applied
+
+
+#: The last fields timed (:func:`_timed_field`), by their contents: a
+#: tuning runs each recording many times, each run's fit the same.
+_TIMED = OrderedDict()
+#: How many it keeps (a recording's field is about 1.4 MB an hour at 100 Hz).
+TIMED_KEPT = 32
+
+
+def _timed_field(omega, body, available, dt: float) -> tuple:
+    """The field ``body`` at its samples' times and the fit, or the field as
+    it is and None where its delay is not clear; the same answer for the
+    same readings is kept (by a digest of their contents, never their
+    identity)."""
+    key = (hashlib.blake2b(b"".join(np.ascontiguousarray(a).tobytes()
+                                    for a in (omega, body, available))).hexdigest(), dt)
+    if key in _TIMED:
+        _TIMED.move_to_end(key)
+        return _TIMED[key]
+    from sensors.delay import at_sample_times, delay_fit   # here: few runs time their field
+    fit = delay_fit(omega, body, available, dt)
+    answer = (body, None)
+    if fit is not None and fit.clear(dt):
+        timed = at_sample_times(omega, body, available, dt, fit.delay_s, fit.offset)
+        timed.flags.writeable = False           # shared by every run that reads it
+        answer = (timed, fit)
+    _TIMED[key] = answer
+    while len(_TIMED) > TIMED_KEPT:
+        _TIMED.popitem(last=False)
+    return answer
 
 
 def path_of(estimator, vectors=()) -> str:
@@ -89,9 +149,16 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
     (:class:`sensors.vector.VectorReadings`), by :func:`path_of`'s path;
     with ``innovations``, a filter's innovation likelihood sums too
     (:attr:`RecordedRun.likelihood`, the kernel's or the per-run filter's
-    ``innovation_sums``: the same numbers)."""
+    ``innovation_sums``: the same numbers); an offline estimator's field
+    timed first where it asks (:func:`field_timed`)."""
     omega = np.ascontiguousarray(omega_meas_radps, dtype=float)
-    vectors = tuple(vectors)
+    vectors, timing = field_timed(estimator, omega, tuple(vectors))
+    run = _on_path(estimator, omega, vectors, innovations)
+    return run if timing is None else replace(run, magnetometer_delay_s=timing.delay_s)
+
+
+def _on_path(estimator, omega: np.ndarray, vectors: tuple, innovations: bool) -> RecordedRun:
+    """:func:`run_recorded` once its readings are as the estimator reads them."""
     path = path_of(estimator, vectors)
     estimator.reset()
     if path == "kernel" and isinstance(estimator, MekfSmoother):
