@@ -410,6 +410,13 @@ def format_groups(result: BroadResult, metric: str = "total_rmse_deg") -> str:
     text = table.to_string(float_format=lambda v: f"{v:.3f}", na_rep="NaN")
     notes = ["(offline): a smoother, each estimate from the whole recording, before and after "
              "it; the others are online, each from the readings up to it"] if offline else []
+    timed = result.trials.get("magnetometer_delay_ms")
+    if timed is not None and timed.notna().any():
+        names = ", ".join(sorted(set(result.trials.loc[timed.notna(), "estimator"])))
+        low, high = f"{timed.min():.1f}", f"{timed.max():.1f}"
+        notes.append(f"{names}: the magnetometer taken at its samples' times, its delay against "
+                     f"the gyro fitted per trial ({low if low == high else f'{low} to {high}'} "
+                     "ms, late where positive; magnetometer_delay_ms in broad_trials.csv)")
     return "\n".join([text, *group_notes(result), *notes])
 
 
