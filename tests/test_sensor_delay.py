@@ -470,6 +470,23 @@ def test_a_timed_field_is_kept_by_its_contents():
     assert later.delay_s - fit.delay_s == pytest.approx(3 * inputs.recording.dt, abs=1e-3)
 
 
+def test_the_timed_fields_kept_stay_within_their_bytes(monkeypatch):
+    from benchmarks.engine import recorded
+    dataset = open_broad(SHIPPED)
+    inputs = imu_inputs(dataset.load(dataset.available[1]))
+    field = next(v for v in inputs.sensors.vectors if v.sensor == "magnetometer")
+    omega, dt = inputs.sensors.omega_meas_radps, inputs.recording.dt
+    monkeypatch.setattr(recorded, "_TIMED", recorded.OrderedDict())
+    monkeypatch.setattr(recorded, "TIMED_BYTES", field.body.nbytes + 1)   # room for one
+    first, _ = recorded._timed_field(omega, field.body, field.available, dt)
+    second, _ = recorded._timed_field(omega, np.roll(field.body, 3, axis=0), field.available, dt)
+    assert len(recorded._TIMED) == 1 and next(iter(recorded._TIMED.values()))[0] is second
+    # a field on time is not kept, only that it is not: the caller's array comes back
+    on_time = recorded._timed_field(omega, first, field.available, dt)
+    assert on_time == (first, None)
+    assert sum(kept is not None for kept, _ in recorded._TIMED.values()) == 1
+
+
 def test_broad_says_which_estimators_timed_their_field(tmp_path, capsys):
     assert main(["broad", "--trials", "07", "--estimators", "mekf,vqf-offline", "--out",
                  str(tmp_path / "out"), "--quiet"]) == 0

@@ -93,31 +93,31 @@ def field_timed(estimator, omega: np.ndarray, vectors: tuple) -> tuple:
 #: The last fields timed (:func:`_timed_field`), by their contents: a
 #: tuning runs each recording many times, each run's fit the same.
 _TIMED = OrderedDict()
-#: How many it keeps (a recording's field is about 1.4 MB an hour at 100 Hz).
-TIMED_KEPT = 32
+#: How much of them it keeps, bytes (a field timed is 24 bytes a sample:
+#: 1.3 MB for a BROAD trial, 17 MB for an hour at 200 Hz); the last always.
+TIMED_BYTES = 64 << 20
 
 
 def _timed_field(omega, body, available, dt: float) -> tuple:
     """The field ``body`` at its samples' times and the fit, or the field as
     it is and None where its delay is not clear; the same answer for the
     same readings is kept (by a digest of their contents, never their
-    identity)."""
+    identity; a field not timed is not kept, only that it is not)."""
     key = (hashlib.blake2b(b"".join(np.ascontiguousarray(a).tobytes()
                                     for a in (omega, body, available))).hexdigest(), dt)
-    if key in _TIMED:
-        _TIMED.move_to_end(key)
-        return _TIMED[key]
-    from sensors.delay import at_sample_times, delay_fit   # here: few runs time their field
-    fit = delay_fit(omega, body, available, dt)
-    answer = (body, None)
-    if fit is not None and fit.clear(dt):
-        timed = at_sample_times(omega, body, available, dt, fit.delay_s, fit.offset)
-        timed.flags.writeable = False           # shared by every run that reads it
-        answer = (timed, fit)
-    _TIMED[key] = answer
-    while len(_TIMED) > TIMED_KEPT:
-        _TIMED.popitem(last=False)
-    return answer
+    if key not in _TIMED:
+        from sensors.delay import at_sample_times, delay_fit   # here: few runs time their field
+        fit, timed = delay_fit(omega, body, available, dt), None
+        if fit is not None and fit.clear(dt):
+            timed = at_sample_times(omega, body, available, dt, fit.delay_s, fit.offset)
+            timed.flags.writeable = False           # shared by every run that reads it
+        _TIMED[key] = (timed, fit if timed is not None else None)
+        while len(_TIMED) > 1 and sum(0 if kept is None else kept.nbytes
+                                      for kept, _ in _TIMED.values()) > TIMED_BYTES:
+            _TIMED.popitem(last=False)
+    _TIMED.move_to_end(key)
+    timed, fit = _TIMED[key]
+    return (body, None) if timed is None else (timed, fit)
 
 
 def path_of(estimator, vectors=()) -> str:
