@@ -46,6 +46,28 @@ def test_two_worker_dask_cluster_gives_identical_results(tmp_path):
     pd.testing.assert_frame_equal(on_dask, in_process, check_exact=True)
 
 
+def _worker_environ(name):
+    return os.environ.get(name)
+
+
+@pytest.mark.slow
+def test_a_local_clusters_workers_map_only_large_allocations():
+    # Dask's own worker settings stay (MALLOC_TRIM_THRESHOLD_, one BLAS
+    # thread); the mapping threshold they would freeze at 128 kB is raised
+    # (runner.WORKER_MMAP_THRESHOLD: the arithmetic, and so the results, the same).
+    pytest.importorskip("distributed")
+    from benchmarks.engine.runner import WORKER_MMAP_THRESHOLD, dask_client
+    client, cluster = dask_client(1, None)
+    try:
+        for name, value in (("MALLOC_MMAP_THRESHOLD_", str(WORKER_MMAP_THRESHOLD)),
+                            ("MALLOC_TRIM_THRESHOLD_", "65536"),
+                            ("OPENBLAS_NUM_THREADS", "1")):
+            assert set(client.run(_worker_environ, name).values()) == {value}
+    finally:
+        client.close()
+        cluster.close()
+
+
 @pytest.mark.slow
 def test_killed_campaign_resumes_without_redoing_chunks(tmp_path):
     out = tmp_path / "campaign"
