@@ -51,7 +51,9 @@ its rate (centripetal and tangential), and would move the fit.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -233,9 +235,44 @@ def delay_fit(rates: np.ndarray, vectors: np.ndarray, available: np.ndarray,
 def recording_fit(recording) -> DelayFit | None:
     """:func:`delay_fit` of a recording's magnetometer against its gyro
     (:class:`sensors.recording.Recording`; its readings the rows that are
-    not exactly zero, which on a gyro's grid is no reading)."""
+    not exactly zero, which on a gyro's grid is no reading), kept as
+    :func:`timed_readings` keeps it."""
     field = recording.magnetometer_uT
-    return delay_fit(recording.gyro_radps, field, readings_taken(field), recording.dt)
+    return _kept(recording.gyro_radps, field, readings_taken(field), recording.dt, False)[0]
+
+
+def timed_readings(rates, vectors, available, dt: float) -> tuple:
+    """``(fit, timed)``: :func:`delay_fit` of the readings and, where it is
+    clear (:meth:`DelayFit.clear`), the readings at their samples' times
+    (:func:`at_sample_times`, read-only: every caller of the same readings
+    shares them); ``timed`` None where it is not clear — the one rule of
+    ``--magnetometer-delay auto`` and of an offline estimator timing its
+    field. The answer for the same readings is kept, by a digest of their
+    contents (never their identity): a tuning runs each recording many
+    times, and a trial's note reads the fit its estimators took."""
+    return _kept(rates, vectors, available, dt, True)
+
+
+#: The fits kept (:func:`timed_readings`), the last used last, and how many
+#: bytes of timed readings they may hold (24 a sample: 1.3 MB for a BROAD
+#: trial, 17 MB for an hour at 200 Hz; the last always) and how many fits.
+_KEPT = OrderedDict()
+KEPT_BYTES = 64 << 20
+KEPT_FITS = 256
+
+
+def _kept(rates, vectors, available, dt: float, timed: bool) -> tuple:
+    key = (hashlib.blake2b(b"".join(np.ascontiguousarray(a).tobytes()
+                                    for a in (rates, vectors, available))).hexdigest(), dt)
+    fit, readings = _KEPT.pop(key, None) or (delay_fit(rates, vectors, available, dt), None)
+    if timed and readings is None and fit is not None and fit.clear(dt):
+        readings = at_sample_times(rates, vectors, available, dt, fit.delay_s, fit.offset)
+        readings.flags.writeable = False
+    _KEPT[key] = (fit, readings)
+    while len(_KEPT) > 1 and (len(_KEPT) > KEPT_FITS or sum(
+            0 if kept is None else kept.nbytes for _, kept in _KEPT.values()) > KEPT_BYTES):
+        _KEPT.popitem(last=False)
+    return fit, readings
 
 
 #: What a clear delay's note advises (``broad``, ``inspect``).

@@ -471,20 +471,41 @@ def test_a_timed_field_is_kept_by_its_contents():
 
 
 def test_the_timed_fields_kept_stay_within_their_bytes(monkeypatch):
-    from benchmarks.engine import recorded
+    from sensors import delay
     dataset = open_broad(SHIPPED)
     inputs = imu_inputs(dataset.load(dataset.available[1]))
     field = next(v for v in inputs.sensors.vectors if v.sensor == "magnetometer")
     omega, dt = inputs.sensors.omega_meas_radps, inputs.recording.dt
-    monkeypatch.setattr(recorded, "_TIMED", recorded.OrderedDict())
-    monkeypatch.setattr(recorded, "TIMED_BYTES", field.body.nbytes + 1)   # room for one
-    first, _ = recorded._timed_field(omega, field.body, field.available, dt)
-    second, _ = recorded._timed_field(omega, np.roll(field.body, 3, axis=0), field.available, dt)
-    assert len(recorded._TIMED) == 1 and next(iter(recorded._TIMED.values()))[0] is second
-    # a field on time is not kept, only that it is not: the caller's array comes back
-    on_time = recorded._timed_field(omega, first, field.available, dt)
-    assert on_time == (first, None)
-    assert sum(kept is not None for kept, _ in recorded._TIMED.values()) == 1
+    monkeypatch.setattr(delay, "_KEPT", delay.OrderedDict())
+    monkeypatch.setattr(delay, "KEPT_BYTES", field.body.nbytes + 1)   # room for one
+    _, first = delay.timed_readings(omega, field.body, field.available, dt)
+    _, second = delay.timed_readings(omega, np.roll(field.body, 3, axis=0), field.available, dt)
+    assert len(delay._KEPT) == 1 and next(iter(delay._KEPT.values()))[1] is second
+    with pytest.raises(ValueError, match="read-only"):     # shared by every caller
+        second[0, 0] = 0.0
+    # a field on time keeps only its fit, no readings: the caller keeps its own
+    fit, on_time = delay.timed_readings(omega, first, field.available, dt)
+    assert on_time is None and abs(fit.delay_s) < 0.5 * dt
+    assert [kept is not None for _, kept in delay._KEPT.values()] == [True, False]
+    # and a fit alone is kept as long as the count allows, none past it
+    monkeypatch.setattr(delay, "KEPT_FITS", 1)
+    delay.timed_readings(omega, np.roll(field.body, 1, axis=0), field.available, dt)
+    assert len(delay._KEPT) == 1
+
+
+def test_a_trial_is_fitted_once_for_its_note_and_its_offline_estimators(monkeypatch, tmp_path):
+    # broad's delay note and the offline estimators' timing read the same
+    # readings: the second takes the first's fit (the warm-up's few samples
+    # aside, too few to fit)
+    from sensors import delay
+    monkeypatch.setattr(delay, "_KEPT", delay.OrderedDict())
+    lengths = []
+    fitted = delay.delay_fit
+    monkeypatch.setattr(delay, "delay_fit", lambda rates, *rest: (
+        lengths.append(len(rates)), fitted(rates, *rest))[1])
+    assert main(["broad", "--trials", "07", "--estimators", "mekf-smoother,vqf-offline",
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert sum(n > 1000 for n in lengths) == 1
 
 
 def test_broad_says_which_estimators_timed_their_field(tmp_path, capsys):

@@ -17,7 +17,7 @@ import numpy as np
 from benchmarks.broad.inputs import heading_reference, runnable_rule, start_sample, \
     usable_readings
 from sensors.delay import AUTO_ADVICE, at_sample_times, described, hard_iron_at, \
-    recording_fit
+    recording_fit, timed_readings
 from sensors.recording import Recording, reading_interval_s, true_runs
 
 _NOTED = set()
@@ -151,14 +151,11 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     field = recording.magnetometer_uT
     read = usable_readings(recording)["magnetometer"]
     if delay == "auto":
-        fit = recording_fit(recording)
-        clear = fit is not None and fit.clear(recording.dt)
-        _FITTED[key] = (fit, clear)
-        if not clear:
-            return recording
-        delay, offset = fit.delay_s, fit.offset
-    else:               # a delay given: the hard iron it is turned about, fitted at it
-        offset = hard_iron_at(recording.gyro_radps, field, read, recording.dt, delay)
+        fit, timed = timed_readings(recording.gyro_radps, field, read, recording.dt)
+        _FITTED[key] = (fit, timed is not None)
+        return recording if timed is None else replace(recording, magnetometer_uT=timed)
+    # a delay given: the hard iron it is turned about, fitted at it
+    offset = hard_iron_at(recording.gyro_radps, field, read, recording.dt, delay)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
     return replace(recording, magnetometer_uT=timed)
 

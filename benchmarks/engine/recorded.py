@@ -32,8 +32,6 @@ its reset; the tests hold each to the per-run path to 1e-9 at every sample.
 """
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -76,48 +74,19 @@ def field_timed(estimator, omega: np.ndarray, vectors: tuple) -> tuple:
     reads the field as a heading or alone (a recording's IMU), the
     magnetometer's readings taken at their samples' times if their delay
     against the gyro ``omega`` is clear — what ``--magnetometer-delay auto``
-    does (:func:`sensors.delay.delay_fit`, :func:`~sensors.delay.at_sample_times`)."""
+    does (:func:`sensors.delay.timed_readings`)."""
     if not (getattr(estimator, "fit_magnetometer_delay", False)
             and getattr(estimator, "magnetometer_model", "heading") == "heading"):
         return vectors, None
+    from sensors.delay import timed_readings      # here: few runs time their field
     timed, applied = [], None
     for readings in vectors:
         if readings.sensor == "magnetometer":
-            body, fit = _timed_field(omega, readings.body, readings.available, estimator.dt)
-            if fit is not None:
+            fit, body = timed_readings(omega, readings.body, readings.available, estimator.dt)
+            if body is not None:
                 applied, readings = fit, replace(readings, body=body)
         timed.append(readings)
     return tuple(timed), applied
-
-
-#: The last fields timed (:func:`_timed_field`), by their contents: a
-#: tuning runs each recording many times, each run's fit the same.
-_TIMED = OrderedDict()
-#: How much of them it keeps, bytes (a field timed is 24 bytes a sample:
-#: 1.3 MB for a BROAD trial, 17 MB for an hour at 200 Hz); the last always.
-TIMED_BYTES = 64 << 20
-
-
-def _timed_field(omega, body, available, dt: float) -> tuple:
-    """The field ``body`` at its samples' times and the fit, or the field as
-    it is and None where its delay is not clear; the same answer for the
-    same readings is kept (by a digest of their contents, never their
-    identity; a field not timed is not kept, only that it is not)."""
-    key = (hashlib.blake2b(b"".join(np.ascontiguousarray(a).tobytes()
-                                    for a in (omega, body, available))).hexdigest(), dt)
-    if key not in _TIMED:
-        from sensors.delay import at_sample_times, delay_fit   # here: few runs time their field
-        fit, timed = delay_fit(omega, body, available, dt), None
-        if fit is not None and fit.clear(dt):
-            timed = at_sample_times(omega, body, available, dt, fit.delay_s, fit.offset)
-            timed.flags.writeable = False           # shared by every run that reads it
-        _TIMED[key] = (timed, fit if timed is not None else None)
-        while len(_TIMED) > 1 and sum(0 if kept is None else kept.nbytes
-                                      for kept, _ in _TIMED.values()) > TIMED_BYTES:
-            _TIMED.popitem(last=False)
-    _TIMED.move_to_end(key)
-    timed, fit = _TIMED[key]
-    return (body, None) if timed is None else (timed, fit)
 
 
 def path_of(estimator, vectors=()) -> str:
