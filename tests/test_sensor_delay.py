@@ -156,6 +156,9 @@ def test_the_dataset_takes_each_reading_at_its_time_only_when_asked():
     # the fitted delay is 12.8 ms: a number close to it takes nearly the same readings
     assert np.max(np.abs(auto - given_delay)) < 0.5
     assert np.max(np.abs(auto - raw)) > 5.0
+    # the recording's own channel, writable as every channel is (the timed
+    # readings kept for the offline estimators are read-only and shared)
+    assert auto.flags.writeable
 
 
 @pytest.fixture(scope="module")

@@ -153,7 +153,8 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
     if delay == "auto":
         fit, timed = timed_readings(recording.gyro_radps, field, read, recording.dt)
         _FITTED[key] = (fit, timed is not None)
-        return recording if timed is None else replace(recording, magnetometer_uT=timed)
+        # a copy: the kept readings are read-only, a recording's channels are not
+        return recording if timed is None else replace(recording, magnetometer_uT=timed.copy())
     # a delay given: the hard iron it is turned about, fitted at it
     offset = hard_iron_at(recording.gyro_radps, field, read, recording.dt, delay)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
