@@ -48,8 +48,10 @@ this setting, as for offline VQF's), the field's delay is fitted from how
 it turns against the gyro before the passes (no reference read) and, where
 the fit is clear, each reading is taken at its sample's time — what
 ``--magnetometer-delay auto`` does for every estimator (:mod:`sensors.delay`);
-with the heading model only (a recording's IMU). :meth:`track` itself
-takes the readings as given.
+with the heading model only (a recording's IMU). Where the recording's
+field was timed already (``--magnetometer-delay``, given or fitted), its
+inputs turn the setting off (:mod:`benchmarks.broad.inputs`): none is taken
+out twice. :meth:`track` itself takes the readings as given.
 
 VQF's offline mode (Laidig & Seel 2023, §3.5, ``offlineVQF``) is the peer:
 forward and backward passes of its bias estimator, fused in information

@@ -53,6 +53,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -255,23 +256,39 @@ def timed_readings(rates, vectors, available, dt: float) -> tuple:
 
 #: The fits kept (:func:`timed_readings`), the last used last, and how many
 #: bytes of timed readings they may hold (24 a sample: 1.3 MB for a BROAD
-#: trial, 17 MB for an hour at 200 Hz; the last always) and how many fits.
+#: trial, 17 MB for an hour at 200 Hz; the last always) and how many fits;
+#: the bookkeeping under a lock (a worker may run tasks in threads: two that
+#: fit the same readings at once each fit them, and keep one answer).
 _KEPT = OrderedDict()
+_KEPT_LOCK = threading.Lock()
 KEPT_BYTES = 64 << 20
 KEPT_FITS = 256
 
 
+def _digest(*arrays) -> str:
+    """A digest of the arrays' contents, shapes and types."""
+    digest = hashlib.blake2b()
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.shape}{array.dtype.str}".encode())
+        digest.update(memoryview(array).cast("B"))
+    return digest.hexdigest()
+
+
 def _kept(rates, vectors, available, dt: float, timed: bool) -> tuple:
-    key = (hashlib.blake2b(b"".join(np.ascontiguousarray(a).tobytes()
-                                    for a in (rates, vectors, available))).hexdigest(), dt)
-    fit, readings = _KEPT.pop(key, None) or (delay_fit(rates, vectors, available, dt), None)
+    key = (_digest(rates, vectors, available), dt)
+    with _KEPT_LOCK:
+        kept = _KEPT.get(key)
+    fit, readings = kept or (delay_fit(rates, vectors, available, dt), None)
     if timed and readings is None and fit is not None and fit.clear(dt):
         readings = at_sample_times(rates, vectors, available, dt, fit.delay_s, fit.offset)
         readings.flags.writeable = False
-    _KEPT[key] = (fit, readings)
-    while len(_KEPT) > 1 and (len(_KEPT) > KEPT_FITS or sum(
-            0 if kept is None else kept.nbytes for _, kept in _KEPT.values()) > KEPT_BYTES):
-        _KEPT.popitem(last=False)
+    with _KEPT_LOCK:
+        _KEPT.pop(key, None)
+        _KEPT[key] = (fit, readings)
+        while len(_KEPT) > 1 and (len(_KEPT) > KEPT_FITS or sum(
+                0 if kept is None else kept.nbytes for _, kept in _KEPT.values()) > KEPT_BYTES):
+            _KEPT.popitem(last=False)
     return fit, readings
 
 

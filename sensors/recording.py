@@ -68,6 +68,9 @@ class Recording:
     accelerometer_mps2 : (N, 3) or None, the accelerometer's specific force,
         m/s², body frame (gravity reads +up at rest)
     magnetometer_uT : (N, 3) or None, the magnetometer, µT, body frame
+    magnetometer_timed : bool, its readings already taken at their samples'
+        times (a delay taken out: :mod:`sensors.delay`), so none is taken
+        out again
     """
 
     name: str
@@ -78,6 +81,7 @@ class Recording:
     info: str = ""
     accelerometer_mps2: np.ndarray | None = None
     magnetometer_uT: np.ndarray | None = None
+    magnetometer_timed: bool = False
 
     @property
     def has_vectors(self) -> bool:

@@ -442,6 +442,24 @@ def test_a_group_mean_is_nan_where_an_estimator_has_no_score_on_one_of_its_trial
     assert "all_trials (2)" in text
 
 
+def test_the_group_table_says_on_which_trials_the_field_was_timed():
+    # An offline estimator times its field where the delay's fit is clear:
+    # the note says where, when that is not every trial
+    rows = [{"trial": trial, "estimator": "vqf-offline", "mode": "offline",
+             "movement_samples": 10, "scored_samples": 10, "magnetometer_delay_ms": delay,
+             **{metric: 1.0 for metric in METRICS}}
+            for trial, delay in ((TRIAL_02, 12.4), (TRIAL_07, math.nan))]
+    dataset = open_broad(SHIPPED)
+    for trials in (rows, rows[:1]):
+        frame = pd.DataFrame(trials)
+        result = benchmark.BroadResult(
+            trials=frame, groups=benchmark.group_means(dataset, frame), curves={},
+            labels={"vqf-offline": "VQF offline"}, curve_trial="")
+        text = benchmark.format_groups(result)
+        assert "vqf-offline: the magnetometer taken at its samples' times" in text
+        assert ("where it was clear (1 of 2 trials)" in text) == (len(trials) == 2)
+
+
 # --- what the tables say --------------------------------------------------------------------
 
 @pytest.mark.slow      # the per-run EKF over a whole trial: 5 s

@@ -161,6 +161,27 @@ def test_the_dataset_takes_each_reading_at_its_time_only_when_asked():
     assert auto.flags.writeable
 
 
+@pytest.mark.parametrize("delay", [0.005, "auto"])
+def test_a_field_timed_by_the_dataset_is_not_timed_again(delay):
+    # --magnetometer-delay, given or fitted, times the field for every
+    # estimator: the offline ones, which would time it themselves, read it
+    # as it is, and a delay given is the one they read (none taken out twice)
+    dataset = open_broad(SHIPPED)
+    trial = dataset.available[1]
+    for timed, recording in ((False, dataset.load(trial)),
+                             (True, replace(dataset, magnetometer_delay=delay).load(trial))):
+        assert recording.magnetometer_timed is timed
+        inputs = imu_inputs(recording)
+        for name in ("mekf-smoother", "vqf-offline"):
+            estimator = resolve_estimator(name).from_scenario(inputs.scenario)
+            assert estimator.fit_magnetometer_delay is not timed
+        run = run_recorded(estimator, inputs.sensors.omega_meas_radps, inputs.sensors.vectors)
+        assert (run.magnetometer_delay_s is None) is timed
+    # the other settings of a section stay (the smoother's are the MEKF's)
+    smoother = resolve_estimator("mekf-smoother").from_scenario(inputs.scenario)
+    assert smoother.magnetometer_model == "heading" and smoother.rest_updates
+
+
 @pytest.fixture(scope="module")
 def mekf_runs(tmp_path_factory):
     root = tmp_path_factory.mktemp("delay")
@@ -518,3 +539,36 @@ def test_broad_says_which_estimators_timed_their_field(tmp_path, capsys):
     assert ("vqf-offline: the magnetometer taken at its samples' times, its delay against the "
             "gyro fitted per trial (12.8 ms, late where positive") in printed
     assert "mekf, " not in printed and "mekf:" not in printed
+
+
+def test_the_fits_kept_stay_whole_under_threads(monkeypatch):
+    # A worker may run tasks in threads: the kept fits' bookkeeping is
+    # locked (without the lock, iterating them while another thread drops
+    # one raised "OrderedDict mutated during iteration" here)
+    import sys
+    import threading
+    from sensors import delay
+    monkeypatch.setattr(delay, "_KEPT", delay.OrderedDict())
+    monkeypatch.setattr(delay, "KEPT_FITS", 3)
+    interval = sys.getswitchinterval()
+    errors = []
+
+    def fit_many(seed):
+        rng = np.random.default_rng(seed)
+        try:
+            for _ in range(300):      # too few readings to fit: each call is quick
+                delay.timed_readings(rng.normal(size=(8, 3)), rng.normal(size=(8, 3)),
+                                     np.ones(8, dtype=bool), 0.01)
+        except Exception as err:      # noqa: BLE001 - any error fails the test below
+            errors.append(err)
+
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=fit_many, args=(seed,)) for seed in range(4)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == [] and len(delay._KEPT) <= 3

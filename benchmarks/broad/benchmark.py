@@ -32,7 +32,7 @@ from benchmarks.broad.tuning import judged_samples
 from benchmarks.broad.metric import CLAIMED, METRICS, claimed_deg, errors_deg, rmse_of, \
     scored_samples, unscored_reason, without_heading
 from dynamics.validation import InvalidParameterError
-from benchmarks.engine.recorded import path_of, run_recorded
+from benchmarks.engine.recorded import field_timed, path_of, run_recorded
 from benchmarks.output import progress
 from estimators import resolve_estimator
 
@@ -244,7 +244,9 @@ _WARM = set()
 def _warm_up(estimator, sensors) -> None:
     """The first run of a compiled path in a process loads (or compiles) its
     machine code: done once on a few samples, so that no trial's time per
-    sample counts it."""
+    sample counts it; nor the field's timing, the trial's, shared by the
+    offline estimators (:func:`sensors.delay.timed_readings` keeps it)."""
+    field_timed(estimator, sensors.omega_meas_radps, sensors.vectors)
     key = (type(estimator), path_of(estimator, sensors.vectors))
     if key[1] in ("kernel", "compiled") and key not in _WARM:
         run_recorded(estimator, sensors.omega_meas_radps[:4],
@@ -414,9 +416,13 @@ def format_groups(result: BroadResult, metric: str = "total_rmse_deg") -> str:
     if timed is not None and timed.notna().any():
         names = ", ".join(sorted(set(result.trials.loc[timed.notna(), "estimator"])))
         low, high = f"{timed.min():.1f}", f"{timed.max():.1f}"
-        notes.append(f"{names}: the magnetometer taken at its samples' times, its delay against "
-                     f"the gyro fitted per trial ({low if low == high else f'{low} to {high}'} "
-                     "ms, late where positive; magnetometer_delay_ms in broad_trials.csv)")
+        fitted = timed.notna().groupby(result.trials["trial"]).any()
+        where = "" if fitted.all() else \
+            f" where it was clear ({fitted.sum()} of {len(fitted)} trials)"
+        span = low if low == high else f"{low} to {high}"
+        notes.append(f"{names}: the magnetometer taken at its samples' times{where}, its delay "
+                     f"against the gyro fitted per trial ({span} ms, late where positive; "
+                     "magnetometer_delay_ms in broad_trials.csv)")
     return "\n".join([text, *group_notes(result), *notes])
 
 

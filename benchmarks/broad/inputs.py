@@ -164,6 +164,18 @@ def _sine_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
+def _timed_already(recording: Recording) -> dict:
+    """The estimators that time their own field (``fit_magnetometer_delay``:
+    the offline ones) told not to where the recording's was timed already
+    (``--magnetometer-delay``, a delay given or fitted): a delay is never
+    taken out twice, and a delay given is the one every estimator reads."""
+    if not recording.magnetometer_timed:
+        return {}
+    from estimators import ESTIMATORS
+    return {name: {"fit_magnetometer_delay": False} for name in ESTIMATORS
+            if "fit_magnetometer_delay" in ESTIMATORS[name].option_names()}
+
+
 def heading_scored(cls, recording: Recording) -> bool:
     """Whether estimator class ``cls`` is scored on its heading on
     ``recording``: it has a heading reference there
@@ -343,7 +355,8 @@ def imu_inputs(recording: Recording, gyro_delay_s: float = 0.0, sigmas=None) -> 
         estimator_options=recorded_options({"mekf": {**priors, **IMU_MODELS},
                                             "usque": {**priors, **IMU_MODELS},
                                             "ekf": {"gate_probability": GATE_PROBABILITY},
-                                            **_vqf_options(usable, dt)}))
+                                            **_vqf_options(usable, dt),
+                                            **_timed_already(recording)}))
     sensors = SensorData(omega_meas_radps=delayed_gyro(recording, delay),
                          star_tracker_quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
                          available=np.zeros(n, dtype=bool), vectors=vectors)

@@ -154,11 +154,12 @@ def magnetometer_timed(recording: Recording, delay, path: Path) -> Recording:
         fit, timed = timed_readings(recording.gyro_radps, field, read, recording.dt)
         _FITTED[key] = (fit, timed is not None)
         # a copy: the kept readings are read-only, a recording's channels are not
-        return recording if timed is None else replace(recording, magnetometer_uT=timed.copy())
+        return recording if timed is None else replace(
+            recording, magnetometer_uT=timed.copy(), magnetometer_timed=True)
     # a delay given: the hard iron it is turned about, fitted at it
     offset = hard_iron_at(recording.gyro_radps, field, read, recording.dt, delay)
     timed = at_sample_times(recording.gyro_radps, field, read, recording.dt, delay, offset)
-    return replace(recording, magnetometer_uT=timed)
+    return replace(recording, magnetometer_uT=timed, magnetometer_timed=True)
 
 
 def applied_delay(path: Path, trial: str):
