@@ -301,7 +301,11 @@ def _readings(path: Path, key: str, section: dict, times: np.ndarray, values: np
     empty cells holds none), a logger's everyday slips mended and said: its
     last row cut short left out, rows repeated or out of order
     (:func:`sensors.clocks.mended`); an infinite or a partly empty row refused."""
-    infinite = np.flatnonzero(np.isinf(values).any(axis=1) | np.isinf(times))
+    late = np.flatnonzero(np.isinf(times))
+    if len(late):
+        refuse(path, f"{key}.time", section.get("time"), f"row {late[0]} holds an infinite "
+                f"time ({times[late[0]]}); a time is finite")
+    infinite = np.flatnonzero(np.isinf(values).any(axis=1))
     if len(infinite):
         refuse(path, f"{key}.columns", section.get("columns"), f"row {infinite[0]} holds an "
                 f"infinite value ({values[infinite[0]].tolist()}); a reading is finite")

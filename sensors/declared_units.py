@@ -65,6 +65,11 @@ HINT_FACTOR = 1.2
 #: windows a wrong clock would need (BROAD's 30 trials: 0.45 to 1.14 where
 #: their turning is clear).
 CLOCK_SEARCH_FACTOR = 2.0
+#: The fewest windows a wrong clock's search reads (a clock 10ⁿ times off
+#: holds as many of its windows as the right clock holds of the usual one:
+#: 600 a minute; a still body's 10 s windows of a minute, six, agreed with
+#: its translation by chance and named a clock 100 times off).
+CLOCK_BLOCKS = 20
 
 
 def canonical_unit(section):
@@ -231,7 +236,10 @@ def clock_turning_scale(rates: np.ndarray, specific_force: np.ndarray, dt: float
                               or _unit_mistake(scale)):
         return scale, 0
     for power in (1, -1, 2, -2, 3, -3):       # the scale 10**power: its window
-        found = turning_scale(rates, specific_force, dt, TURNING_WINDOW_S / 10.0 ** power)
+        window = TURNING_WINDOW_S / 10.0 ** power
+        if len(rates) * dt < CLOCK_BLOCKS * window:
+            continue        # too few windows to tell (a still body's few happen to agree)
+        found = turning_scale(rates, specific_force, dt, window)
         if found is not None and abs(math.log10(found) - power) <= math.log10(HINT_FACTOR):
             return found, power
     return scale, 0

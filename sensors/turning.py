@@ -284,8 +284,10 @@ def reference_scale(rates: np.ndarray, reference_quat: np.ndarray, dt: float) ->
     """The factor by which ``rates`` must be multiplied to turn as fast as
     the reference turns (1 for a gyro in rad/s on the reference's clock):
     the ratio of their RMS rates over blocks of :data:`TURNING_WINDOW_S`;
-    None where neither turns at :data:`MIN_RATE_RADPS` on average, or too
-    few blocks hold a reference."""
+    None where neither turns at :data:`MIN_RATE_RADPS` on average, or the
+    reference hardly at all (a still reference beside a gyro's bias, or a
+    gyro in a wrong unit: no scale to tell it by), or too few blocks hold
+    a reference."""
     from scipy.spatial.transform import Rotation
     steps = max(1, int(round(TURNING_WINDOW_S / dt)))
     starts = np.arange(len(rates) // steps) * steps
@@ -297,7 +299,8 @@ def reference_scale(rates: np.ndarray, reference_quat: np.ndarray, dt: float) ->
         quat[1:][paired], scalar_first=True)).as_rotvec() / (steps * dt)
     rate = _turned_rates(rates, steps, len(starts))[paired]
     turned_rms, rate_rms = (float(np.sqrt(np.mean(np.sum(x * x, axis=1)))) for x in (turned, rate))
-    if max(turned_rms, rate_rms) < MIN_RATE_RADPS or rate_rms == 0.0:
+    if max(turned_rms, rate_rms) < MIN_RATE_RADPS or rate_rms == 0.0 or \
+            turned_rms < MIN_RATE_RADPS / TURNING_FACTOR:
         return None
     return turned_rms / rate_rms
 

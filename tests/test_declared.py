@@ -274,6 +274,7 @@ def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tm
     (dict(back=True), "gyro.time = 't': goes back or repeats at reading 100 \\([0-9.]+ s after "
                       "[0-9.]+ s\\); times must increase"),
     (dict(partly=True), "accelerometer.columns = .*: row 7 is partly empty"),
+    (dict(infinite_time=True), "gyro.time = 't': row 100 holds an infinite time \\(inf\\)"),
     (dict(time_unit="minutes"), "time_unit = 'minutes': must be one of s, ms, us, ns"),
     # Times in seconds declared in ms: the clock's unit is named, not the gyro's.
     (dict(time_unit="ms"), 'time_unit = .ms.: makes the gyro read at 2.86e\\+05 Hz, where an '
@@ -302,6 +303,8 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
         table["t"][100] = table["t"][98]
     if change.pop("partly", False):
         table["ay"][7] = np.nan
+    if change.pop("infinite_time", False):
+        table["t"][100] = np.inf
     if change.pop("inverse", False):
         table["qx"], table["qy"], table["qz"] = -table["qx"], -table["qy"], -table["qz"]
     columns = change.pop("mag_columns", [0, 1, 2])
@@ -314,6 +317,46 @@ def test_a_loggers_mistake_is_one_line_and_nothing_is_written(trial, tmp_path, c
     assert err.count("\n") == 1 and err.startswith("attitude-bench: error: log.toml: recording.")
     assert re.search(message, err), err
     assert not out.exists()
+
+
+def _still_log(seconds: float = 30.0, rate_hz: float = 100.0, carried: float = 0.2) -> dict:
+    """A device that never turns: its gyro reads its bias and noise (deg/s),
+    its accelerometer gravity tilted 30° and a translation of ``carried``
+    m/s² at 0.5 Hz, its magnetometer a constant field (north, dipping 63°),
+    its reference one attitude throughout."""
+    rng = np.random.default_rng(3)
+    t = np.arange(int(seconds * rate_hz)) / rate_hz
+    tilt = math.radians(30.0)
+    # the world's (ENU) up and field in the body, turned 30° about x
+    up = 9.81 * np.array([0.0, math.sin(tilt), math.cos(tilt)])
+    field = np.array([0.0, 20.0 * math.cos(tilt) - 40.0 * math.sin(tilt),
+                      -20.0 * math.sin(tilt) - 40.0 * math.cos(tilt)])
+    table = {"t": t}
+    for i, axis in enumerate("xyz"):
+        table[f"g{axis}"] = (0.1, -0.2, 0.05)[i] + 0.05 * rng.standard_normal(len(t))
+        table[f"a{axis}"] = up[i] + carried * np.sin(2 * np.pi * 0.5 * t + i) \
+            + 0.02 * rng.standard_normal(len(t))
+        table[f"m{axis}"] = field[i] + 0.3 * rng.standard_normal(len(t))
+    quat = (math.cos(tilt / 2), math.sin(tilt / 2), 0.0, 0.0)
+    table.update({f"q{part}": np.full(len(t), quat[i]) for i, part in enumerate("wxyz")})
+    return table
+
+
+def test_a_still_device_carried_is_scored_and_inspected(tmp_path, capsys):
+    # A device carried without turning: its accelerometer's translation,
+    # read over a few 10 s windows, once passed for gravity turning a
+    # hundred times slower than the gyro (a clock "100 times off"), and
+    # inspect, guessing rad/s for its deg/s bias, divided by the still
+    # reference's zero turning (a traceback)
+    declared = _declare(tmp_path, _csv(tmp_path, _still_log(), "still.csv"), gyro_unit="deg/s")
+    out = tmp_path / "out"
+    assert main(["broad", "--broad", str(declared), "--estimators", "mekf", "--out", str(out),
+                 "--quiet"]) == 0
+    scores = pd.read_csv(out / "broad_trials.csv")
+    assert scores["total_rmse_deg"].iloc[0] < 1.0
+    capsys.readouterr()
+    assert main(["inspect", str(tmp_path / "still.csv"), "--out", str(tmp_path / "guess")]) == 0
+    assert "Traceback" not in capsys.readouterr().err
 
 
 @pytest.mark.slow      # 4 s
@@ -372,6 +415,8 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, 
     ("text cell", "gyro.columns = 'gx': must be one column of numbers; it holds text"),
     ("frame on gyro", "gyro.frame = 'NED': is not a key of the gyro's section"),
     ("lengths", "magnetometer.columns = .*: must be columns of one length"),
+    # The one recording given, too short: its own rule, named by its file.
+    ("short", "broad = '.*log.toml': has 20 samples; a trial needs at least"),
     # The file's own error, named by the declaration that gave it.
     ("empty file", "log.toml: recording.file = 'log.csv': cannot be read"),
     # The fit's rule, not the key's: the trial's first 40 s turn too little.
@@ -389,6 +434,8 @@ def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, ch
         table["gx"][5] = "err"
     if change == "header only":
         table = {key: value[:0] for key, value in table.items()}
+    if change == "short":
+        table = {key: value[2000:2020] for key, value in table.items()}
     if change == "lengths":
         table["mx"] = table["mx"][:100]
         np.savez(tmp_path / "log.npz", **table)
@@ -575,6 +622,25 @@ def test_a_clipped_accelerometer_is_noted(trial, tmp_path, capsys):
     assert main([*args, "--out", str(tmp_path / "clipped")]) == 0
     assert f"trial log: {count} accelerometer readings at ±11 m/s², its rail (clipped)" in \
         capsys.readouterr().err
+
+
+def test_replay_notes_a_clipped_gyro_and_only_its_gyro(trial, tmp_path, capsys):
+    # replay reads the gyro alone: its clipping is said, as broad says it,
+    # and the accelerometer's, which it does not read, is not
+    table = _table(trial, whole=True)
+    # rails below the trial's peaks: 0.5 rad/s, and 9.5 m/s² (gravity's axis at rest)
+    for prefix, rail in (("g", 0.5), ("a", 9.5)):
+        for axis in "xyz":
+            table[f"{prefix}{axis}"] = np.clip(table[f"{prefix}{axis}"], -rail, rail)
+    from benchmarks.experiments.inspection import clipped
+    for prefix in "ga":
+        assert clipped(np.column_stack([table[f"{prefix}{axis}"] for axis in "xyz"]))[0] >= 20
+    _csv(tmp_path, table)
+    assert main(["replay", "--dataset", str(_declare(tmp_path, "log.csv")), "--estimators",
+                 "dead-reckoning", "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "gyro readings at ±0.5 rad/s, its rail (clipped)" in err
+    assert "accelerometer readings at" not in err
 
 
 @settings(max_examples=60, deadline=None)

@@ -329,3 +329,18 @@ def test_inspect_refuses_a_read_only_folder_beside_the_file_before_any_work(phon
     assert captured.out == "" and len(captured.err.strip().splitlines()) == 1
     assert "is not writable" in captured.err and "give --out DIR" in captured.err
     assert not (folder / "phone.toml").exists()
+
+
+def test_inspect_guesses_past_an_infinite_reading_and_names_its_row(phone_csv, tmp_path, capsys):
+    # One infinite gyro reading: the guess reads it as no reading (it had
+    # passed numpy's overflow warnings on as three notes, and guessed the
+    # units from a rate of 1.8e308), and the declaration's check names the row
+    path, _ = phone_csv
+    frame = pd.read_csv(path)
+    frame.loc[2000, "gyro_y"] = np.inf
+    frame.to_csv(tmp_path / "inf.csv", index=False, float_format="%.17g")
+    assert main(["inspect", str(tmp_path / "inf.csv"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "encountered" not in err
+    assert "row 2000 holds an infinite value" in err
+    assert 'unit = "deg/s"' in (tmp_path / "o" / "inf.toml").read_text()

@@ -355,7 +355,7 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
     for each unbroken part of each (named by its file, and its part where
     the gyro's clock has gaps: :func:`sensors.declared.load_parts`), all in
     one group; a part too short to run is left out, and a note says so."""
-    files = {}
+    files, left_out = {}, []
     for path in paths:
         parts = declared_parts(path)
         if len(parts) > 1:
@@ -372,12 +372,16 @@ def declared_dataset(paths, folder: Path, parameter: str) -> BroadDataset:
                     "replay --dataset)")
             rule = runnable_rule(part)
             if rule:
-                warnings.warn(f"{path.name}: part {part.name} left out: {rule}", stacklevel=2)
+                left_out.append((path, part.name, rule))
             else:
                 files[part.name] = path
+    if not files and len(left_out) == 1:      # the one recording given: its own rule
+        raise InvalidParameterError(parameter, str(left_out[0][0]), left_out[0][2])
     if not files:
         raise InvalidParameterError(parameter, str(folder), "holds no recording long enough to "
                                     "run (each part of each [recording] file was left out)")
+    for path, part, rule in left_out:
+        warnings.warn(f"{path.name}: part {part} left out: {rule}", stacklevel=2)
     trials = {name: {"description": f"declared by {path.name}",
                      "groups": [RECORDINGS_GROUP.name]} for name, path in files.items()}
     return BroadDataset(folder=folder, groups=(RECORDINGS_GROUP,), trials=trials, files=files,

@@ -41,11 +41,15 @@ CLIPPING_HARM = {"gyro": "every filter's turn there falls short of the body's",
                  "accelerometer": "the filters read less acceleration than there was"}
 
 
-def note_clipping(recording: Recording, path: Path) -> None:
-    """A note for a gyro or accelerometer that sits at its rail: clipped."""
+def note_clipping(recording: Recording, path: Path,
+                  channels: tuple = ("gyro", "accelerometer")) -> None:
+    """A note for a gyro or accelerometer (of ``channels``: those the run
+    reads) that sits at its rail: clipped."""
     from benchmarks.experiments.inspection import clipped
     for name, values, unit in (("gyro", recording.gyro_radps, "rad/s"),
                                ("accelerometer", recording.accelerometer_mps2, "m/s²")):
+        if name not in channels:
+            continue
         count, extreme = clipped(values) if values is not None else (0, 0.0)
         note = (f"trial {recording.name}: {count} {name} readings at ±{extreme:.6g} {unit}, its "
                 f"rail (clipped): {CLIPPING_HARM[name]}")

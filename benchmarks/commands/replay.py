@@ -65,6 +65,7 @@ def run(args, _scenario):
     from benchmarks.experiments.gyro_delay import DELAY_SEARCH_SAMPLES, likeliest_gyro_delay
     from benchmarks.experiments.replay import REPLAY_SENSORS
     from benchmarks.sensor_use import refuse_unreadable
+    from benchmarks.broad.trial_notes import note_clipping
     # The estimators, the recording, the settings and the memory are checked before any write.
     refuse_unreadable(args.estimators, REPLAY_SENSORS, "the replay")
     delay = args.gyro_delay
@@ -82,6 +83,8 @@ def run(args, _scenario):
     data = load_replay(args.dataset, args.star_tracker_interval, args.star_tracker_noise_deg,
                        args.seed, settings=args.scenario, allow_imports=allowed_imports(args),
                        gyro_delay_s=delay)
+    # replay reads the gyro alone: its clipping is said, as broad says it
+    note_clipping(data.recording, Path(str(args.dataset)), channels=("gyro",))
     if args.tuned:
         data = _tuned_replay(args, data, delay)
     else:

@@ -175,8 +175,8 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
         if accelerometer and accelerometer["time"] == gyro["time"]:
             force = column_values(table, accelerometer["columns"]) * \
                 UNITS["accelerometer"][accelerometer["unit"]]
-            force = np.nan_to_num(force)
-        rates = np.nan_to_num(column_values(table, gyro["columns"]))
+            force = np.nan_to_num(force, posinf=0.0, neginf=0.0)    # no reading
+        rates = np.nan_to_num(column_values(table, gyro["columns"]), posinf=0.0, neginf=0.0)
         step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
         gyro["unit"], power = gyro_unit(rates, force, step)
         if power:
