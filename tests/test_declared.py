@@ -555,6 +555,13 @@ def test_replay_finds_the_rest_a_declared_recording_begins_with(trial, tmp_path)
         moving[f"q{part}"][:int(recording.rate_hz)] = np.nan
     moved = open_dataset(str(_declare(tmp_path, _csv(tmp_path, moving, "moving.csv"))))[0]
     assert moved.movement.all() and np.isnan(moved.rest_gyro_mean_radps()).all()
+    # A log at rest throughout (its first 35 s): nothing moves after its
+    # rest, and every sample is scored (its last fraction of a second had
+    # been scored alone, as "the movement after the rest")
+    rested = {key: np.array(value)[:int(35 * recording.rate_hz)] for key, value in table.items()}
+    with pytest.warns(UserWarning, match="it is at rest throughout"):
+        still = open_dataset(str(_declare(tmp_path, _csv(tmp_path, rested, "still.csv"))))[0]
+    assert still.movement.all()
 
 
 def test_read_table_names_a_file_it_cannot_read(tmp_path):

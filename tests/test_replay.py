@@ -193,7 +193,8 @@ def test_bad_recordings_are_refused_in_one_line(tmp_path, capsys, changes, messa
     (["--star-tracker-interval", "0"], "star_tracker_interval = 0.0: must be > 0"),
     (["--star-tracker-noise-deg", "-1"], "star_tracker_noise_deg = -1.0: must be > 0"),
     (["--star-tracker-noise-deg", "0"], "star_tracker_noise_deg = 0.0: must be > 0"),
-    (["--star-tracker-interval", "1000"], "must be shorter than the recording (186.3 s)"),
+    (["--star-tracker-interval", "1000"],
+     "must be shorter than the recording (186.3 s; --star-tracker-interval, 1 s by default)"),
     (["--estimators", "ekf,ekf"], "names ekf more than once"),
 ])
 def test_bad_replay_settings_are_refused_in_one_line(tmp_path, capsys, argv, message):

@@ -121,10 +121,12 @@ def with_found_rest(recording: Recording) -> Recording:
     1.5 s) from its first sample. There, as in a BROAD trial's rest, the
     gyro's noise and bias are taken; a note says how long it is. Where none
     is found, it moves from its first sample: no rest, even before its
-    reference begins."""
+    reference begins; where the rest lasts to its end, it is still
+    throughout, and every sample is scored."""
     import warnings
     from dataclasses import replace
     from benchmarks.experiments.inspection import rest_periods
+    from estimators.imu.rest import MIN_DURATION_S
     from sensors.turning import held_readings
     force = (np.zeros_like(recording.gyro_radps) if recording.accelerometer_mps2 is None
              else held_readings(recording.accelerometer_mps2))
@@ -135,10 +137,15 @@ def with_found_rest(recording: Recording) -> Recording:
     if not periods or periods[0][0] > 0.0:   # no rest: it moves from its first sample
         return replace(recording, movement=np.ones(recording.n_samples, dtype=bool))
     end = int(round(periods[0][1] / recording.dt))
-    warnings.warn(f"{recording.name}: its first {end * recording.dt:.1f} s are at rest (the gyro"
-                  f"{' and the accelerometer' if recording.accelerometer_mps2 is not None else ''}"
-                  " still within VQF's thresholds): the gyro's noise and bias are taken there "
-                  "and the movement is scored after it", stacklevel=2)
+    both = " and the accelerometer" if recording.accelerometer_mps2 is not None else ""
+    still = f"the gyro{both} still within VQF's thresholds"
+    if (recording.n_samples - end) * recording.dt < MIN_DURATION_S:     # no movement after it
+        warnings.warn(f"{recording.name}: it is at rest throughout ({still}): nothing moves, "
+                      "and every sample is scored, no rest taken out", stacklevel=2)
+        return replace(recording, movement=np.ones(recording.n_samples, dtype=bool))
+    warnings.warn(f"{recording.name}: its first {end * recording.dt:.1f} s are at rest ({still}): "
+                  "the gyro's noise and bias are taken there and the movement is scored after "
+                  "it", stacklevel=2)
     # movement from the rest's end on (scored where the reference is): the
     # rest is the samples before it, even where the reference begins later
     return replace(recording, movement=np.arange(recording.n_samples) >= end)
@@ -172,16 +179,14 @@ MAX_NOISE_DEG = 90.0
 def interval_steps(recording: Recording, interval_s: float) -> int:
     """``interval_s`` in whole samples of ``recording``, checked."""
     interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
-    if not interval_s / recording.dt < recording.n_samples:     # round(inf) would overflow
+    # round(inf) would overflow: the ratio is checked first
+    if not interval_s / recording.dt < recording.n_samples or \
+            max(1, round(interval_s / recording.dt)) >= recording.n_samples:
         raise InvalidParameterError("star_tracker_interval", interval_s,
                                     f"must be shorter than the recording "
-                                    f"({recording.n_samples * recording.dt:.1f} s)")
-    steps = max(1, round(interval_s / recording.dt))
-    if steps >= recording.n_samples:
-        raise InvalidParameterError("star_tracker_interval", interval_s,
-                                    f"must be shorter than the recording "
-                                    f"({recording.n_samples * recording.dt:.1f} s)")
-    return steps
+                                    f"({recording.n_samples * recording.dt:.4g} s; "
+                                    "--star-tracker-interval, 1 s by default)")
+    return max(1, round(interval_s / recording.dt))
 
 
 def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S,
