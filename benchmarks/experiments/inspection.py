@@ -67,13 +67,14 @@ def fitting_unit(sensor: str, values: np.ndarray) -> str | None:
 
 
 def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -> tuple:
-    """``(rad/s or deg/s, power)``: the gyro's unit, and the power of ten
+    """``(rad/s or deg/s, power, turned)``: the gyro's unit, and the power of ten
     by which the times' tick is longer than assumed, that together turn
     gravity as the accelerometer sees it turn (:func:`sensors.
     declared_units.clock_turning_scale`; a tick other than assumed only
     where it fits within :data:`~sensors.declared_units.HINT_FACTOR`);
     without an accelerometer, by the rates' size (a hand-held or vehicle
-    IMU's rates rarely pass 20 rad/s) and the tick assumed."""
+    IMU's rates rarely pass 20 rad/s) and the tick assumed; ``turned``:
+    whether gravity's turning told them (else the rates' size did)."""
     if specific_force is not None:
         scale, _ = clock_turning_scale(rates, specific_force, dt)
         if scale is not None:
@@ -83,9 +84,9 @@ def gyro_unit(rates: np.ndarray, specific_force: np.ndarray | None, dt: float) -
                                range(-3, 4)), key=lambda pair: misfit(pair)
                               + (math.log(HINT_FACTOR) if pair[1] else 0.0))
             if power == 0 or misfit((unit, power)) <= math.log(HINT_FACTOR):
-                return unit, power   # a tick only where it fits (raw counts fit none)
-            return min(UNITS["gyro"], key=lambda unit: misfit((unit, 0))), 0
-    return ("deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"), 0
+                return unit, power, True   # a tick only where it fits (raw counts fit none)
+            return min(UNITS["gyro"], key=lambda unit: misfit((unit, 0))), 0, True
+    return ("deg/s" if np.nanmax(np.abs(rates)) > 20.0 else "rad/s"), 0, False
 
 
 def rest_periods(rates: np.ndarray, specific_force: np.ndarray, dt: float) -> list:
@@ -169,21 +170,34 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
                              "check it")
         declaration[sensor] = section
     if "gyro" in declaration:
-        gyro = declaration["gyro"]
-        force = None
-        accelerometer = declaration.get("accelerometer")
-        if accelerometer and accelerometer["time"] == gyro["time"]:
-            force = column_values(table, accelerometer["columns"]) * \
-                UNITS["accelerometer"][accelerometer["unit"]]
-            force = np.nan_to_num(force, posinf=0.0, neginf=0.0)    # no reading
-        rates = np.nan_to_num(column_values(table, gyro["columns"]), posinf=0.0, neginf=0.0)
-        step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
-        gyro["unit"], power = gyro_unit(rates, force, step)
-        if power:
-            declaration["time_unit"] = tick_name(seconds * 10.0 ** power)
-            notes.append(f"time: its tick is taken as {seconds * 10.0 ** power:g} s, which "
-                         "turns gravity as the gyro does (check it)")
+        _guess_gyro(declaration, table, gyro_time, seconds, notes)
     return declaration, notes
+
+
+def _guess_gyro(declaration: dict, table, gyro_time: np.ndarray, seconds: float,
+                notes: list) -> None:
+    """The gyro's unit (and the clock's tick, where another fits) in
+    ``declaration``, by how its rates turn gravity (:func:`gyro_unit`),
+    with a note where they are a guess; an infinite reading read as none."""
+    gyro = declaration["gyro"]
+    force = None
+    accelerometer = declaration.get("accelerometer")
+    if accelerometer and accelerometer["time"] == gyro["time"]:
+        force = column_values(table, accelerometer["columns"]) * \
+            UNITS["accelerometer"][accelerometer["unit"]]
+        force = np.nan_to_num(force, posinf=0.0, neginf=0.0)
+    rates = np.nan_to_num(column_values(table, gyro["columns"]), posinf=0.0, neginf=0.0)
+    step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
+    gyro["unit"], power, turned = gyro_unit(rates, force, step)
+    if not turned:
+        notes.append(f"gyro: {gyro['unit']} by the rates' size: "
+                     + ("the log turns too little for gravity's turning to tell its unit"
+                        if force is not None else "no accelerometer on its clock to tell "
+                        "its unit by") + " (check it)")
+    if power:
+        declaration["time_unit"] = tick_name(seconds * 10.0 ** power)
+        notes.append(f"time: its tick is taken as {seconds * 10.0 ** power:g} s, which "
+                     "turns gravity as the gyro does (check it)")
 
 
 #: The note of a reference given as one array, whose order its name cannot tell.
