@@ -18,7 +18,8 @@ from benchmarks.broad.inputs import imu_inputs
 from benchmarks.engine.recorded import _finished, field_timed, path_of, run_recorded
 from benchmarks.shipped import shipped_file
 from benchmarks.simulation import build_estimator
-from estimators import AttitudeEstimator, triad, wahba
+from estimators import AttitudeEstimator, resolve_estimator, triad, wahba
+from estimators.readings import InvalidMeasurementError
 
 #: The slice: from the start of trial 07's movement (sample 7573), long
 #: enough for the gate to act, short enough for the per-run USQUE.
@@ -297,3 +298,20 @@ def test_the_per_run_path_keeps_the_covariance_its_class_tracks(trial):
                                                    np.zeros(n, bool), vectors=vectors)
     np.testing.assert_array_equal(run.attitude_covariance, trace.attitude_covariance)
     assert run.attitude_covariance.shape == (n, 3, 3)
+
+
+@pytest.mark.parametrize("name", ["mekf", "mekf-smoother", "vqf-offline", "madgwick", "triad"])
+def test_a_malformed_record_is_refused_in_one_rule_on_every_path(trial, name):
+    # Checked before any path reads it (the offline estimators' field
+    # timing, a kernel's arrays): the per-run classes' own rules, not an
+    # IndexError from deep inside
+    scenario, omega, vectors = trial
+    estimator = resolve_estimator(name).from_scenario(scenario)
+    with pytest.raises(InvalidMeasurementError, match=r"omega_meas_radps of shape = \(1500,\)"):
+        run_recorded(estimator, omega[:, 0], vectors)
+    short = tuple(replace(v, body=v.body[:-1]) if v.sensor == "magnetometer" else v
+                  for v in vectors)
+    with pytest.raises(InvalidMeasurementError,
+                       match=r"vectors\[magnetometer\]\.body of shape = \(1499, 3\): must have "
+                             r"shape \(1500, 3\)"):
+        run_recorded(estimator, omega, short)
