@@ -179,14 +179,15 @@ MAX_NOISE_DEG = 90.0
 def interval_steps(recording: Recording, interval_s: float) -> int:
     """``interval_s`` in whole samples of ``recording``, checked."""
     interval_s = finite_number("star_tracker_interval", interval_s, strictly_positive=True)
-    # round(inf) would overflow: the ratio is checked first
-    if not interval_s / recording.dt < recording.n_samples or \
-            max(1, round(interval_s / recording.dt)) >= recording.n_samples:
-        raise InvalidParameterError("star_tracker_interval", interval_s,
-                                    f"must be shorter than the recording "
-                                    f"({recording.n_samples * recording.dt:.4g} s; "
-                                    "--star-tracker-interval, 1 s by default)")
-    return max(1, round(interval_s / recording.dt))
+    # round(inf) would overflow: the ratio is checked before the steps are counted
+    if interval_s / recording.dt < recording.n_samples:
+        steps = max(1, round(interval_s / recording.dt))
+        if steps < recording.n_samples:
+            return steps
+    raise InvalidParameterError("star_tracker_interval", interval_s,
+                                f"must be shorter than the recording "
+                                f"({recording.n_samples * recording.dt:.4g} s; "
+                                "--star-tracker-interval, 1 s by default)")
 
 
 def replay_scenario(recording: Recording, interval_s: float = DEFAULT_INTERVAL_S,
