@@ -346,12 +346,14 @@ class AttitudeAndBiasEstimator(SampledRate, KalmanEstimator):
 
     def _configure(self, *, gyro_noise, gyro_bias_random_walk, measurement_covariance,
                    initial_bias_radps, initial_attitude_sigma_rad, initial_bias_sigma_radps,
-                   output, rate_interpolation="hold") -> None:
+                   output, rate_interpolation="hold", gyro_scale_density=0.0) -> None:
         """Validate and keep the settings the six-state filters share."""
         self._set_rate_interpolation(rate_interpolation)
         self.gyro_noise = finite_number("gyro_noise", gyro_noise, minimum=0.0)
         self.gyro_bias_random_walk = finite_number("gyro_bias_random_walk",
                                                    gyro_bias_random_walk, minimum=0.0)
+        self.gyro_scale_density = finite_number("gyro_scale_density", gyro_scale_density,
+                                                minimum=0.0)
         self.R = covariance_matrix("measurement_covariance", measurement_covariance, size=3)
         self.initial_bias_radps = finite_vector("initial_bias_radps", initial_bias_radps, 3)
         attitude_sigma = axis_sigmas("initial_attitude_sigma_rad", initial_attitude_sigma_rad)

@@ -58,6 +58,23 @@ is
 Below :math:`x = 0.1` the five coefficients come from their Taylor series
 (:func:`transition_coefficients`), where the closed forms lose digits.
 
+**The rate's own error** (``gyro_scale_density``, 0 by default: the book's
+gyro model). A real gyro also errs in proportion to the rate it reads: its
+scale factor and its axes' misalignment (which calibration filters estimate
+as states: Pittelkau, "Kalman filtering for spacecraft system alignment
+calibration", *JGCD* 24(6), 2001), and the timing of its samples. Where
+these are not estimated, the filter takes them
+as a white relative error of the rate, :math:`\tilde\omega = (1 + \nu_s)\,
+\omega + \beta + \eta_v` with :math:`\nu_s` of density :math:`S_s` (s):
+noise along the rate, which :math:`\Phi_{11}` (a turn about
+:math:`\hat\omega`) leaves as it is, so its exact share of :math:`Q` is
+
+.. math:: Q_{11} \mathrel{+}= S_s\, \Delta t\; \hat\omega\,\hat\omega^\mathsf{T}.
+
+In a fast turn the heading then drifts as much as the filter believes it
+may, and the field corrects it sooner; at rest it adds nothing. An IMU
+recording's filters take :data:`estimators.imu.GYRO_SCALE_DENSITY`.
+
 **Measurement** (§6.2.2): the star tracker reading :math:`z` (a quaternion)
 is first aligned in sign with the prediction (:math:`z \leftarrow -z` if
 :math:`\hat q \cdot z < 0`: :math:`q` and :math:`-q` are one attitude, and
@@ -194,7 +211,8 @@ def transition_coefficients(rate_norm_radps: float, dt: float) -> tuple[float, .
 
 
 def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: float,
-                         gyro_bias_random_walk: float) -> tuple[np.ndarray, np.ndarray]:
+                         gyro_bias_random_walk: float, gyro_scale_density: float = 0.0
+                         ) -> tuple[np.ndarray, np.ndarray]:
     r"""The error state's exact transition :math:`\Phi` and process noise :math:`Q` (6x6).
 
     Parameters
@@ -203,6 +221,7 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     dt : step, s
     gyro_noise : :math:`\sigma_v^2`, rad²/s
     gyro_bias_random_walk : :math:`\sigma_u`, rad/s^{3/2}
+    gyro_scale_density : :math:`S_s`, s (the rate's own error, module docstring)
     """
     w = float(np.sqrt(omega_hat_radps @ omega_hat_radps))
     s1, c2, s3, q5, q4 = transition_coefficients(w, dt)
@@ -214,6 +233,8 @@ def discrete_error_model(omega_hat_radps: np.ndarray, dt: float, gyro_noise: flo
     su2 = gyro_bias_random_walk * gyro_bias_random_walk
     q = np.empty((6, 6))
     q[:3, :3] = gyro_noise * dt * _I3 + su2 * (dt ** 3 / 3.0 * _I3 + q5 * W2)
+    if gyro_scale_density > 0.0:
+        q[:3, :3] += gyro_scale_density * dt * np.outer(omega_hat_radps, omega_hat_radps)
     q[:3, 3:] = -su2 * (0.5 * dt * dt * _I3 - s3 * W + q4 * W2)
     q[3:, :3] = q[:3, 3:].T
     q[3:, 3:] = su2 * dt * _I3
@@ -237,10 +258,10 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
         Gyro step, seconds.
     initial_attitude : (4,) array-like
         :math:`\\hat q_0`, scalar-first; normalised.
-    gyro_noise : float
-        :math:`\\sigma_v^2` in rad²/s the filter assumes (the gyro's noise power).
-    gyro_bias_random_walk : float
-        :math:`\\sigma_u` in rad/s^{3/2} the filter assumes.
+    gyro_noise, gyro_bias_random_walk, gyro_scale_density : float
+        The gyro model the filter assumes: :math:`\\sigma_v^2` in rad²/s (the
+        gyro's noise power), :math:`\\sigma_u` in rad/s^{3/2}, and :math:`S_s`
+        in s, the rate's own relative error (module docstring; 0: none).
     measurement_covariance : float, (3,) or (3, 3)
         :math:`R` in rad², the star tracker's body-frame error covariance.
     initial_bias_radps : (3,) array-like
@@ -306,7 +327,7 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
     def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
                  gyro_noise: float = DEFAULT_GYRO_NOISE, gyro_bias_random_walk: float = 0.0,
                  measurement_covariance=DEFAULT_MEASUREMENT_COVARIANCE,
-                 initial_bias_radps=(0.0, 0.0, 0.0),
+                 initial_bias_radps=(0.0, 0.0, 0.0), gyro_scale_density: float = 0.0,
                  initial_attitude_sigma_rad=DEFAULT_ATTITUDE_SIGMA_RAD,
                  initial_bias_sigma_radps=DEFAULT_BIAS_SIGMA_RADPS, output: str = "posterior",
                  gate_probability: float | None = None,
@@ -327,6 +348,7 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
         self.gate_probability = gate_probability_setting(gate_probability)
         self.magnetic_norm_tolerance = norm_tolerance_setting(magnetic_norm_tolerance)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
+                        gyro_scale_density=gyro_scale_density,
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
@@ -416,7 +438,7 @@ class MultiplicativeEKF(ErrorStateUpdates, MagnetometerBiasStates, AttitudeAndBi
         dt = self.dt if dt is None else dt
         omega_hat = np.asarray(omega_meas_radps, dtype=float) - self.beta_hat
         phi, q = discrete_error_model(omega_hat, dt, self.gyro_noise,
-                                      self.gyro_bias_random_walk)
+                                      self.gyro_bias_random_walk, self.gyro_scale_density)
         if self.magnetometer_bias_states:             # a constant hard iron: Φ = I, Q = 0
             phi, q = _with_constant_states(phi, q, self.state_size)
         self.filter.predict(F=phi, Q=q)

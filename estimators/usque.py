@@ -265,7 +265,7 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
 
     Parameters
     ----------
-    dt, initial_attitude, gyro_noise, gyro_bias_random_walk,
+    dt, initial_attitude, gyro_noise, gyro_bias_random_walk, gyro_scale_density,
     measurement_covariance, initial_bias_radps, initial_attitude_sigma_rad,
     initial_bias_sigma_radps, output, gate_probability, magnetic_norm_tolerance,
     rate_interpolation, gravity_model, magnetometer_model, rest_updates,
@@ -293,6 +293,7 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
 
     def __init__(self, *, dt: float = DEFAULT_DT_S, initial_attitude=IDENTITY,
                  gyro_noise: float = DEFAULT_GYRO_NOISE, gyro_bias_random_walk: float = 0.0,
+                 gyro_scale_density: float = 0.0,
                  measurement_covariance=DEFAULT_MEASUREMENT_COVARIANCE,
                  initial_bias_radps=(0.0, 0.0, 0.0),
                  initial_attitude_sigma_rad=DEFAULT_ATTITUDE_SIGMA_RAD,
@@ -323,6 +324,7 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
         self.filter = UnscentedKalmanFilter(dim_x=STATE_SIZE, dim_z=3, dt=self.dt, hx=self._hx,
                                             fx=self._fx, points=points)
         self._configure(gyro_noise=gyro_noise, gyro_bias_random_walk=gyro_bias_random_walk,
+                        gyro_scale_density=gyro_scale_density,
                         measurement_covariance=measurement_covariance,
                         initial_bias_radps=initial_bias_radps,
                         initial_attitude_sigma_rad=initial_attitude_sigma_rad,
@@ -439,7 +441,8 @@ class USQUE(SigmaPointImuUpdates, AttitudeAndBiasEstimator):
         omega_hat = omega - self.filter.x[3:]
         q_next = _unit(quat_multiply(self.q_hat, quat_from_rotvec(omega_hat * dt)))
         _, self.filter.Q = discrete_error_model(omega_hat, dt, self.gyro_noise,
-                                                self.gyro_bias_random_walk)
+                                                self.gyro_bias_random_walk,
+                                                self.gyro_scale_density)
         self.filter.predict(dt=dt, omega_meas_radps=omega, q_reference_next=q_next)
         if self.imu is not None:
             self.imu.propagate(omega_hat * dt, dt)

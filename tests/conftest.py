@@ -6,6 +6,7 @@ from hypothesis import settings
 import pytest
 
 from dynamics.quaternion import quat_from_rotvec, quat_multiply, to_body_frame
+from estimators.imu import GYRO_SCALE_DENSITY
 
 
 @pytest.fixture
@@ -102,7 +103,8 @@ def imu_filter_settings(dt: float, **extra) -> dict:
     """The MEKF's or USQUE's keywords for the simulated IMUs of the tests
     (:func:`turning_imu`): its IMU models on, as ``broad`` sets them, and a
     prior on the bias of 0.5 °/s; ``extra`` over them."""
-    return dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
-                initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
-                magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
-                **extra)
+    settings = dict(dt=dt, gyro_noise=1e-6, gyro_bias_random_walk=1e-5,
+                    initial_bias_sigma_radps=math.radians(0.5), gravity_model="lowpass",
+                    magnetometer_model="heading", rest_updates=True, rate_interpolation="end",
+                    gyro_scale_density=GYRO_SCALE_DENSITY)
+    return {**settings, **extra}

@@ -23,8 +23,10 @@ from estimators.mekf import SERIES_BELOW, discrete_error_model, transition_coeff
 FLIGHT = Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml"
 
 
-def van_loan(omega_hat, dt, sigma_v2, sigma_u):
-    """Φ and Q of dx/dt = F x + G w by Van Loan's matrix exponential (1978)."""
+def van_loan(omega_hat, dt, sigma_v2, sigma_u, scale_density=0.0):
+    """Φ and Q of dx/dt = F x + G w by Van Loan's matrix exponential (1978);
+    ``scale_density``: the rate's own error, white along ω̂ (S_s ω̂ω̂ᵀ more in
+    the rate noise's spectral density)."""
     F = np.zeros((6, 6))
     F[:3, :3] = -skew(omega_hat)
     F[:3, 3:] = -np.eye(3)
@@ -32,6 +34,7 @@ def van_loan(omega_hat, dt, sigma_v2, sigma_u):
     G[:3, :3] = -np.eye(3)
     G[3:, 3:] = np.eye(3)
     spectral = np.diag([sigma_v2] * 3 + [sigma_u ** 2] * 3)
+    spectral[:3, :3] += scale_density * np.outer(omega_hat, omega_hat)
     block = np.zeros((12, 12))
     block[:6, :6] = -F
     block[:6, 6:] = G @ spectral @ G.T
@@ -53,6 +56,48 @@ def test_transition_and_process_noise_equal_van_loan(rng, rate_norm):
     assert np.allclose(phi, phi_ref, rtol=0, atol=1e-13)
     assert np.allclose(q, q_ref, rtol=1e-9, atol=1e-22)
     assert np.allclose(q, q.T, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("rate_norm", [0.0, 0.05, 1.1, 7.9])
+def test_the_rates_own_error_is_van_loans_too(rng, rate_norm):
+    # The white relative error of the rate (gyro_scale_density) enters Q as
+    # S_s Δt ω̂ω̂ᵀ in closed form, because Φ₁₁ turns about ω̂ and leaves it as
+    # it is: against the exact integral, 450 °/s (7.9 rad/s) included.
+    direction = rng.standard_normal(3)
+    omega_hat = rate_norm * direction / np.linalg.norm(direction)
+    dt, sigma_v2, sigma_u, density = 0.05, 1e-8, 3e-5, 1e-3
+    _, q = discrete_error_model(omega_hat, dt, sigma_v2, sigma_u, density)
+    _, q_ref = van_loan(omega_hat, dt, sigma_v2, sigma_u, density)
+    assert np.allclose(q, q_ref, rtol=1e-9, atol=1e-22)
+    _, q_without = discrete_error_model(omega_hat, dt, sigma_v2, sigma_u)
+    assert np.linalg.norm(q - q_without) == pytest.approx(density * dt * rate_norm ** 2,
+                                                          rel=1e-12, abs=0)
+
+
+def test_in_a_fast_turn_the_rates_own_error_widens_the_heading_not_the_tilt():
+    # One second at 450 °/s about the vertical (the body's z at the identity,
+    # which the turn keeps): the filter's heading variance grows by S_s ω² t
+    # more than without the rate's own error; the tilt's is as it was.
+    dt, rate, density = 0.005, math.radians(450.0), 1e-7
+    covariances = []
+    for scale_density in (0.0, density):
+        mekf = MultiplicativeEKF(dt=dt, gyro_noise=1e-6, initial_attitude_sigma_rad=1e-3,
+                                 initial_bias_sigma_radps=1e-9,
+                                 gyro_scale_density=scale_density)
+        for _ in range(200):
+            mekf.propagate(np.array([0.0, 0.0, rate]))
+        covariances.append(mekf.filter.P[:3, :3])
+    without, with_ = covariances
+    assert with_[2, 2] - without[2, 2] == pytest.approx(density * rate ** 2 * 1.0, rel=1e-9)
+    assert np.allclose(with_[:2, :], without[:2, :], rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("value", [-1e-7, math.nan, math.inf])
+def test_the_rates_own_error_is_refused_unless_finite_and_not_negative(value):
+    from estimators import USQUE
+    for cls in (MultiplicativeEKF, USQUE):
+        with pytest.raises(InvalidParameterError, match=r"^gyro_scale_density = .*: must be"):
+            cls(gyro_scale_density=value)
 
 
 def test_series_and_closed_form_meet_at_the_switch():

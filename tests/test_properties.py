@@ -94,6 +94,29 @@ def test_mekf_transition_matches_finite_differences_of_the_kinematics(q_hat, ome
     assert np.allclose(numeric, phi, atol=1e-7)
 
 
+@settings(max_examples=80)
+@given(st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3), st.floats(1e-4, 0.1),
+       st.one_of(st.just(0.0), st.floats(1e-9, 1e-3)))
+def test_the_rates_own_error_adds_variance_along_the_rate_only(omega, dt, density):
+    # gyro_scale_density's share of Q is S_s Δt ω̂ω̂ᵀ: positive semi-definite,
+    # nothing across the rate (a turn about z leaves the tilt's variance as
+    # it was), S_s Δt |ω̂|² along it, and the rest of Q bit for bit as without
+    # it. ``floor``: the rounding of the sum Q₁₁ + the share, a few ulps of Q₁₁.
+    omega = np.asarray(omega)
+    _, without = discrete_error_model(omega, dt, 1e-6, 1e-5)
+    _, with_ = discrete_error_model(omega, dt, 1e-6, 1e-5, density)
+    added = (with_ - without)[:3, :3]
+    assert np.array_equal(with_[3:], without[3:]) and np.array_equal(with_[:, 3:],
+                                                                      without[:, 3:])
+    assert np.array_equal(added, added.T)
+    floor = 1e-14 * np.abs(with_[:3, :3]).max()
+    across = np.cross(omega, [0.3, -0.5, 0.8])
+    assert abs(across @ added @ across) <= floor * (across @ across)
+    along = density * dt * (omega @ omega) ** 2
+    assert abs(omega @ added @ omega - along) <= floor * (omega @ omega) + 1e-9 * along
+    assert np.linalg.eigvalsh(added).min() >= -floor
+
+
 toml_values = st.one_of(st.integers(-10 ** 6, 10 ** 6), st.floats(allow_nan=True),
                         st.text(max_size=5), st.booleans(),
                         st.lists(st.floats(-10, 10), max_size=5))

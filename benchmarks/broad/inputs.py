@@ -25,7 +25,8 @@ The MEKF and USQUE run the IMU models (:mod:`estimators.imu`, by their
 ``[estimators.mekf]`` and ``[estimators.usque]`` settings:
 :data:`IMU_MODELS`): gravity low-passed in its strapdown frame, the
 heading-only magnetometer with its hard iron fitted online, rest detection
-with the zero-rate update of its bias. Every estimator with a setting for
+with the zero-rate update of its bias, and the gyro's own error along the
+rate (:data:`estimators.imu.GYRO_SCALE_DENSITY`). Every estimator with a setting for
 it takes the gyro's reading as the rate over the interval before it (an
 IMU's output is filtered inside the sensor:
 :data:`benchmarks.experiments.replay.RECORDED_GYRO`).
@@ -51,7 +52,7 @@ from dynamics.environment import STANDARD_GRAVITY_MPS2
 from dynamics.quaternion import from_rotation
 from dynamics.validation import InvalidParameterError, standard_deviation
 from estimators import sensing, wahba
-from estimators.imu import GYRO_NOISE_DENSITY
+from estimators.imu import GYRO_NOISE_DENSITY, GYRO_SCALE_DENSITY
 from estimators.imu.heading import NORM_TOLERANCE
 from sensors.recording import Recording, reading_interval_s
 from sensors.turning import held_readings
@@ -84,7 +85,8 @@ GATE_PROBABILITY = 0.9999
 MAGNETIC_NORM_TOLERANCE = NORM_TOLERANCE
 #: The MEKF's and USQUE's settings on an IMU recording (module docstring).
 IMU_MODELS = {"gravity_model": "lowpass", "magnetometer_model": "heading",
-              "rest_updates": True, "hard_iron_fit": True}
+              "rest_updates": True, "hard_iron_fit": True,
+              "gyro_scale_density": GYRO_SCALE_DENSITY}
 
 
 @dataclass(frozen=True)

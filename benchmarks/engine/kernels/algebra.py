@@ -45,6 +45,17 @@ def propagate(q, w, half_dt, out, jacobian, want_jacobian):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def add_along_rate(Q, o0, o1, o2, density, dt):
+    """``Q[:3, :3] += S_s Δt ω̂ω̂ᵀ`` (estimators.mekf.discrete_error_model's
+    share of the rate's own error, in its order: (S_s Δt)(ω̂ᵢ ω̂ⱼ))."""
+    along = density * dt
+    o = (o0, o1, o2)
+    for i in range(3):
+        for j in range(3):
+            Q[i, j] += along * (o[i] * o[j])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def matmul4(a, b, out):
     """out = a b for 4x4 arrays (out distinct from a and b)."""
     for i in range(4):

@@ -335,6 +335,14 @@ def gate_thresholds(estimators) -> dict:
             "gate": gate}
 
 
+def gyro_errors(estimators) -> np.ndarray:
+    """``(B, 3)``: each run's gyro model, read off its per-run filter: its
+    σ_v², σ_u and S_s (``gyro_noise``, ``gyro_bias_random_walk``,
+    ``gyro_scale_density``: :mod:`estimators.mekf`)."""
+    return np.array([[e.gyro_noise, e.gyro_bias_random_walk, e.gyro_scale_density]
+                     for e in estimators], dtype=float).reshape(-1, 3)
+
+
 def norm_tolerances(estimators) -> np.ndarray:
     """Each run's magnetic norm tolerance, read off its per-run filter
     (``magnetic_norm_tolerance``; infinite where it does not test)."""

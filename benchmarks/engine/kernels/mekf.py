@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_innovation, gate_thresholds, keep_output,
+                                              fold_innovation, gate_thresholds, gyro_errors,
+                                              keep_output,
                                               mark_diverged, nees_arrays, norm_tolerances,
                                               rate_arrays, rate_states, record_error,
                                               trapezoid_rate)
@@ -48,8 +49,7 @@ class State(NamedTuple):
     q: np.ndarray                # (B, 4)
     beta: np.ndarray             # (B, 3) the bias estimate, rad/s
     P: np.ndarray                # (B, n, n) n = 6, or 9 with the hard-iron states
-    noise: np.ndarray            # (B,) σ_v², each run's filter's
-    bias_rw: np.ndarray          # (B,) σ_u
+    gyro_errors: np.ndarray      # (B, 3) σ_v², σ_u, S_s: each run's filter's gyro model
     R: np.ndarray                # (B, 3, 3)
     beta_last: np.ndarray        # (B, 3) the output bias at the last step
     P_last: np.ndarray           # (B, n, n) and its covariance
@@ -93,8 +93,7 @@ def initial_state(estimators) -> State:
     P = np.array([e.initial_covariance for e in estimators]).reshape(-1, size, size)
     return State(q=np.array([e.initial_attitude for e in estimators]).reshape(-1, 4),
                  beta=beta, P=P,
-                 noise=np.array([e.gyro_noise for e in estimators], dtype=float),
-                 bias_rw=np.array([e.gyro_bias_random_walk for e in estimators], dtype=float),
+                 gyro_errors=gyro_errors(estimators),
                  R=np.array([e.filter.R for e in estimators]).reshape(-1, 3, 3),
                  beta_last=beta.copy(), P_last=P.copy(), hard_iron=size > 6,
                  mag_bias=np.array([e.magnetometer_bias for e in estimators]).reshape(-1, 3),
@@ -159,14 +158,12 @@ def _filter_arrays(state, record, row):
     and the IMU models' arrays (:func:`~benchmarks.engine.kernels.imu.gravity_models`),
     taken out of their tuples before the loop over the runs, to be borrowed
     (the package's docstring)."""
-    return (state.q, state.beta, state.P, state.mag_bias, state.noise, state.bias_rw,
-            state.beta_last, state.P_last, state.posterior, record.rejected[row],
+    return (state.q, state.beta, state.P, state.mag_bias, state.gyro_errors, state.beta_last, state.P_last, state.posterior, record.rejected[row],
             imu.gravity_models(state), imu.field_models(state))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapdown, rotation,
-               turn):
+def _propagate(q, beta, P, rate, dt, errors, scratch, dq, imu_on, strapdown, rotation, turn):
     """:func:`propagate_covariance`, and the IMU models' strapdown by the same
     bias-corrected rotation (MultiplicativeEKF.propagate); ``turn`` (3,) scratch."""
     if imu_on:
@@ -174,7 +171,7 @@ def _propagate(q, beta, P, rate, dt, noise, bias_rw, scratch, dq, imu_on, strapd
             turn[i] = (rate[i] - beta[i]) * dt
         imu.strapdown_step(strapdown, turn, strapdown)
         imu.integrate_rotation(strapdown, dt, rotation)
-    propagate_covariance(q, beta, P, rate, dt, noise, bias_rw, scratch, dq)
+    propagate_covariance(q, beta, P, rate, dt, errors, scratch, dq)
     if P.shape[0] > 6:                  # the hard iron's cross-covariance through Φ
         carry_constant_states(P, scratch[2], scratch[3], scratch[0])
 
@@ -315,8 +312,8 @@ def advance_runs(first, last, block, sensors, state, record, row):
      health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = borrowed(nees_arrays(record, row))
-    (q_all, beta_all, P_all, mag_bias_all, noise, bias_rw, beta_last, P_last, posterior,
-     rejected, gravity_models, field_models) = borrowed(_filter_arrays(state, record, row))
+    (q_all, beta_all, P_all, mag_bias_all, errors, beta_last, P_last, posterior, rejected,
+     gravity_models, field_models) = borrowed(_filter_arrays(state, record, row))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
     batch = _batch_scratch(last - first)
@@ -335,7 +332,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
             if imu_on:
                 imu.gyro_reading(counts, detector, rate_lp, run, w, dt, imu_table, imu_table_dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end):
-                _propagate(q, beta, P, mean, dt, noise[run], bias_rw[run], scratch6, dq,
+                _propagate(q, beta, P, mean, dt, errors[run], scratch6, dq,
                            imu_on, strapdown[run], rotation[run, 0], imu_work[run, imu.TURN])
             if not posterior:
                 _output(q, out, run, k, last_step, q_true[j], beta, P, beta_last, P_last,
@@ -358,7 +355,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not trapezoid[run]:
-                _propagate(q, beta, P, w, dt, noise[run], bias_rw[run], scratch6, dq, imu_on,
+                _propagate(q, beta, P, w, dt, errors[run], scratch6, dq, imu_on,
                            strapdown[run], rotation[run, 0], imu_work[run, imu.TURN])
             if not (finite_state(q, 4, P, P.shape[0]) and finite_state(beta, 3, P, 0)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)

@@ -13,9 +13,9 @@ import math
 
 from numba import njit
 
-from benchmarks.engine.kernels.algebra import (gauss_jordan, joseph_covariance, log_error,
-                                               quadratic_form, quat_exp, quat_times_normalized,
-                                               to_body_frame)
+from benchmarks.engine.kernels.algebra import (add_along_rate, gauss_jordan, joseph_covariance,
+                                               log_error, quadratic_form, quat_exp,
+                                               quat_times_normalized, to_body_frame)
 from benchmarks.engine.kernels.common import passes_norm
 from estimators.mekf import transition_coefficients
 
@@ -27,8 +27,10 @@ _transition_coefficients = njit(cache=True, inline="always",
 
 
 @njit(cache=True, error_model="numpy")
-def propagate_covariance(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
-    """q ⊗ δq(ω̂Δt), P = Φ P Φᵀ + Q with Φ = [[A, B], [0, I]] (estimators.mekf)."""
+def propagate_covariance(q, beta, P, w_meas, dt, errors, scratch, dq):
+    """q ⊗ δq(ω̂Δt), P = Φ P Φᵀ + Q with Φ = [[A, B], [0, I]] (estimators.mekf;
+    ``errors``: the filter's gyro model, σ_v², σ_u and S_s: common.gyro_errors)."""
+    noise, bias_rw, scale_density = errors[0], errors[1], errors[2]
     o0, o1, o2 = w_meas[0] - beta[0], w_meas[1] - beta[1], w_meas[2] - beta[2]
     rate = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
     s1, c2, s3, q5, q4 = _transition_coefficients(rate, dt)
@@ -52,6 +54,8 @@ def propagate_covariance(q, beta, P, w_meas, dt, noise, bias_rw, scratch, dq):
             Bm[i, j] = -(dt * eye - c2 * W[i, j] + s3 * W2[i, j])
             Q11[i, j] = noise * dt * eye + su2 * (dt * dt * dt / 3.0 * eye + q5 * W2[i, j])
             Q12[i, j] = -su2 * (0.5 * dt * dt * eye - s3 * W[i, j] + q4 * W2[i, j])
+    if scale_density > 0.0:
+        add_along_rate(Q11, o0, o1, o2, scale_density, dt)
     # FP = Φ P: the top three rows A P_top + B P_bottom, the bottom three P's own.
     FP = scratch[6]
     for i in range(3):

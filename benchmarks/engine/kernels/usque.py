@@ -33,10 +33,11 @@ import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels import imu, usque_imu
-from benchmarks.engine.kernels.algebra import quat_exp, to_body_frame
+from benchmarks.engine.kernels.algebra import add_along_rate, quat_exp, to_body_frame
 from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
-                                              fold_innovation, gate_thresholds, keep_output,
+                                              fold_innovation, gate_thresholds, gyro_errors,
+                                              keep_output,
                                               norm_tolerances, passes_norm, mark_diverged,
                                               nees_arrays, rate_arrays, rate_states,
                                               record_error, trapezoid_rate)
@@ -63,8 +64,7 @@ class State(NamedTuple):
     x: np.ndarray                # (B, 6) [δp, β], δp about q̂
     P: np.ndarray                # (B, 6, 6)
     sigmas: np.ndarray           # (B, 13, 6) the sigma points the next update uses
-    noise: np.ndarray            # (B,) σ_v², each run's filter's
-    bias_rw: np.ndarray          # (B,) σ_u
+    gyro_errors: np.ndarray      # (B, 3) σ_v², σ_u, S_s: each run's filter's gyro model
     R: np.ndarray                # (B, 3, 3)
     spread: np.ndarray           # (B,) n + λ, as filterpy's sigma points compute it
     Wm: np.ndarray               # (B, 13) the weights of the mean
@@ -106,7 +106,7 @@ class State(NamedTuple):
 def _filter_arrays(state):
     """The filters' arrays of the state, taken out of its tuple (before the
     loop over the runs: see the kernels package's docstring)."""
-    return (state.q, state.x, state.P, state.sigmas, state.noise, state.bias_rw, state.spread,
+    return (state.q, state.x, state.P, state.sigmas, state.gyro_errors, state.spread,
             state.Wm, state.Wc, state.beta_last, state.P_last, state.posterior)
 
 
@@ -127,8 +127,7 @@ def initial_state(estimators) -> State:
     x = stack((f.x for f in filters), (6,))
     return State(q=stack((e.q_hat for e in estimators), (4,)), x=x, P=P,
                  sigmas=stack((f.sigmas_f for f in filters), (N_SIGMAS, 6)),
-                 noise=stack((e.gyro_noise for e in estimators), ()),
-                 bias_rw=stack((e.gyro_bias_random_walk for e in estimators), ()),
+                 gyro_errors=gyro_errors(estimators),
                  R=stack((f.R for f in filters), (3, 3)),
                  spread=np.array([_spread(f.points_fn) for f in filters]),
                  Wm=stack((f.Wm for f in filters), (N_SIGMAS,)),
@@ -154,8 +153,10 @@ _transition_coefficients = njit(cache=True,
 
 
 @njit(cache=True, error_model="numpy")
-def _process_noise(o0, o1, o2, dt, noise, bias_rw, Q):
-    """The Q of estimators.mekf.discrete_error_model at the rate ω̂."""
+def _process_noise(o0, o1, o2, dt, errors, Q):
+    """The Q of estimators.mekf.discrete_error_model at the rate ω̂ (``errors``:
+    σ_v², σ_u, S_s, as common.gyro_errors keeps them)."""
+    noise, bias_rw, scale_density = errors[0], errors[1], errors[2]
     rate = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
     _, _, s3, q5, q4 = _transition_coefficients(rate, dt)
     W = ((0.0, -o2, o1), (o2, 0.0, -o0), (-o1, o0, 0.0))
@@ -168,10 +169,12 @@ def _process_noise(o0, o1, o2, dt, noise, bias_rw, Q):
             Q[i, j + 3] = -su2 * (0.5 * dt * dt * eye - s3 * W[i][j] + q4 * w2)
             Q[j + 3, i] = Q[i, j + 3]
             Q[i + 3, j + 3] = su2 * dt * eye
+    if scale_density > 0.0:
+        add_along_rate(Q, o0, o1, o2, scale_density, dt)
 
 
 @njit(cache=True, error_model="numpy")
-def _predict(q, x, P, sigmas, w_meas, dt, noise, bias_rw, spread, Wm, Wc, L, Q, propagated):
+def _predict(q, x, P, sigmas, w_meas, dt, errors, spread, Wm, Wc, L, Q, propagated):
     """USQUE.propagate: filterpy's ``predict`` with ``fx`` on each sigma point,
     then q̂ ← q̂⁺. False if a Cholesky factor does not exist."""
     if not sigma_points(x, P, spread, sigmas, L):
@@ -196,7 +199,7 @@ def _predict(q, x, P, sigmas, w_meas, dt, noise, bias_rw, spread, Wm, Wc, L, Q, 
             product(n0, -n1, -n2, -n3, b0, b1, b2, b3))
         propagated[i, 3], propagated[i, 4], propagated[i, 5] = s[3], s[4], s[5]
     unscented_mean(propagated, Wm, STATE_SIZE, x)
-    _process_noise(o0, o1, o2, dt, noise, bias_rw, Q)
+    _process_noise(o0, o1, o2, dt, errors, Q)
     for a in range(STATE_SIZE):
         for b in range(a, STATE_SIZE):
             total = 0.0
@@ -328,7 +331,7 @@ def _run_scratch(batch, run):
 
 
 @njit(cache=True, error_model="numpy")
-def _propagated(q, x, P, sigmas, rate, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
+def _propagated(q, x, P, sigmas, rate, dt, run, errors, spread, Wm, Wc, scratch,
                 propagated, imu_on, strapdown, rotation, turns):
     """:func:`_predict` with ``rate`` (and the IMU models' strapdown before it):
     True if its Cholesky factors existed and the state is finite after it.
@@ -337,8 +340,8 @@ def _propagated(q, x, P, sigmas, rate, dt, run, noise, bias_rw, spread, Wm, Wc, 
     call costs nothing measurable."""
     if imu_on:
         usque_imu.propagate_strapdown(strapdown[run], rotation[run, 0], rate, x, dt, turns[run])
-    factored = _predict(q, x, P, sigmas, rate, dt, noise[run], bias_rw[run], spread[run], Wm,
-                        Wc, scratch[0], scratch[1], propagated)
+    factored = _predict(q, x, P, sigmas, rate, dt, errors[run], spread[run], Wm, Wc,
+                        scratch[0], scratch[1], propagated)
     return factored and _finite(q, x, P)
 
 
@@ -373,8 +376,8 @@ def advance_runs(first, last, block, sensors, state, record, row):
      health) = borrowed(error_arrays(record, row))
     (streaming, nees_every, settle, nees_samples, nees_sum, nis_sum, nis_count,
      variances, likelihood) = borrowed(nees_arrays(record, row))
-    (q_all, x_all, P_all, sigmas_all, noise, bias_rw, spread, Wm_all, Wc_all, beta_last,
-     P_last, posterior) = borrowed(_filter_arrays(state))
+    (q_all, x_all, P_all, sigmas_all, errors, spread, Wm_all, Wc_all, beta_last, P_last,
+     posterior) = borrowed(_filter_arrays(state))
     (trapezoid, rate_prev, has_rate, end, imu_on, counts, detector, rate_lp, strapdown,
      rotation, imu_table, imu_table_dt, imu_work) = borrowed(rate_arrays(state))
     imu_turns = imu_work[:, imu.TURN]         # (B, 3): each run's strapdown turn
@@ -397,7 +400,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
             if imu_on:
                 imu.gyro_reading(counts, detector, rate_lp, run, w, dt, imu_table, imu_table_dt)
             if trapezoid_rate(run, w, mean, trapezoid, rate_prev, has_rate, end) and not \
-                    _propagated(q, x, P, sigmas, mean, dt, run, noise, bias_rw, spread, Wm, Wc,
+                    _propagated(q, x, P, sigmas, mean, dt, run, errors, spread, Wm, Wc,
                                 scratch, propagated, imu_on, strapdown, rotation, imu_turns):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
                 continue
@@ -415,7 +418,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
             record_error(run, k, q_true[j], out, stats, hist, first_bits, traces, keep_traces,
                          error_every, samples, diverged, bits, bits_int)
             if not (_finite(q, x, P) if trapezoid[run] else _propagated(
-                    q, x, P, sigmas, w, dt, run, noise, bias_rw, spread, Wm, Wc, scratch,
+                    q, x, P, sigmas, w, dt, run, errors, spread, Wm, Wc, scratch,
                     propagated, imu_on, strapdown, rotation, imu_turns)):
                 mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
             if check:
