@@ -40,6 +40,7 @@ from dynamics.quaternion import IDENTITY, quat_multiply
 from dynamics.validation import InvalidParameterError, boolean, finite_number
 from estimators import sensing
 from estimators.base import AttitudeEstimator, InvalidMeasurementError
+from estimators.readings import checked_rates
 from estimators.complementary import NWU_TO_ENU, MagneticFrame, acc_mag, field_reference
 from estimators.settings import DEFAULT_DT_S
 
@@ -207,13 +208,11 @@ class OfflineVQF(VQF9D):
         if not {"accelerometer", "magnetometer"} <= set(found):
             raise InvalidParameterError("estimator", self.name, "needs the accelerometer's and "
                                         "the magnetometer's readings of a whole recording")
-        omega = np.asarray(omega_meas_radps, dtype=float)
+        omega = checked_rates(omega_meas_radps)
         bad = np.flatnonzero(~np.isfinite(omega).all(axis=1))
-        if omega.ndim != 2 or omega.shape[1:] != (3,) or len(bad):
-            step = int(bad[0]) if len(bad) else 0
-            raise InvalidMeasurementError(f"omega_meas_radps at step {step}",
-                                          omega[step] if len(bad) else omega.shape,
-                                          "must be finite rates, one (3,) row per step")
+        if len(bad):
+            raise InvalidMeasurementError(f"omega_meas_radps at step {bad[0]}", omega[bad[0]],
+                                          "must be finite rates")
         acc, mag = (_held(found[name].body, found[name].available)
                     for name in ("accelerometer", "magnetometer"))
         self.reset()

@@ -100,19 +100,16 @@ class MeasurementChecks:
         (values are checked step by step, in :meth:`step`)."""
         self.reset()
         self._restart_count()
-        omega = _real_array("omega_meas_radps", omega_meas_radps)
+        omega = checked_rates(omega_meas_radps)
         star = _real_array("star_tracker_quat", star_tracker_quat)
         flags = np.asarray(available)
-        n = len(omega) if omega.ndim == 2 else -1
-        offsets = (np.zeros(max(n, 0)) if offset_s is None
-                   else _real_array("offset_s", offset_s))
-        for name, array, shape in (("omega_meas_radps", omega, (n, 3)),
-                                   ("star_tracker_quat", star, (n, 4)),
+        n = len(omega)
+        offsets = np.zeros(n) if offset_s is None else _real_array("offset_s", offset_s)
+        for name, array, shape in (("star_tracker_quat", star, (n, 4)),
                                    ("available", flags, (n,)), ("offset_s", offsets, (n,))):
-            if n < 0 or array.shape != shape:
-                rule = (f"must have shape {shape}: one row per step, as the rates" if n >= 0
-                        else "must have shape (N, 3): one row per step")
-                raise InvalidMeasurementError(f"{name} of shape", array.shape, rule)
+            if array.shape != shape:
+                raise InvalidMeasurementError(f"{name} of shape", array.shape, f"must have "
+                                              f"shape {shape}: one row per step, as the rates")
         if flags.dtype != bool:
             raise InvalidMeasurementError("available", flags, "must be booleans (True where "
                                           "a reading was taken)")
@@ -143,6 +140,17 @@ def observations_at(vectors, k: int) -> tuple:
     if not vectors:
         return ()
     return tuple(readings.observation(k) for readings in vectors if readings.available[k])
+
+
+def checked_rates(omega_meas_radps) -> np.ndarray:
+    """A record's gyro rates as a float array of shape ``(N, 3)``, one row
+    per step, or refused in one line (its values are checked where a
+    filter reads them): the one rule of every path that takes a whole record."""
+    omega = _real_array("omega_meas_radps", omega_meas_radps)
+    if omega.ndim != 2 or omega.shape[1:] != (3,):
+        raise InvalidMeasurementError("omega_meas_radps of shape", omega.shape,
+                                      "must have shape (N, 3): one row per step")
+    return omega
 
 
 def checked_vector_record(vectors, n_steps: int) -> tuple:

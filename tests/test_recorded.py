@@ -300,6 +300,27 @@ def test_the_per_run_path_keeps_the_covariance_its_class_tracks(trial):
     assert run.attitude_covariance.shape == (n, 3, 3)
 
 
+def test_a_whole_records_own_methods_refuse_its_rates_by_the_same_rule(trial):
+    # Offline VQF's run_batch and a per-run class's run read the rates by
+    # run_recorded's rule (estimators.readings.checked_rates): a column of
+    # rates was an AxisError inside run_batch, complex rates lost their
+    # imaginary part.
+    pytest.importorskip("vqf")
+    scenario, omega, vectors = trial
+    n = len(omega)
+    offline = resolve_estimator("vqf-offline").from_scenario(scenario)
+    with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps of shape = \(1500,\): "
+                                                      r"must have shape \(N, 3\)"):
+        offline.run_batch(omega[:, 0], vectors)
+    mekf = resolve_estimator("mekf").from_scenario(scenario)
+    with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps = .*must be real"):
+        mekf.run(omega.astype(complex), np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool))
+    bad = omega.copy()
+    bad[7, 1] = np.nan
+    with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps at step 7 = .*finite"):
+        offline.run_batch(bad, vectors)
+
+
 @pytest.mark.parametrize("name", ["mekf", "mekf-smoother", "vqf-offline", "madgwick", "triad"])
 def test_a_malformed_record_is_refused_in_one_rule_on_every_path(trial, name):
     # Checked before any path reads it (the offline estimators' field

@@ -40,7 +40,7 @@ from benchmarks.engine.kernels import KERNELS, kernel, settings_limitation
 from dynamics.quaternion import IDENTITY, quat_multiply
 from estimators.complementary import NWU_TO_ENU, declination_turn
 from estimators.mekf import estimates_hard_iron
-from estimators.readings import InvalidMeasurementError, checked_vector_record
+from estimators.readings import checked_rates, checked_vector_record
 from estimators.records import RecordRuns
 from estimators.smoother import (MekfSmoother, diverged_step, fuse, reversed_readings,
                                  reversed_rates)
@@ -121,10 +121,7 @@ def run_recorded(estimator, omega_meas_radps: np.ndarray, vectors=(), *,
     (:attr:`RecordedRun.likelihood`, the kernel's or the per-run filter's
     ``innovation_sums``: the same numbers); an offline estimator's field
     timed first where it asks (:func:`field_timed`)."""
-    omega = np.ascontiguousarray(omega_meas_radps, dtype=float)
-    if omega.ndim != 2 or omega.shape[1:] != (3,):      # checked before any path reads it
-        raise InvalidMeasurementError("omega_meas_radps of shape", omega.shape,
-                                      "must have shape (N, 3): one row per step")
+    omega = np.ascontiguousarray(checked_rates(omega_meas_radps))  # before any path reads it
     vectors, timing = field_timed(estimator, omega, checked_vector_record(vectors, len(omega)))
     run = _on_path(estimator, omega, vectors, innovations)
     return run if timing is None else replace(run, magnetometer_delay_s=timing.delay_s)
