@@ -344,3 +344,23 @@ def test_inspect_guesses_past_an_infinite_reading_and_names_its_row(phone_csv, t
     assert "encountered" not in err
     assert "row 2000 holds an infinite value" in err
     assert 'unit = "deg/s"' in (tmp_path / "o" / "inf.toml").read_text()
+
+
+def test_times_printed_coarser_than_the_clock_are_still_the_time_column(phone_csv, tmp_path,
+                                                                         capsys):
+    # A logger printing its time in steps of two samples (each time twice, as
+    # an Arduino's Serial.print(t, 2) at 200 Hz): the loader spreads each run
+    # of equal times (sensors.clocks.dequantized), and inspect now reads the
+    # column as the loader does. It had found no time column at all.
+    path, recording = phone_csv
+    frame = pd.read_csv(path)
+    frame["timestamp_ms"] = (np.arange(len(frame)) // 2) * 2e3 / recording.rate_hz
+    frame.to_csv(tmp_path / "coarse.csv", index=False, float_format="%.17g")
+    assert main(["inspect", str(tmp_path / "coarse.csv"), "--out", str(tmp_path / "o")]) == 0
+    out, err = capsys.readouterr()
+    assert "no time column recognised" not in err
+    rates = {line.split()[0]: float(line.split("readings,")[1].split("Hz")[0])
+             for line in out.splitlines() if "readings," in line}
+    assert rates["gyro"] == pytest.approx(recording.rate_hz, rel=0.02)
+    suggested = load_declared(tmp_path / "o" / "coarse.toml")
+    assert len(suggested.gyro_radps) == len(frame)

@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from sensors.clocks import unwrapped
+from sensors.clocks import dequantized, unwrapped
 
 #: Name tokens of each sensor's columns (the prefix before the axis letter).
 SENSOR_TOKENS = {
@@ -129,13 +129,14 @@ def time_columns(table: dict) -> list[str]:
 
 def _time_steps(values) -> np.ndarray | None:
     """A column's steps as times (a counter's roll-over unwrapped, empty
-    cells left out); None where it is not one column of numbers, or holds
-    fewer than two."""
+    cells left out, times printed coarser than their clock spread as the
+    loader spreads them: :func:`sensors.clocks.dequantized`); None where it
+    is not one column of numbers, or holds fewer than two."""
     raw = np.asarray(values)
     if raw.dtype.kind not in "iuf" or sum(size > 1 for size in raw.shape) != 1:
         return None
     times = unwrapped(raw.reshape(-1)).astype(float)
-    times = times[~np.isnan(times)]
+    times = dequantized(times[~np.isnan(times)])
     return np.diff(times) if len(times) > 1 else None
 
 

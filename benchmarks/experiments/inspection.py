@@ -22,7 +22,7 @@ from benchmarks.experiments.columns import (column_values, columns_by_values, he
 from dynamics.validation import InvalidParameterError
 from estimators.imu.heading import EARTH_FIELD_NORM_UT
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.clocks import GAP_FACTOR, clock_period, unwrapped
+from sensors.clocks import GAP_FACTOR, clock_period, dequantized, unwrapped
 from sensors.declared import SENSORS, declared_recordings
 from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
                                     clock_turning_scale, tick_name, tick_seconds)
@@ -151,7 +151,8 @@ def guess_declaration(table: dict, file_name: str) -> tuple[dict, list]:
     if "gyro" in columns:
         gyro_time = np.asarray(table[time_for("gyro", columns["gyro"], times, table)],
                                dtype=float)
-        declaration["time_unit"] = time_unit(np.diff(gyro_time[~np.isnan(gyro_time)]))
+        gyro_time = dequantized(gyro_time[~np.isnan(gyro_time)])     # as the loader reads it
+        declaration["time_unit"] = time_unit(np.diff(gyro_time))
     seconds = TIME_UNITS[declaration.get("time_unit", "s")]
     for sensor, chosen in columns.items():
         section = {"time": time_for(sensor, chosen, times, table), "columns": chosen}
@@ -298,8 +299,7 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
         # them so); a gyro's are a rate, Euler angles' an attitude.
         if sensor in ("accelerometer", "magnetometer") or values.shape[1] == 4:
             taken &= readings_taken(values)
-        times = times[taken] * seconds
-        clock_of = clock(times)
+        clock_of = clock(dequantized(times[taken] * seconds))     # as the loader reads them
         if "interval" not in clock_of:
             lines.append(f"{sensor:<14} {clock_of['readings']:>9,} reading(s): no rate to tell")
             continue
