@@ -186,5 +186,5 @@ def _real_array(name: str, value, strict: bool = True) -> np.ndarray:
         return array.astype(float, copy=False)
     if not strict:
         return np.empty(0)
-    raise InvalidMeasurementError(name, value, "must be real numbers (not complex, booleans "
-                                  "or text)")
+    raise InvalidMeasurementError(name, value, "must be real numbers (not complex, booleans, "
+                                  "text or None: NaN for a missing one)")

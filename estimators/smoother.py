@@ -69,6 +69,7 @@ from dynamics.validation import boolean
 from estimators.base import (EstimateTrace, checked_vector_record, quiet_overflow,
                              observations_at)
 from estimators.mekf import MultiplicativeEKF
+from estimators.readings import checked_rates
 
 
 def reversed_rates(omega: np.ndarray, interpolation: str) -> np.ndarray:
@@ -251,7 +252,7 @@ class MekfSmoother(MultiplicativeEKF):
         if offset_s is not None and np.any(np.asarray(offset_s) != 0.0):
             raise ValueError("offset_s: the smoother takes readings on the gyro's grid only "
                              "(no reading between two steps)")
-        omega = np.asarray(omega_meas_radps, dtype=float)
+        omega = checked_rates(omega_meas_radps)
         forward_filter = self.pass_filter()
         forward = filter_pass(forward_filter, omega, star_tracker_quat, available, vectors)
         backward_filter = self.pass_filter(backward_from=forward_filter)

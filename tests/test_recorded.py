@@ -301,10 +301,11 @@ def test_the_per_run_path_keeps_the_covariance_its_class_tracks(trial):
 
 
 def test_a_whole_records_own_methods_refuse_its_rates_by_the_same_rule(trial):
-    # Offline VQF's run_batch and a per-run class's run read the rates by
-    # run_recorded's rule (estimators.readings.checked_rates): a column of
-    # rates was an AxisError inside run_batch, complex rates lost their
-    # imaginary part.
+    # Offline VQF's run_batch, run_recorded and a per-run class's run (the
+    # smoother's too) read the rates by one rule (estimators.readings.checked_rates):
+    # a column of rates was an AxisError inside run_batch; complex rates lost
+    # their imaginary part (with a ComplexWarning) in run_recorded, run_batch
+    # and the smoother's run.
     pytest.importorskip("vqf")
     scenario, omega, vectors = trial
     n = len(omega)
@@ -312,9 +313,16 @@ def test_a_whole_records_own_methods_refuse_its_rates_by_the_same_rule(trial):
     with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps of shape = \(1500,\): "
                                                       r"must have shape \(N, 3\)"):
         offline.run_batch(omega[:, 0], vectors)
-    mekf = resolve_estimator("mekf").from_scenario(scenario)
+    complex_rates = omega.astype(complex)
+    for name in ("mekf", "mekf-smoother", "vqf-offline"):
+        estimator = resolve_estimator(name).from_scenario(scenario)
+        with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps = .*must be real"):
+            run_recorded(estimator, complex_rates, vectors)
+        if name != "vqf-offline":
+            with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps = .*real"):
+                estimator.run(complex_rates, np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool))
     with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps = .*must be real"):
-        mekf.run(omega.astype(complex), np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(n, bool))
+        offline.run_batch(complex_rates, vectors)
     bad = omega.copy()
     bad[7, 1] = np.nan
     with pytest.raises(InvalidMeasurementError, match=r"^omega_meas_radps at step 7 = .*finite"):
