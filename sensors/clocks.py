@@ -73,7 +73,16 @@ def dequantized(times: np.ndarray) -> np.ndarray:
     equal times over the interval to the next time, ``k`` parts of it (the
     last run over its own typical interval); other times as they are. The
     same times give the same spread, so sensors logged on one time column
-    stay on one row each."""
+    stay on one row each. An empty time (NaN) stays empty, the times around
+    it spread as if it were not there."""
+    finite = ~np.isnan(times)
+    if not finite.all():
+        spread = np.array(times, dtype=float)
+        kept = dequantized(times[finite])
+        if kept is times[finite] or np.array_equal(kept, times[finite]):
+            return times
+        spread[finite] = kept
+        return spread
     steps = np.diff(times)
     if len(times) < 3 or np.any(steps < 0) or np.mean(steps == 0) < QUANTISED_SHARE:
         return times

@@ -364,3 +364,20 @@ def test_times_printed_coarser_than_the_clock_are_still_the_time_column(phone_cs
     assert rates["gyro"] == pytest.approx(recording.rate_hz, rel=0.02)
     suggested = load_declared(tmp_path / "o" / "coarse.toml")
     assert len(suggested.gyro_radps) == len(frame)
+
+
+def test_a_held_time_is_the_time_column_only_where_no_other_increases():
+    # A 1 Hz GPS time held over a 200 Hz log's rows repeats, and spread it
+    # would increase: the column that increases as printed comes first; and
+    # a file without a header takes no steadily rising integer (a
+    # temperature) for its time.
+    from benchmarks.experiments.columns import columns_by_values, time_columns
+    n = 2000
+    table = {"gps_time": np.floor(np.arange(n) / 200.0), "t": np.arange(n) * 5e-3}
+    assert time_columns(table) == ["t", "gps_time"]
+    assert time_columns({"gps_time": table["gps_time"]}) == ["gps_time"]
+    rng = np.random.default_rng(0)
+    headerless = {"1": np.floor(np.linspace(20.0, 30.0, n))}
+    for i, column in enumerate(rng.normal(0.0, 1.0, (6, n)), start=2):
+        headerless[str(i)] = column
+    assert columns_by_values(headerless)[1] == []

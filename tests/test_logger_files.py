@@ -658,6 +658,24 @@ def test_times_printed_coarser_than_the_clock_are_spread(trial, tmp_path):
     assert coarse < 1.5 * whole + 0.2, (coarse, whole)
 
 
+@settings(max_examples=60)
+@given(st.lists(st.integers(0, 3), min_size=3, max_size=40),
+       st.lists(st.integers(0, 45), max_size=5))
+def test_an_empty_time_stays_empty_and_the_others_spread_as_without_it(steps, empty):
+    # sensors.clocks.dequantized on a column with empty cells (NaN): the NaN
+    # stays where it was, and the times around it spread as the column
+    # without it does (a NaN had been given an invented time, and every time
+    # after it shifted).
+    from sensors.clocks import dequantized
+    times = np.cumsum(np.array(steps, dtype=float))
+    with_empty = times.copy()
+    for index in sorted(set(e % (len(times) + 1) for e in empty)):
+        with_empty = np.insert(with_empty, index, np.nan)
+    spread = dequantized(with_empty)
+    assert np.array_equal(np.isnan(spread), np.isnan(with_empty))
+    assert np.array_equal(spread[~np.isnan(spread)], dequantized(times))
+
+
 # -- a second audit's findings (phone loggers) -----------------------------------
 
 def _handheld_log(folder, seed: int, rate_hz: float, rate_rms_dps: float = 60.0,

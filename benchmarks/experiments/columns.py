@@ -113,9 +113,12 @@ TIME_BACK_SHARE = 0.01
 
 
 def time_columns(table: dict) -> list[str]:
-    """The columns named as times whose readings increase (but for
-    :data:`TIME_BACK_SHARE` of their steps), those that always do first."""
-    names, nearly = [], []
+    """The columns named as times whose readings increase: those that always
+    do first, then those that go back or repeat at :data:`TIME_BACK_SHARE`
+    of their steps at most, then those printed coarser than their clock,
+    which increase once spread as the loader spreads them
+    (:func:`sensors.clocks.dequantized`)."""
+    names, nearly, coarse = [], [], []
     for name, values in table.items():
         steps = _time_steps(values)
         if steps is None or not _tokens(name) & set(TIME_TOKENS):
@@ -124,19 +127,23 @@ def time_columns(table: dict) -> list[str]:
             names.append(name)
         elif np.mean(steps <= 0) <= TIME_BACK_SHARE:
             nearly.append(name)
-    return names + nearly
+        elif np.all(_time_steps(values, spread=True) > 0):
+            coarse.append(name)
+    return names + nearly + coarse
 
 
-def _time_steps(values) -> np.ndarray | None:
+def _time_steps(values, spread: bool = False) -> np.ndarray | None:
     """A column's steps as times (a counter's roll-over unwrapped, empty
-    cells left out, times printed coarser than their clock spread as the
-    loader spreads them: :func:`sensors.clocks.dequantized`); None where it
-    is not one column of numbers, or holds fewer than two."""
+    cells left out; with ``spread``, times printed coarser than their clock
+    spread as the loader spreads them); None where it is not one column of
+    numbers, or holds fewer than two."""
     raw = np.asarray(values)
     if raw.dtype.kind not in "iuf" or sum(size > 1 for size in raw.shape) != 1:
         return None
     times = unwrapped(raw.reshape(-1)).astype(float)
-    times = dequantized(times[~np.isnan(times)])
+    times = times[~np.isnan(times)]
+    if spread:
+        times = dequantized(times)
     return np.diff(times) if len(times) > 1 else None
 
 

@@ -22,7 +22,7 @@ from benchmarks.experiments.columns import (column_values, columns_by_values, he
 from dynamics.validation import InvalidParameterError
 from estimators.imu.heading import EARTH_FIELD_NORM_UT
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.clocks import GAP_FACTOR, clock_period, dequantized, unwrapped
+from sensors.clocks import GAP_FACTOR, clock_period, dequantized, repeated_rows, unwrapped
 from sensors.declared import SENSORS, declared_recordings
 from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
                                     clock_turning_scale, tick_name, tick_seconds)
@@ -299,7 +299,10 @@ def findings(parts, tables: dict, declaration: dict) -> list[str]:
         # them so); a gyro's are a rate, Euler angles' an attitude.
         if sensor in ("accelerometer", "magnetometer") or values.shape[1] == 4:
             taken &= readings_taken(values)
-        clock_of = clock(dequantized(times[taken] * seconds))     # as the loader reads them
+        # As the loader reads them: rows written twice dropped, the column
+        # spread where printed coarser than its clock, then the readings taken.
+        kept = ~repeated_rows(times, values)
+        clock_of = clock(dequantized(times[kept])[taken[kept]] * seconds)
         if "interval" not in clock_of:
             lines.append(f"{sensor:<14} {clock_of['readings']:>9,} reading(s): no rate to tell")
             continue
