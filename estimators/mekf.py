@@ -60,10 +60,12 @@ Below :math:`x = 0.1` the five coefficients come from their Taylor series
 
 **The rate's own error** (``gyro_scale_density``, 0 by default: the book's
 gyro model). A real gyro also errs in proportion to the rate it reads: its
-scale factor and its axes' misalignment (which calibration filters estimate
+scale factors and its axes' misalignment (which calibration filters estimate
 as states: Pittelkau, "Kalman filtering for spacecraft system alignment
-calibration", *JGCD* 24(6), 2001), and the timing of its samples. Where
-these are not estimated, the filter takes them
+calibration", *JGCD* 24(6), 2001), and the timing of its samples. The part
+along the rate (a scale error common to the axes, the timing) is modelled
+here; what errs across it (the axes' own scale errors, misalignment) is
+left to :math:`\sigma_v`. Where these are not estimated, the filter takes them
 as a white relative error of the rate, :math:`\tilde\omega = (1 + \nu_s)\,
 \omega + \beta + \eta_v` with :math:`\nu_s` of density :math:`S_s` (s):
 noise along the rate, which :math:`\Phi_{11}` (a turn about

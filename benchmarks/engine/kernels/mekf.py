@@ -158,8 +158,9 @@ def _filter_arrays(state, record, row):
     and the IMU models' arrays (:func:`~benchmarks.engine.kernels.imu.gravity_models`),
     taken out of their tuples before the loop over the runs, to be borrowed
     (the package's docstring)."""
-    return (state.q, state.beta, state.P, state.mag_bias, state.gyro_errors, state.beta_last, state.P_last, state.posterior, record.rejected[row],
-            imu.gravity_models(state), imu.field_models(state))
+    return (state.q, state.beta, state.P, state.mag_bias, state.gyro_errors, state.beta_last,
+            state.P_last, state.posterior, record.rejected[row], imu.gravity_models(state),
+            imu.field_models(state))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
