@@ -77,10 +77,11 @@ def dequantized(times: np.ndarray) -> np.ndarray:
     it spread as if it were not there."""
     finite = ~np.isnan(times)
     if not finite.all():
-        spread = np.array(times, dtype=float)
-        kept = dequantized(times[finite])
-        if kept is times[finite] or np.array_equal(kept, times[finite]):
+        given = times[finite]
+        kept = dequantized(given)
+        if kept is given:                   # nothing to spread: the times as they are
             return times
+        spread = np.array(times, dtype=float)
         spread[finite] = kept
         return spread
     steps = np.diff(times)

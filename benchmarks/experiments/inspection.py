@@ -179,7 +179,8 @@ def _guess_gyro(declaration: dict, table, gyro_time: np.ndarray, seconds: float,
                 notes: list) -> None:
     """The gyro's unit (and the clock's tick, where another fits) in
     ``declaration``, by how its rates turn gravity (:func:`gyro_unit`),
-    with a note where they are a guess; an infinite reading read as none."""
+    with a note where they are a guess; an infinite reading read as none.
+    ``gyro_time``: its times as the loader reads them (no empty one)."""
     gyro = declaration["gyro"]
     force = None
     accelerometer = declaration.get("accelerometer")
@@ -188,7 +189,7 @@ def _guess_gyro(declaration: dict, table, gyro_time: np.ndarray, seconds: float,
             UNITS["accelerometer"][accelerometer["unit"]]
         force = np.nan_to_num(force, posinf=0.0, neginf=0.0)
     rates = np.nan_to_num(column_values(table, gyro["columns"]), posinf=0.0, neginf=0.0)
-    step = float(np.median(np.diff(gyro_time[~np.isnan(gyro_time)]))) * seconds
+    step = float(np.median(np.diff(gyro_time))) * seconds
     gyro["unit"], power, turned = gyro_unit(rates, force, step)
     if not turned:
         notes.append(f"gyro: {gyro['unit']} by the rates' size: "

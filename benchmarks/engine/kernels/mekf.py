@@ -22,10 +22,9 @@ from numba import njit
 
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, gyro_errors,
-                                              keep_output,
-                                              mark_diverged, nees_arrays, norm_tolerances,
-                                              rate_arrays, rate_states, record_error,
-                                              trapezoid_rate)
+                                              keep_output, mark_diverged, nees_arrays,
+                                              norm_tolerances, rate_arrays, rate_states,
+                                              record_error, trapezoid_rate)
 from benchmarks.engine.kernels import imu
 from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.cores import on_every_core_of

@@ -37,10 +37,9 @@ from benchmarks.engine.kernels.algebra import add_along_rate, quat_exp, to_body_
 from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, gate_thresholds, gyro_errors,
-                                              keep_output,
-                                              norm_tolerances, passes_norm, mark_diverged,
-                                              nees_arrays, rate_arrays, rate_states,
-                                              record_error, trapezoid_rate)
+                                              keep_output, norm_tolerances, passes_norm,
+                                              mark_diverged, nees_arrays, rate_arrays,
+                                              rate_states, record_error, trapezoid_rate)
 from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
