@@ -52,8 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
-from sensors.clocks import (GAP_FACTOR, IRREGULAR_SHARE, clock_fit, clock_period, dequantized,
-                            mended, part_starts, repeated_rows, unwrapped)
+from sensors.clocks import (GAP_FACTOR, clock_fit, clock_period, dequantized,
+                            mended, part_starts, repeated_rows, steady, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
 from sensors.declared_units import (UNITS, canonical_unit, check_gyro_axes, check_norm,
@@ -417,7 +417,7 @@ def _gyro_on_grid(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
     ``loop()``'s, a rate that changes) are resampled instead, said too."""
     steps, period, misfit = clock_fit(times) if len(times) > 1 else \
         (np.arange(len(times)), 0.0, 0.0)
-    if len(times) > 2 and misfit > IRREGULAR_SHARE * period:
+    if not steady(period, misfit, len(times)):
         return _resampled(path, times, rates)
     missing = int(steps[-1]) + 1 - len(times)
     if missing == 0:

@@ -366,6 +366,30 @@ def test_times_printed_coarser_than_the_clock_are_still_the_time_column(phone_cs
     assert len(suggested.gyro_radps) == len(frame)
 
 
+def test_an_uneven_loop_printed_coarsely_is_told_at_the_rate_the_loader_reads(phone_csv,
+                                                                              tmp_path, capsys):
+    # A loop whose intervals vary by ±80 % of its period, its time printed
+    # to 10 ms: the spread times keep no steady clock, and the loader
+    # resamples the gyro at their mean interval. inspect told the fitted
+    # line's rate instead, which counts uneven intervals as dropped samples
+    # (291 Hz here, where the loader reads 285 Hz; 361 Hz, with 369 "gaps",
+    # for a longer log); now it tells the loader's rate.
+    path, recording = phone_csv
+    frame = pd.read_csv(path)
+    period = 1e3 / recording.rate_hz
+    times = np.cumsum(period * (1.0 + np.random.default_rng(5).uniform(-0.8, 0.8, len(frame))))
+    frame["timestamp_ms"] = np.floor(times / 10.0) * 10.0
+    frame.to_csv(tmp_path / "loop.csv", index=False, float_format="%.17g")
+    assert main(["inspect", str(tmp_path / "loop.csv"), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    gyro = next(line for line in out.splitlines() if line.split()[:1] == ["gyro"])
+    told = float(gyro.split("readings,")[1].split("Hz")[0])
+    with pytest.warns(UserWarning, match="keep no steady clock"):
+        loaded = load_declared(tmp_path / "o" / "loop.toml")
+    assert told == pytest.approx(loaded.rate_hz, rel=1e-3), gyro
+    assert gyro.endswith(" 0 gaps"), gyro
+
+
 def test_a_held_time_is_the_time_column_only_where_no_other_increases():
     # A 1 Hz GPS time held over a 200 Hz log's rows repeats, and spread it
     # would increase: the column that increases as printed comes first; and
