@@ -112,6 +112,38 @@ def test_a_magnet_put_on_and_taken_off_is_followed():
     np.testing.assert_array_equal(out, off[-1])
 
 
+def _believed_after(readings, start: int, dt: float = 0.01) -> float:
+    """Seconds after reading ``start`` until the fit applies a hard iron
+    within 0.2 µT of :data:`MAGNET` (inf: never)."""
+    state, out = hard_iron.new_state(), np.empty(3)
+    for k, reading in enumerate(readings):
+        hard_iron.step(reading, dt, state, out)
+        if k >= start and np.linalg.norm(hard_iron.applied(state) - MAGNET) < 0.2:
+            return (k - start) * dt
+    return math.inf
+
+
+def test_a_magnet_put_on_is_fitted_soon_after_it_sits_still():
+    # 10 s without a magnet, 2 s of a magnet being put on (readings off any
+    # sphere: a field twice the Earth's swinging about), then 30 s with it
+    # fixed. The transient's readings, however faded, held the residual
+    # beyond MAX_RESIDUAL for some 20 s; the fit now forgets them once its
+    # residual has been beyond its bound for RESTART_S, and is believed
+    # within RESTART_S plus the few seconds a fresh fit takes (3.5 s here;
+    # before, not within the 30 s). Without the transient it is believed as
+    # soon (5.9 s: the readings without the magnet lie off the new sphere
+    # too), and the transient alone, 30 s long (nothing fixed to fit),
+    # leaves no hard iron applied.
+    before = _sphere(1000, 0.2, np.zeros(3), seed=4)
+    swing = 2 * np.linalg.norm(EARTH) * np.sin(np.arange(200)[:, None] / 5.0 + [0.0, 1.0, 2.0])
+    after = _sphere(3000, 0.2, MAGNET, seed=5)
+    with_transient = _believed_after(np.concatenate([before, swing, after]), 1200)
+    assert with_transient < hard_iron.RESTART_S + 4.0, with_transient
+    assert _believed_after(np.concatenate([before, after]), 1000) < hard_iron.RESTART_S + 4.0
+    state, _ = _fitted(np.concatenate([before, np.tile(swing, (15, 1))]))
+    assert np.all(hard_iron.applied(state) == 0.0)
+
+
 @pytest.mark.parametrize("magnet_stays", [False, True])
 def test_a_magnet_taken_off_before_a_rest_is_dropped_without_a_new_fit(magnet_stays):
     # At rest no fit can be made (no spread): the hard iron is dropped
