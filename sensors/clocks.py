@@ -147,23 +147,36 @@ def steady(period: float, misfit: float, count: int) -> bool:
     """Whether ``count`` times off the uniform clock of ``period`` fitted
     through them by ``misfit`` (RMS, :func:`clock_fit`) keep a steady clock:
     within :data:`IRREGULAR_SHARE` of its period (two times always do)."""
-    return count <= 2 or misfit <= IRREGULAR_SHARE * period
+    return count <= 2 or not misfit > IRREGULAR_SHARE * period
 
 
 def clock_period(times: np.ndarray) -> float:
     """A sensor's period, as the loader takes it (:mod:`sensors.declared`):
-    the median interval where the fitted one (:func:`clock_fit`) agrees with
-    it to 1 ppm (a clock without drops or rounding, read as before), else
-    the fitted one; where the times keep no steady clock (:func:`steady`),
-    the mean interval between the gaps (as :func:`part_starts` finds them),
-    which the loader resamples such a gyro at: the fitted line's period counts
-    uneven intervals as dropped samples (291 Hz for a 285 Hz loop whose
-    intervals vary by ±80 %, printed to 10 ms)."""
-    intervals = np.diff(times)
-    median = float(np.median(intervals))
+    in each part between the gaps (:func:`part_starts`, where the loader
+    splits a recording), the median interval where the fitted one
+    (:func:`clock_fit`) agrees with it to 1 ppm (a clock without drops or
+    rounding, read as before), else the fitted one; where the part's times
+    keep no steady clock (:func:`steady`), its mean interval, which the
+    loader resamples such a gyro at: the fitted line's period counts uneven
+    intervals as dropped samples (291 Hz for a 285 Hz loop whose intervals
+    vary by ±80 %, printed to 10 ms). Over several parts, their periods'
+    mean weighted by their readings."""
+    bounds = np.append(part_starts(times), len(times)) if len(times) > 2 else \
+        np.array([0, len(times)])
+    parts = [(times[start:end], end - start) for start, end in zip(bounds[:-1], bounds[1:])
+             if end - start > 1]
+    if len(parts) == 1:
+        return _part_period(parts[0][0])
+    return float(np.average([_part_period(part) for part, _ in parts],
+                            weights=[count for _, count in parts]))
+
+
+def _part_period(times: np.ndarray) -> float:
+    """:func:`clock_period` of one part between gaps."""
     _, fitted, misfit = clock_fit(times)
     if not steady(fitted, misfit, len(times)):
-        return float(np.mean(intervals[np.rint(intervals / median) <= GAP_FACTOR]))
+        return float((times[-1] - times[0]) / (len(times) - 1))
+    median = float(np.median(np.diff(times)))
     return median if abs(fitted - median) <= 1e-6 * median else fitted
 
 

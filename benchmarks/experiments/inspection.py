@@ -22,7 +22,7 @@ from benchmarks.experiments.columns import (column_values, columns_by_values, he
 from dynamics.validation import InvalidParameterError
 from estimators.imu.heading import EARTH_FIELD_NORM_UT
 from estimators.imu.rest import ACC_THRESHOLD_MPS2, GYRO_THRESHOLD_RADPS, MIN_DURATION_S
-from sensors.clocks import GAP_FACTOR, clock_period, dequantized, repeated_rows, unwrapped
+from sensors.clocks import clock_period, dequantized, part_starts, repeated_rows, unwrapped
 from sensors.declared import SENSORS, declared_recordings
 from sensors.declared_units import (HINT_FACTOR, PLAUSIBLE_NORMS, TIME_UNITS, UNITS,
                                     clock_turning_scale, tick_name, tick_seconds)
@@ -49,7 +49,8 @@ def clock(times: np.ndarray) -> dict:
     if not len(intervals):
         return {"readings": len(times)}
     typical = clock_period(times)
-    gaps = intervals > GAP_FACTOR * typical       # the jitter is the spread between them
+    gaps = np.zeros(len(intervals), dtype=bool)   # the jitter is the spread between them
+    gaps[part_starts(times)[1:] - 1] = True       # where the loader splits the recording
     return {"readings": len(times), "interval": typical,
             "jitter": float(np.std(intervals[~gaps]) / typical) if (~gaps).any() else 0.0,
             "longest": float(intervals.max()), "gaps": int(np.count_nonzero(gaps))}
