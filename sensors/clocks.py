@@ -37,6 +37,12 @@ def unwrapped(times: np.ndarray) -> np.ndarray:
     return times
 
 
+def mean_interval(times: np.ndarray) -> float:
+    """The mean interval of ``times`` (at least two): their span over
+    their count less one."""
+    return (times[-1] - times[0]) / (len(times) - 1)
+
+
 def clock_fit(times: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Each sample's step on a uniform clock, the clock's period, and the
     RMS distance of the times to it: the least-squares line through the
@@ -47,7 +53,7 @@ def clock_fit(times: np.ndarray) -> tuple[np.ndarray, float, float]:
     dropped, the mean where the times are rounded (integer milliseconds at
     256 Hz: intervals of 3 and 4 ms, median 4)."""
     intervals, best = np.diff(times), None
-    for guess in (np.median(intervals), (times[-1] - times[0]) / (len(times) - 1)):
+    for guess in (np.median(intervals), mean_interval(times)):
         steps = np.concatenate([[0], np.cumsum(np.maximum(1.0, np.rint(intervals / guess)))])
         period, origin = np.polyfit(steps, times, 1)
         misfit = float(np.mean((times - origin - period * steps) ** 2))
@@ -161,21 +167,19 @@ def clock_period(times: np.ndarray) -> float:
     intervals as dropped samples (291 Hz for a 285 Hz loop whose intervals
     vary by ±80 %, printed to 10 ms). Over several parts, their periods'
     mean weighted by their readings."""
-    bounds = np.append(part_starts(times), len(times)) if len(times) > 2 else \
-        np.array([0, len(times)])
-    parts = [(times[start:end], end - start) for start, end in zip(bounds[:-1], bounds[1:])
-             if end - start > 1]
+    bounds = np.append(part_starts(times), len(times))
+    parts = [times[start:end] for start, end in zip(bounds[:-1], bounds[1:]) if end - start > 1]
     if len(parts) == 1:
-        return _part_period(parts[0][0])
-    return float(np.average([_part_period(part) for part, _ in parts],
-                            weights=[count for _, count in parts]))
+        return _part_period(parts[0])
+    return float(np.average([_part_period(part) for part in parts],
+                            weights=[len(part) for part in parts]))
 
 
 def _part_period(times: np.ndarray) -> float:
     """:func:`clock_period` of one part between gaps."""
     _, fitted, misfit = clock_fit(times)
     if not steady(fitted, misfit, len(times)):
-        return float((times[-1] - times[0]) / (len(times) - 1))
+        return float(mean_interval(times))
     median = float(np.median(np.diff(times)))
     return median if abs(fitted - median) <= 1e-6 * median else fitted
 

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from dynamics.validation import InvalidParameterError
-from sensors.clocks import (GAP_FACTOR, clock_fit, clock_period, dequantized,
+from sensors.clocks import (GAP_FACTOR, clock_fit, clock_period, dequantized, mean_interval,
                             mended, part_starts, repeated_rows, steady, unwrapped)
 from sensors.declared_reference import (check_field_north, check_gravity_up, check_reference,
                                         declared_reference)
@@ -458,7 +458,7 @@ def _resampled(path: Path, times: np.ndarray, rates: np.ndarray) -> tuple:
     between its readings (the filters integrate each step's rate over one
     step, which a rate read at uneven intervals would break: 2.1° for
     0.45° on intervals of 4 to 8 ms, 44° where the rate halved midway)."""
-    period = (times[-1] - times[0]) / (len(times) - 1)
+    period = mean_interval(times)
     grid = times[0] + period * np.arange(len(times))
     intervals = np.diff(times)
     warnings.warn(f"{path.name}: the gyro's times keep no steady clock (intervals "
