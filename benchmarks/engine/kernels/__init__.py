@@ -99,6 +99,11 @@ readings with the trapezoidal rate, after them otherwise) it took 9 s more
 to compile.
 The MEKF's Joseph update has no copy of its own for six states (loops of
 a constant length): it ran no faster so, and took 10 s of the compile.
+
+The EKF's kernel has a second form for a campaign's case (statistics only):
+:mod:`~benchmarks.engine.kernels.ekf_lanes` advances eight runs side by side
+in the processor's vector instructions, the same numbers to the bit;
+``ekf.advance`` chooses it where it applies.
 """
 from __future__ import annotations
 

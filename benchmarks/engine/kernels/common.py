@@ -105,7 +105,7 @@ MEAN, M2, MAX, FINAL = 0, 1, 2, 3
 N_ACCUMULATORS = 4
 #: Histogram bins keep 7 mantissa bits: 128 bins per octave of error.
 HISTOGRAM_SHIFT = 52 - 7
-_RAD_TO_DEG = 180.0 / math.pi
+RAD_TO_DEG = 180.0 / math.pi
 
 # fdlibm's e_acos.c coefficients (Sun Microsystems, 1993): asin(√z)/√z - 1 ≈ z p(z)/q(z).
 _PS0 = 1.66666666666666657415e-01
@@ -118,7 +118,7 @@ _QS1 = -2.40339491173441421878e+00
 _QS2 = 2.02094576023350569471e+00
 _QS3 = -6.88283971605453293030e-01
 _QS4 = 7.70381505559019352791e-02
-_HIGH_WORD_MASK = np.int64(-4294967296)   # clears the low 32 bits of a double
+HIGH_WORD_MASK = np.int64(-4294967296)   # clears the low 32 bits of a double
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -138,8 +138,14 @@ def acos(x, bits, bits_int):
     z = (1.0 - x) * 0.5
     s = math.sqrt(z)
     bits[0] = s
-    bits_int[0] = bits_int[0] & _HIGH_WORD_MASK
-    df = bits[0]
+    bits_int[0] = bits_int[0] & HIGH_WORD_MASK
+    return acos_near_one(z, s, bits[0])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def acos_near_one(z, s, df):
+    """fdlibm's acos(x) for x > 0.5 from z = (1 - x)/2, s = √z and ``df``,
+    s with its low 32 bits cleared (:data:`HIGH_WORD_MASK`)."""
     c = (z - df * df) / (s + df)
     p = z * (_PS0 + z * (_PS1 + z * (_PS2 + z * (_PS3 + z * (_PS4 + z * _PS5)))))
     q = 1.0 + z * (_QS1 + z * (_QS2 + z * (_QS3 + z * _QS4)))
@@ -208,13 +214,30 @@ def record_error(run, k, q_true_k, q, stats, hist, first_bits, traces, keep_trac
     if diverged[run] >= 0 or not math.isfinite(dot):
         mark_diverged(run, k, diverged, traces, keep_traces, error_every, samples)
         return
-    inv_count = 1.0 / (k + 1)     # Welford's 1/n
-    error = 2.0 * acos(min(1.0, dot), bits, bits_int) * _RAD_TO_DEG
-    delta = error - stats[run, MEAN]
-    stats[run, MEAN] += delta * inv_count
-    stats[run, M2] += delta * (error - stats[run, MEAN])
-    if error > stats[run, MAX] or k == 0:
-        stats[run, MAX] = error
+    error = 2.0 * acos(min(1.0, dot), bits, bits_int) * RAD_TO_DEG
+    fold_error(run, k, error, stats, hist, first_bits, error_every, samples, bits, bits_int)
+    if keep_traces:
+        for i in range(4):
+            traces[run, k, i] = q[i]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def welford(mean, m2, maximum, error, inv_count, first):
+    """The running mean, M2 and maximum with one more ``error``
+    (``inv_count``: Welford's 1/n; ``first``: the run's first step)."""
+    delta = error - mean
+    mean = mean + delta * inv_count
+    return mean, m2 + delta * (error - mean), error if error > maximum or first else maximum
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def fold_error(run, k, error, stats, hist, first_bits, error_every, samples, bits,
+               bits_int):
+    """The error at step ``k`` (degrees) folded into the run's Welford mean
+    and M2, maximum, final value and histogram, and kept every
+    ``error_every`` steps (``bits``: one float of scratch, ``bits_int`` its int64 view)."""
+    stats[run, MEAN], stats[run, M2], stats[run, MAX] = welford(
+        stats[run, MEAN], stats[run, M2], stats[run, MAX], error, 1.0 / (k + 1), k == 0)
     stats[run, FINAL] = error
     # Histogram bin from the float's bit pattern (exponent and top mantissa
     # bits), monotone in the error: a log-like binning without calling log.
@@ -225,9 +248,6 @@ def record_error(run, k, q_true_k, q, stats, hist, first_bits, traces, keep_trac
     elif index >= hist.shape[1]:
         index = hist.shape[1] - 1
     hist[run, index] += 1
-    if keep_traces:
-        for i in range(4):
-            traces[run, k, i] = q[i]
     if error_every and k % error_every == 0:
         samples[run, k // error_every] = error
 

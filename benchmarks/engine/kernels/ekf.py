@@ -11,15 +11,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from benchmarks.engine.kernels.algebra import (matmul4, projected_covariance, propagate,
-                                               quadratic_form)
+from benchmarks.engine.kernels import ekf_lanes
+from benchmarks.engine.kernels.algebra import projected_covariance, propagate
 from benchmarks.engine.kernels.borrowed import borrowed
 from benchmarks.engine.kernels.common import (check_health, error_arrays, finite_state,
                                               fold_innovation, fold_nees, keep_variances,
                                               mark_diverged, nees, nees_arrays)
-from benchmarks.engine.kernels.common import gauss_jordan_inlined as gauss_jordan
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
-from benchmarks.engine.kernels.cores import on_every_core_of
+from benchmarks.engine.kernels.cores import on_every_core, on_every_core_of
+from benchmarks.engine.kernels.ekf_update import align, ekf_update
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
 
@@ -54,42 +54,6 @@ def nis_dof(estimators) -> int:
     return estimators[0].filter.dim_z
 
 
-@njit(cache=True, error_model="numpy")
-def _ekf_update(x, P, z, R, scratch):
-    """filterpy's update with H = I: S = P + R, K = P S⁻¹, x += K (z - x),
-    P = (I - K) P (I - K)ᵀ + K R Kᵀ. Returns the NIS and det S."""
-    S = scratch[0]
-    inverse = scratch[1]
-    K = scratch[2]
-    IK = scratch[3]
-    T = scratch[4]
-    for i in range(4):
-        for j in range(4):
-            S[i, j] = P[i, j] + R[i, j]
-    determinant = gauss_jordan(S, inverse, 4)
-    matmul4(P, inverse, K)
-    y0, y1, y2, y3 = z[0] - x[0], z[1] - x[1], z[2] - x[2], z[3] - x[3]
-    nis = quadratic_form((y0, y1, y2, y3), inverse, 4)
-    for i in range(4):
-        x[i] = x[i] + (K[i, 0] * y0 + K[i, 1] * y1 + K[i, 2] * y2 + K[i, 3] * y3)
-    for i in range(4):
-        for j in range(4):
-            IK[i, j] = (1.0 if i == j else 0.0) - K[i, j]
-    # T = (I - K) P ; P = T (I - K)ᵀ + (K R) Kᵀ
-    matmul4(IK, P, T)
-    KR = S   # S is no longer needed
-    matmul4(K, R, KR)
-    for i in range(4):
-        for j in range(4):
-            first = 0.0
-            second = 0.0
-            for m in range(4):
-                first += T[i, m] * IK[j, m]
-                second += KR[i, m] * K[j, m]
-            P[i, j] = first + second
-    return nis, determinant
-
-
 @njit(cache=True, inline="always", error_model="numpy")
 def _ekf_predict(x, P, w, half_dt, q_variance, F, scratch):
     """x = f(x, ω); P = F P Fᵀ + Q with F the exact Jacobian at the pre-step x."""
@@ -114,10 +78,8 @@ def _star_update(run, x, P, z, aligned, R, align_sign, scratch, check, health, f
                  streaming, nis_sum, nis_count, likelihood):
     """A star tracker reading: its sign turned to the estimate's where the
     filter aligns it, the update, its health and its NIS."""
-    flip = align_sign and (x[0] * z[0] + x[1] * z[1] + x[2] * z[2] + x[3] * z[3]) < 0
-    for i in range(4):
-        aligned[i] = -z[i] if flip else z[i]
-    nis, determinant = _ekf_update(x, P, aligned, R, scratch)
+    align(x, z, aligned, align_sign)
+    nis, determinant = ekf_update(x, P, aligned, R, scratch)
     if check:   # the additive update leaves |x| off 1 by design
         check_health(x, False, P, 4, health, factor)
     if streaming:
@@ -206,5 +168,15 @@ def advance_runs(first, last, block, sensors, state, record, row):
                 check_health(x, True, P, 4, health[run], factor)
 
 
-#: Every run of the batch through a block, a share of the runs per core.
-advance = on_every_core_of(advance_runs)
+_advance_runs = on_every_core_of(advance_runs)
+
+
+def advance(block, sensors, state, record, row):
+    """Every run of the batch through ``block``, a share of the runs per
+    core: eight runs side by side where the lanes kernel covers the case (a
+    campaign's), one at a time otherwise (the same numbers either way)."""
+    if not ekf_lanes.lanes_apply(block, record, state):
+        _advance_runs(block, sensors, state, record, row)
+        return
+    on_every_core(ekf_lanes.advance_lanes, record.diverged.shape[1], block, sensors, state,
+                  record, row)
