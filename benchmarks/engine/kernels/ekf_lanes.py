@@ -12,8 +12,8 @@ rows into values, computes and writes them back, without calls or
 branches: LLVM's loop vectorizer turns it into vector instructions. (One
 buffer, so that it can prove the lanes apart; several arrays, rows a
 run-time stride apart, or a body storing and reloading many rows left it
-scalar: measured.) Measured on one thread of this kernel's 2-core machine:
-46 ns a run-step against the one-run kernel's 107.
+scalar: measured.) On one thread of the 2-core development machine: 46–57
+ns a run-step against the one-run kernel's 107.
 
 What is not the same arithmetic on every lane is done lane by lane with the
 functions the one-run kernel calls (:mod:`~benchmarks.engine.kernels.ekf_update`,
@@ -58,7 +58,7 @@ def _first_rows(**sizes) -> tuple:
 # A group's buffer, LANES numbers a row: the state x and P (row-major), the
 # gyro's reading, the Jacobian F, Q's diagonal; the |q̂ · q| of the error,
 # the arccos's √z, its high word and its value, the error, the run's
-# statistics (common.Record's MEAN, M2, MAX, FINAL), whether it diverged
+# statistics (Record.stats' MEAN, M2, MAX, FINAL of common), whether it diverged
 # (1.0) or its error needs a lane's own care (1.0), its divergence test (NaN:
 # not finite).
 (_X, _P, _W, _F, _QV, _DOT, _ROOT, _HIGH, _ACOS, _ERROR, _STATS, _DIVERGED, _OWN, _CHECK,
