@@ -10,7 +10,8 @@ from numba import njit
 
 from benchmarks.engine.kernels.algebra import propagate
 from benchmarks.engine.kernels.borrowed import borrowed
-from benchmarks.engine.kernels.common import check_health, error_arrays, record_error
+from benchmarks.engine.kernels.common import check_health, error_arrays
+from benchmarks.engine.kernels.common import record_error_inlined as record_error
 from benchmarks.engine.kernels.cores import on_every_core_of
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
@@ -35,7 +36,7 @@ def initial_state(estimators) -> State:
                  skip_first=first.rate_timing == "end", align_sign=first.align_sign)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _predict(q, w, previous_rate, k, step_average, skip_first, half_dt, out, F):
     """out = q propagated as the per-run class propagates it at step ``k``."""
     if not step_average and (k > 0 or not skip_first):
