@@ -234,11 +234,18 @@ def welford(mean, m2, maximum, error, inv_count, first):
 def fold_error(run, k, error, stats, hist, first_bits, error_every, samples, bits,
                bits_int):
     """The error at step ``k`` (degrees) folded into the run's Welford mean
-    and M2, maximum, final value and histogram, and kept every
-    ``error_every`` steps (``bits``: one float of scratch, ``bits_int`` its int64 view)."""
+    and M2, maximum and final value, then counted (:func:`count_error`)."""
     stats[run, MEAN], stats[run, M2], stats[run, MAX] = welford(
         stats[run, MEAN], stats[run, M2], stats[run, MAX], error, 1.0 / (k + 1), k == 0)
     stats[run, FINAL] = error
+    count_error(run, k, error, hist, first_bits, error_every, samples, bits, bits_int)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def count_error(run, k, error, hist, first_bits, error_every, samples, bits, bits_int):
+    """The error at step ``k`` counted in the run's histogram, and kept every
+    ``error_every`` steps (``bits``: one float of scratch, ``bits_int`` its
+    int64 view)."""
     # Histogram bin from the float's bit pattern (exponent and top mantissa
     # bits), monotone in the error: a log-like binning without calling log.
     bits[0] = error

@@ -40,8 +40,8 @@ import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels.borrowed import borrowed
-from benchmarks.engine.kernels.common import (HIGH_WORD_MASK, HISTOGRAM_SHIFT, RAD_TO_DEG,
-                                              acos_near_one, error_arrays, mark_diverged,
+from benchmarks.engine.kernels.common import (HIGH_WORD_MASK, RAD_TO_DEG, acos_near_one,
+                                              count_error, error_arrays, mark_diverged,
                                               welford)
 from benchmarks.engine.kernels.ekf_update import align, ekf_update
 from benchmarks.engine.kernels.sensors import first_countdown, star_arrays, star_step
@@ -199,11 +199,12 @@ def _fold(b, m, k):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _fold_own(b, m, first, k, errors, bits):
+def _fold_own(b, m, first, k, errors, words, words_int):
     """What :func:`_fold` leaves to each lane: a divergence marked, an error
     at x <= 0.5 from the library's arccos (as common.acos takes it), then the
-    histogram's count and the kept sample (common.fold_error's)."""
-    stats, hist, first_bits, traces, keep_traces, every, samples, diverged = errors[:8]
+    histogram's count and the kept sample (common.count_error; ``words``,
+    ``words_int``: its scratch float and int64 view)."""
+    hist, first_bits, traces, keep_traces, every, samples, diverged = errors[1:8]
     for lane in range(m):
         run = np.int64(first + lane)
         if b[_OWN * LANES + lane] != 0.0:
@@ -219,10 +220,8 @@ def _fold_own(b, m, first, k, errors, bits):
             b[_STATS * LANES + lane], b[(_STATS + 1) * LANES + lane] = mean, m2
             b[(_STATS + 2) * LANES + lane], b[(_STATS + 3) * LANES + lane] = maximum, error
             b[_ERROR * LANES + lane] = error
-        index = (bits[_ERROR * LANES + lane] >> HISTOGRAM_SHIFT) - first_bits + 1
-        hist[run, min(max(index, 0), hist.shape[1] - 1)] += 1
-        if every and k % every == 0:
-            samples[run, k // every] = b[_ERROR * LANES + lane]
+        count_error(run, k, b[_ERROR * LANES + lane], hist, first_bits, every, samples, words,
+                    words_int)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -304,13 +303,13 @@ def advance_lanes(first, last, block, sensors, state, record, row):
     x_all, P_all, q_variance, R_all = borrowed((state.x, state.P, state.q_variance, state.R))
     align_sign = state.align_sign
     # Made before the loop, borrowed in it (the kernels package's docstring).
-    made = (np.empty(_ROWS * LANES), np.empty(LANES, np.int64),
+    made = (np.empty(_ROWS * LANES), np.empty(1), np.empty(LANES, np.int64),
             np.empty(LANES, np.int64), (np.empty(4), np.empty(4), np.empty(4), np.empty(4),
                                         np.empty((4, 4)), np.empty((5, 4, 4))))
     for group in range(first, last, LANES):
         m = min(LANES, last - group)
-        b, countdown, reading, work = borrowed(made)
-        bits = b.view(np.int64)
+        b, words, countdown, reading, work = borrowed(made)
+        bits, words_int = b.view(np.int64), words.view(np.int64)
         _group(b, m, group, x_all, P_all, q_variance, errors[0], errors[7], False)
         for lane in range(m):
             countdown[lane], reading[lane] = first_countdown(k0, star, group + lane), 0
@@ -319,7 +318,7 @@ def advance_lanes(first, last, block, sensors, state, record, row):
             _gyro(b, m, j, group, omega, std, normals)
             _arccos(b, bits, m, q_true[j])
             _fold(b, m, k)
-            _fold_own(b, m, group, k, errors, bits)
+            _fold_own(b, m, group, k, errors, words, words_int)
             _star(b, m, group, j, countdown, reading, q_true, star, R_all, align_sign, work)
             _propagate(b, m, half_dt)
             _covariance(b, m)
