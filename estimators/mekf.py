@@ -193,19 +193,28 @@ def transition_coefficients(rate_norm_radps: float, dt: float) -> tuple[float, .
     r"""The five scalar coefficients of :math:`\Phi` and :math:`Q`, for :math:`w = |\hat\omega|`:
 
     ``(sin x / w, (1 - cos x)/w², (x - sin x)/w³, (x³/3 + 2 sin x - 2x)/w⁵,
-    (x²/2 + cos x - 1)/w⁴)`` with ``x = w Δt``.
+    (x²/2 + cos x - 1)/w⁴)`` with ``x = w Δt``; their Taylor series below
+    :data:`SERIES_BELOW`.
     """
-    w = rate_norm_radps
-    x = w * dt
+    x = rate_norm_radps * dt
     if x < SERIES_BELOW:
-        x2 = x * x
-        dt2 = dt * dt
-        return (dt * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0))),
-                dt2 * (0.5 - x2 / 24.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0))),
-                dt2 * dt * (1.0 / 6.0 - x2 / 120.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))),
-                dt2 * dt2 * dt * (1.0 / 60.0 - x2 / 2520.0 * (1.0 - x2 / 72.0
-                                                               * (1.0 - x2 / 110.0))),
-                dt2 * dt2 * (1.0 / 24.0 - x2 / 720.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0))))
+        return series_coefficients(x, dt)
+    return trigonometric_coefficients(rate_norm_radps, x)
+
+
+def series_coefficients(x: float, dt: float) -> tuple[float, ...]:
+    """:func:`transition_coefficients` by their Taylor series in ``x = w Δt``."""
+    x2 = x * x
+    dt2 = dt * dt
+    return (dt * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0))),
+            dt2 * (0.5 - x2 / 24.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0))),
+            dt2 * dt * (1.0 / 6.0 - x2 / 120.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))),
+            dt2 * dt2 * dt * (1.0 / 60.0 - x2 / 2520.0 * (1.0 - x2 / 72.0 * (1.0 - x2 / 110.0))),
+            dt2 * dt2 * (1.0 / 24.0 - x2 / 720.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0))))
+
+
+def trigonometric_coefficients(w: float, x: float) -> tuple[float, ...]:
+    """:func:`transition_coefficients` from sin x and cos x (``x = w Δt``)."""
     s, c = math.sin(x), math.cos(x)
     w2 = w * w
     return (s / w, (1.0 - c) / w2, (x - s) / (w2 * w), (x * x * x / 3.0 + 2.0 * s - 2.0 * x)

@@ -100,10 +100,12 @@ to compile.
 The MEKF's Joseph update has no copy of its own for six states (loops of
 a constant length): it ran no faster so, and took 10 s of the compile.
 
-The EKF's kernel has a second form for a campaign's case (statistics only):
-:mod:`~benchmarks.engine.kernels.ekf_lanes` advances eight runs side by side
-in the processor's vector instructions, the same numbers to the bit;
-``ekf.advance`` chooses it where it applies.
+The EKF's and the MEKF's kernels have a second form for a campaign's case
+(statistics only): :mod:`~benchmarks.engine.kernels.ekf_lanes` and
+:mod:`~benchmarks.engine.kernels.mekf_lanes` advance eight runs side by
+side in the processor's vector instructions
+(:mod:`~benchmarks.engine.kernels.lanes`), the same numbers to the bit;
+``ekf.advance`` and ``mekf.advance`` choose them where they apply.
 """
 from __future__ import annotations
 

@@ -147,12 +147,22 @@ def quadratic_form(y, inverse, n):
     return total
 
 
+#: Below this angle δq's sin(θ/2)/θ is its series (:func:`quat_exp`).
+SINC_SERIES_BELOW = 1e-4
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def half_sinc_series(angle):
+    """sin(θ/2)/θ by its series, for θ below :data:`SINC_SERIES_BELOW`."""
+    return 0.5 - angle * angle / 48.0
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def quat_exp(t0, t1, t2, out):
     """out = δq(θ), the exponential map of dynamics.quaternion.quat_from_rotvec."""
     angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    if angle < 1e-4:
-        half_sinc = 0.5 - angle * angle / 48.0
+    if angle < SINC_SERIES_BELOW:
+        half_sinc = half_sinc_series(angle)
     else:
         half_sinc = math.sin(0.5 * angle) / angle
     out[0] = math.cos(0.5 * angle)
@@ -162,14 +172,21 @@ def quat_exp(t0, t1, t2, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def product_normalized(q0, q1, q2, q3, d0, d1, d2, d3):
+    """(q ⊗ d) / |q ⊗ d| (Hamilton product), on values."""
+    w = q0 * d0 - q1 * d1 - q2 * d2 - q3 * d3
+    x = q0 * d1 + q1 * d0 + q2 * d3 - q3 * d2
+    y = q0 * d2 - q1 * d3 + q2 * d0 + q3 * d1
+    z = q0 * d3 + q1 * d2 - q2 * d1 + q3 * d0
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    return w / norm, x / norm, y / norm, z / norm
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def quat_times_normalized(q, d, out):
     """out = (q ⊗ d) / |q ⊗ d| (Hamilton product); out may be q."""
-    w = q[0] * d[0] - q[1] * d[1] - q[2] * d[2] - q[3] * d[3]
-    x = q[0] * d[1] + q[1] * d[0] + q[2] * d[3] - q[3] * d[2]
-    y = q[0] * d[2] - q[1] * d[3] + q[2] * d[0] + q[3] * d[1]
-    z = q[0] * d[3] + q[1] * d[2] - q[2] * d[1] + q[3] * d[0]
-    norm = math.sqrt(w * w + x * x + y * y + z * z)
-    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
+    out[0], out[1], out[2], out[3] = product_normalized(q[0], q[1], q[2], q[3], d[0], d[1],
+                                                        d[2], d[3])
 
 
 @njit(cache=True, inline="always", error_model="numpy")

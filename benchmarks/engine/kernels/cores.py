@@ -110,3 +110,22 @@ def on_every_core_of(advance_runs):
     advance.__doc__ = (f"Every run through ``block``: ``{advance_runs.__name__}`` of "
                        f"{advance_runs.__module__} on every core.")
     return advance
+
+
+def on_every_core_in_lanes(advance_runs, lanes):
+    """A kernel's ``advance`` with a second form in lanes (module ``lanes``:
+    its ``advance_lanes``, eight runs side by side, where its
+    ``lanes_apply(block, record, state)`` says it covers the case, a
+    campaign's; ``advance_runs``, one run at a time, otherwise): the same
+    numbers either way, a share of the runs per core."""
+    one_by_one = on_every_core_of(advance_runs)
+
+    def advance(block, sensors, state, record, row):
+        if not lanes.lanes_apply(block, record, state):
+            one_by_one(block, sensors, state, record, row)
+            return
+        on_every_core(lanes.advance_lanes, record.diverged.shape[1], block, sensors, state,
+                      record, row)
+    advance.__doc__ = (f"Every run through ``block``: {lanes.__name__}.advance_lanes where it "
+                       f"applies, else {advance_runs.__module__}.{advance_runs.__name__}.")
+    return advance

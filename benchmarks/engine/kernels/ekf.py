@@ -18,7 +18,7 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               fold_innovation, fold_nees, keep_variances,
                                               mark_diverged, nees, nees_arrays)
 from benchmarks.engine.kernels.common import record_error_inlined as record_error
-from benchmarks.engine.kernels.cores import on_every_core, on_every_core_of
+from benchmarks.engine.kernels.cores import on_every_core_in_lanes
 from benchmarks.engine.kernels.ekf_update import align, ekf_update
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step)
@@ -168,15 +168,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
                 check_health(x, True, P, 4, health[run], factor)
 
 
-_advance_runs = on_every_core_of(advance_runs)
-
-
-def advance(block, sensors, state, record, row):
-    """Every run of the batch through ``block``, a share of the runs per
-    core: eight runs side by side where the lanes kernel covers the case (a
-    campaign's), one at a time otherwise (the same numbers either way)."""
-    if not ekf_lanes.lanes_apply(block, record, state):
-        _advance_runs(block, sensors, state, record, row)
-        return
-    on_every_core(ekf_lanes.advance_lanes, record.diverged.shape[1], block, sensors, state,
-                  record, row)
+#: Every run of the batch through a block, a share of the runs per core:
+#: eight runs side by side where the lanes kernel covers the case (a
+#: campaign's), one at a time otherwise (the same numbers either way).
+advance = on_every_core_in_lanes(advance_runs, ekf_lanes)

@@ -10,64 +10,47 @@ by both paths, cannot drift. The state of each run's models sits in
 from __future__ import annotations
 
 import math
-import types
 
 import numpy as np
 from numba import njit
 
 from benchmarks.engine.kernels.algebra import (joseph_covariance, quat_exp, quat_times_normalized,
                                                to_body_frame)
+from benchmarks.engine.kernels.twins import compiled
 from estimators.imu import gravity, hard_iron, heading, lowpass, rest
 
 
-def _compiled(func, **globals_):
-    """``func`` compiled, the globals it calls swapped for compiled twins:
-    ``name=function``, or ``name={attribute: function}`` for a module."""
-    names = dict(func.__globals__)
-    for name, twin in globals_.items():
-        if isinstance(twin, dict):
-            namespace = types.ModuleType(f"{name}_compiled")
-            for attribute, compiled in twin.items():
-                setattr(namespace, attribute, compiled)
-            twin = namespace
-        names[name] = twin
-    clone = types.FunctionType(func.__code__, names, func.__name__, func.__defaults__,
-                               func.__closure__)
-    clone.__module__, clone.__qualname__ = func.__module__, func.__qualname__
-    return njit(cache=True, error_model="numpy")(clone)
-
-
-coefficients = _compiled(lowpass.coefficients)
-_rotate = _compiled(gravity.rotate)
-_rotated_back = _compiled(gravity.rotated_back)
-_LOWPASS = {"step": _compiled(lowpass.step),
-            "samples_averaged": _compiled(lowpass.samples_averaged)}
-strapdown_step = _compiled(gravity.strapdown_step)
-integrate_rotation = _compiled(gravity.integrate_rotation)
-drift_jacobian = _compiled(gravity.drift_jacobian, lowpass=_LOWPASS, rotated_back=_rotated_back)
-gravity_direction = _compiled(gravity.gravity_direction, lowpass=_LOWPASS,
-                              rotate=_rotate,
-                              rotate_back=_compiled(gravity.rotate_back,
-                                                    rotated_back=_rotated_back))
-_reading_variance = _compiled(gravity.reading_variance, lowpass=_LOWPASS)
-rest_gyro_step = _compiled(rest.gyro_step, lowpass=_LOWPASS)
-rest_acc_step = _compiled(rest.acc_step, lowpass=_LOWPASS)
-field_in_reference = _compiled(heading.field_in_reference, rotate=_rotate)
-_close = _compiled(heading._close)
-_earthly = _compiled(heading._earthly)
-_candidate_step = _compiled(heading._candidate_step, _close=_close, _earthly=_earthly)
-trust_step = _compiled(heading.trust_step, _candidate_step=_candidate_step, _close=_close)
-steady_step = _compiled(heading.steady_step, lowpass=_LOWPASS, rotate=_rotate)
-validated = _compiled(heading.validated)
-_forget = _compiled(heading.forget_heading)
-_widen = _compiled(heading.widen_heading)
-new_trust = _compiled(heading.new_state)
-hard_iron_step = _compiled(hard_iron.step, _take=_compiled(
-    hard_iron._take, _gone_step=_compiled(hard_iron._gone_step),
-    _refit=_compiled(hard_iron._refit, _solve_symmetric=_compiled(hard_iron._solve_symmetric),
-                     smallest_eigenvalue=_compiled(hard_iron.smallest_eigenvalue))))
-first_trust = _compiled(heading.first_state, new_state=new_trust)
-reading_steps = _compiled(lowpass.reading_steps)
+coefficients = compiled(lowpass.coefficients)
+_rotate = compiled(gravity.rotate)
+_rotated_back = compiled(gravity.rotated_back)
+_LOWPASS = {"step": compiled(lowpass.step),
+            "samples_averaged": compiled(lowpass.samples_averaged)}
+strapdown_step = compiled(gravity.strapdown_step)
+integrate_rotation = compiled(gravity.integrate_rotation)
+drift_jacobian = compiled(gravity.drift_jacobian, lowpass=_LOWPASS, rotated_back=_rotated_back)
+gravity_direction = compiled(gravity.gravity_direction, lowpass=_LOWPASS,
+                             rotate=_rotate,
+                             rotate_back=compiled(gravity.rotate_back,
+                                                  rotated_back=_rotated_back))
+_reading_variance = compiled(gravity.reading_variance, lowpass=_LOWPASS)
+rest_gyro_step = compiled(rest.gyro_step, lowpass=_LOWPASS)
+rest_acc_step = compiled(rest.acc_step, lowpass=_LOWPASS)
+field_in_reference = compiled(heading.field_in_reference, rotate=_rotate)
+_close = compiled(heading._close)
+_earthly = compiled(heading._earthly)
+_candidate_step = compiled(heading._candidate_step, _close=_close, _earthly=_earthly)
+trust_step = compiled(heading.trust_step, _candidate_step=_candidate_step, _close=_close)
+steady_step = compiled(heading.steady_step, lowpass=_LOWPASS, rotate=_rotate)
+validated = compiled(heading.validated)
+_forget = compiled(heading.forget_heading)
+_widen = compiled(heading.widen_heading)
+new_trust = compiled(heading.new_state)
+hard_iron_step = compiled(hard_iron.step, _take=compiled(
+    hard_iron._take, _gone_step=compiled(hard_iron._gone_step),
+    _refit=compiled(hard_iron._refit, _solve_symmetric=compiled(hard_iron._solve_symmetric),
+                     smallest_eigenvalue=compiled(hard_iron.smallest_eigenvalue))))
+first_trust = compiled(heading.first_state, new_state=new_trust)
+reading_steps = compiled(lowpass.reading_steps)
 
 #: Entries of :attr:`ImuState.counts`: steps since the last accelerometer and
 #: magnetometer readings, magnetometer readings so far, and each one's last

@@ -25,9 +25,9 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               keep_output, mark_diverged, nees_arrays,
                                               norm_tolerances, rate_arrays, rate_states,
                                               record_error, trapezoid_rate)
-from benchmarks.engine.kernels import imu
+from benchmarks.engine.kernels import imu, mekf_lanes
 from benchmarks.engine.kernels.borrowed import borrowed
-from benchmarks.engine.kernels.cores import on_every_core_of
+from benchmarks.engine.kernels.cores import on_every_core_in_lanes
 from benchmarks.engine.kernels.mekf_steps import (carry_constant_states, field_passes,
                                                   gravity_update, propagate_covariance,
                                                   star_update, vector_update)
@@ -363,5 +363,7 @@ def advance_runs(first, last, block, sensors, state, record, row):
                 check_health(q, True, P, P.shape[0], health[run], factor)
 
 
-#: Every run of the batch through a block, a share of the runs per core.
-advance = on_every_core_of(advance_runs)
+#: Every run of the batch through a block, a share of the runs per core:
+#: eight runs side by side where the lanes kernel covers the case (a
+#: campaign's), one at a time otherwise (the same numbers either way).
+advance = on_every_core_in_lanes(advance_runs, mekf_lanes)

@@ -17,13 +17,19 @@ from benchmarks.engine.kernels.algebra import (add_along_rate, gauss_jordan, jos
                                                log_error, quadratic_form, quat_exp,
                                                quat_times_normalized, to_body_frame)
 from benchmarks.engine.kernels.common import passes_norm
-from estimators.mekf import transition_coefficients
+from benchmarks.engine.kernels.twins import compiled
+from estimators.mekf import (series_coefficients, transition_coefficients,
+                             trigonometric_coefficients)
 
 
-#: The MEKF's transition coefficients: the per-run function itself, compiled
-#: (plain scalar arithmetic, so one definition serves both paths).
-_transition_coefficients = njit(cache=True, inline="always",
-                                error_model="numpy")(transition_coefficients)
+#: The MEKF's transition coefficients: the per-run functions themselves,
+#: compiled (plain scalar arithmetic, so one definition serves both paths);
+#: the series and the trigonometric ones apart for the kernel in lanes.
+series = compiled(series_coefficients, inline=True)
+trigonometric = compiled(trigonometric_coefficients, inline=True)
+_transition_coefficients = compiled(transition_coefficients, inline=True,
+                                    series_coefficients=series,
+                                    trigonometric_coefficients=trigonometric)
 
 
 @njit(cache=True, error_model="numpy")

@@ -41,8 +41,10 @@ from benchmarks.engine.kernels.common import (check_health, error_arrays, finite
                                               mark_diverged, nees_arrays, rate_arrays,
                                               rate_states, record_error, trapezoid_rate)
 from benchmarks.engine.kernels.cores import on_every_core_of
+from benchmarks.engine.kernels.mekf_steps import series, trigonometric
 from benchmarks.engine.kernels.sensors import (first_countdown, gyro_arrays, gyro_reading,
                                                star_arrays, star_step, vector_arrays)
+from benchmarks.engine.kernels.twins import compiled
 from benchmarks.engine.kernels.unscented import (N_SIGMAS, fold_reference, grp_from_quat,
                                                  output, product, quat_from_grp,
                                                  sigma_points, unit, unscented_mean,
@@ -147,8 +149,8 @@ def final(state, estimators) -> dict:
     return {"bias_radps": state.beta_last, "covariance": state.P_last}
 
 
-_transition_coefficients = njit(cache=True,
-                                error_model="numpy")(transition_coefficients)
+_transition_coefficients = compiled(transition_coefficients, series_coefficients=series,
+                                    trigonometric_coefficients=trigonometric)
 
 
 @njit(cache=True, error_model="numpy")
