@@ -37,8 +37,7 @@ _P, _F, _QV, _ROWS = lanes.first_rows(lanes.OWN_ROWS, P=16, F=16, q_variance=1)
 def lanes_apply(block, record, state) -> bool:
     """Whether the lanes kernel covers this block, record and state (the
     module's docstring): otherwise the one-run kernel advances them."""
-    return not (block.has_scale or block.has_bias or record.consistency or record.keep_traces
-                or record.check_health or state.posterior or state.end)
+    return lanes.campaign_case(block, record) and not (state.posterior or state.end)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -62,6 +62,14 @@ def first_rows(start: int = 0, **sizes) -> tuple:
                         own=1, check=1)
 
 
+def campaign_case(block, record) -> bool:
+    """What every kernel in lanes needs of a block and record: a gyro with
+    white noise only (no scale factor, no bias), and statistics only (no
+    NEES, traces or health checks)."""
+    return not (block.has_scale or block.has_bias or record.consistency or record.keep_traces
+                or record.check_health)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def three(b, row, lane):
     """Rows ``row`` to ``row + 2`` of one lane, as values."""

@@ -41,10 +41,9 @@ from benchmarks.engine.kernels.sensors import first_countdown, star_arrays
 def lanes_apply(block, record, state) -> bool:
     """Whether the lanes kernel covers this block, record and state (the
     module's docstring): otherwise the one-run kernel advances them."""
-    return not (block.has_scale or block.has_bias or record.consistency or record.keep_traces
-                or record.check_health or state.imu_on or state.hard_iron
-                or state.trapezoid.any() or block.vector_available.shape[2] > 0
-                or (state.gyro_errors[:, 2] != 0.0).any())
+    return lanes.campaign_case(block, record) and not (
+        state.imu_on or state.hard_iron or state.trapezoid.any()
+        or block.vector_available.shape[2] > 0 or (state.gyro_errors[:, 2] != 0.0).any())
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -113,7 +113,8 @@ def _blocks(b, m, dt):
     left the lanes' loop scalar."""
     for lane in range(m):
         o0, o1, o2 = _rate(b, lane)
-        c = three(b, COEFFICIENTS, lane) + three(b, COEFFICIENTS + 3, lane)[:2]
+        c = three(b, COEFFICIENTS, lane) + (b[(COEFFICIENTS + 3) * LANES + lane],
+                                            b[(COEFFICIENTS + 4) * LANES + lane])
         noise, bias_rw = b[NOISE * LANES + lane], b[BIAS_RW * LANES + lane]
         su2 = bias_rw * bias_rw
         w = (0.0, -o2, o1, o2, 0.0, -o0, -o1, o0, 0.0)
