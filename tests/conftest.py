@@ -1,3 +1,5 @@
+import ast
+import functools
 import math
 import warnings
 
@@ -18,6 +20,13 @@ def rng():
 def random_unit_quaternions(rng, n):
     q = rng.standard_normal((n, 4))
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+@functools.lru_cache(maxsize=None)
+def source_tree(path) -> ast.Module:
+    """The parsed source of the project's file ``path``, parsed once per
+    process: the layout tests walk every module several times."""
+    return ast.parse(path.read_text(), filename=str(path))
 
 
 def random_sky(seed: int, steps: int):

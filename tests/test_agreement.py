@@ -126,6 +126,7 @@ def test_a_recording_without_a_reference_is_ranked_by_agreement_and_says_so(
     assert (groups["scored_against"] == "others' median").all()
 
 
+@pytest.mark.slow
 def test_without_a_reference_tuning_and_a_lone_heading_are_refused(unreferenced, tmp_path,
                                                                     capsys):
     out = tmp_path / "out"

@@ -169,6 +169,7 @@ def test_resume_refuses_a_damaged_manifest(tmp_path, capsys):
     assert "campaign.json is damaged" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_bad_or_unreachable_scheduler_leaves_nothing(tmp_path, capsys, monkeypatch):
     from benchmarks.engine import runner
     out = tmp_path / "c"

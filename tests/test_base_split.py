@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import pytest
 
 from estimators import USQUE, AttitudeEstimator, MultiplicativeEKF
+from tests.conftest import source_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def names_imported_from(module: str):
     for folder in ("dynamics", "sensors", "estimators", "benchmarks", "tests"):
         for path in (ROOT / folder).rglob("*.py"):
-            for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            for node in ast.walk(source_tree(path)):
                 if isinstance(node, ast.ImportFrom) and node.module == module:
                     yield from (alias.name for alias in node.names)
 

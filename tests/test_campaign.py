@@ -140,6 +140,7 @@ def test_bad_montecarlo_input_fails_cleanly(tmp_path, capsys, argv, text):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_existing_campaign_needs_resume_and_same_settings(tmp_path, capsys):
     out = tmp_path / "mc"
     base = ["montecarlo", "--runs", "4", "--tstop", "1", "--out", str(out), "--quiet"]

@@ -153,6 +153,7 @@ def test_outputs_are_readable_by_others(tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temp files left
 
 
+@pytest.mark.slow
 def test_flight_compare_draws_the_per_axis_figure_with_any_estimators(tmp_path, capsys):
     scenario = tmp_path / "short.toml"
     flight = (Path(__file__).resolve().parents[1] / "scenarios" / "flight.toml").read_text()

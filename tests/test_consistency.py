@@ -72,6 +72,7 @@ def test_a_verdict_near_its_band_edge_says_borderline():
     assert verdict(3.56, (low, high)) == "optimistic"
 
 
+@pytest.mark.slow
 def test_consistency_command_prints_the_table_and_writes_csv_and_figure(tmp_path, capsys):
     from benchmarks.cli import main
     short = tmp_path / "short.toml"

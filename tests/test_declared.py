@@ -136,6 +136,7 @@ def test_the_same_data_in_any_format_is_the_same_recording(trial, tmp_path):
         assert np.array_equal(declared.movement, seen), file
 
 
+@pytest.mark.slow
 def test_a_declared_csv_scores_as_its_npz_does(trial, tmp_path):
     # The same samples through a CSV and a [recording] file, and as the
     # toolkit's own .npz: the broad command's numbers agree to rounding.
@@ -188,6 +189,7 @@ def _phone(trial, jitter: float = 0.2, seed: int = 1) -> pd.DataFrame:
     return frame
 
 
+@pytest.mark.slow
 def test_a_phone_log_on_its_own_clocks_and_units_reaches_the_scored_table(trial, tmp_path):
     frame = _phone(trial)
     frame.to_csv(tmp_path / "phone.csv", index=False, float_format="%.17g")
@@ -234,6 +236,7 @@ def test_the_reference_in_euler_angles_and_ned_is_the_same_attitude(trial, tmp_p
     assert np.degrees((expected.inv() * got).magnitude()).max() < 1e-9
 
 
+@pytest.mark.slow
 def test_a_reference_in_other_axes_is_noted_and_a_wrong_sequence_named(trial, tmp_path):
     """The reference's axes turned 20° from the IMU's fit the gyro's turning
     and are said to (every score includes them); Euler angles declared
@@ -342,6 +345,7 @@ def _still_log(seconds: float = 30.0, rate_hz: float = 100.0, carried: float = 0
     return table
 
 
+@pytest.mark.slow
 def test_a_still_device_carried_is_scored_and_inspected(tmp_path, capsys):
     # A device carried without turning: its accelerometer's translation,
     # read over a few 10 s windows, once passed for gravity turning a
@@ -424,8 +428,9 @@ def test_a_log_with_a_gap_is_two_trials_each_scored_as_its_npz(trial, tmp_path, 
     # The file's own error, named by the declaration that gave it.
     ("empty file", "log.toml: recording.file = 'log.csv': cannot be read"),
     # The fit's rule, not the key's: the trial's first 40 s turn too little.
-    ("calibrate", "magnetometer.calibrate = True: cannot be done on these readings \\(\\d+% "
-                  "of the directions\\): an ellipsoid fit needs readings in at least 70%"),
+    pytest.param("calibrate", "magnetometer.calibrate = True: cannot be done on these "
+                 "readings \\(\\d+% of the directions\\): an ellipsoid fit needs readings in "
+                 "at least 70%", marks=pytest.mark.slow),
 ])
 def test_a_malformed_declaration_or_file_is_one_line(trial, tmp_path, capsys, change, message):
     import re
@@ -635,6 +640,7 @@ def test_a_clipped_accelerometer_is_noted(trial, tmp_path, capsys):
         capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_replay_notes_a_clipped_gyro_and_only_its_gyro(trial, tmp_path, capsys):
     # replay reads the gyro alone: its clipping is said, as broad says it,
     # and the accelerometer's, which it does not read, is not

@@ -41,7 +41,7 @@ def cubesat_batch():
                            block_steps=128)
 
 
-@pytest.mark.parametrize("name", VECTOR_FILTERS)
+@pytest.mark.parametrize("name", ["mekf", pytest.param("usque", marks=pytest.mark.slow)])
 def test_vector_kernels_equal_the_per_run_filters_at_every_step(cubesat_batch, name):
     runs, batch = cubesat_batch
     for i, seed in enumerate(runs.seeds):

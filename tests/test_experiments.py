@@ -88,7 +88,8 @@ def test_bad_landscape_grid_fails_cleanly(tmp_path, capsys, argv, name):
     assert name in capsys.readouterr().err and not out.exists()
 
 
-@pytest.mark.parametrize("estimator, frames", [(None, 5), ("ekf", 5)])
+@pytest.mark.parametrize("estimator, frames", [(None, 5),
+                                               pytest.param("ekf", 5, marks=pytest.mark.slow)])
 def test_attitude_animation_frames_and_still(tmp_path, estimator, frames):
     argv = ["animate", "--every", "25", "--out", str(tmp_path), *SHORT]
     if estimator:

@@ -81,6 +81,7 @@ def assert_texts_do_not_overlap(figure):
             assert overlap_x <= 1 or overlap_y <= 1, f"{first!r} overlaps {second!r}"
 
 
+@pytest.mark.slow
 def test_every_estimator_of_the_comparison_can_be_seen(smallsat_run):
     figure = drawn(flight_comparison_figure(smallsat_run))
     assert_legends_outside_the_panels(figure)

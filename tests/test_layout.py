@@ -4,6 +4,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import source_tree
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("dynamics", "sensors", "estimators", "benchmarks")
 #: package → the project packages it may import.
@@ -16,7 +18,7 @@ ALLOWED = {
 
 
 def project_imports(path):
-    tree = ast.parse(path.read_text(), filename=str(path))
+    tree = source_tree(path)
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names = [alias.name for alias in node.names]
@@ -50,7 +52,7 @@ FORBIDDEN_INSIDE = {
 
 
 def module_imports(path):
-    tree = ast.parse(path.read_text(), filename=str(path))
+    tree = source_tree(path)
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             yield from (alias.name for alias in node.names)
@@ -94,7 +96,7 @@ def import_edges(modules: dict) -> dict:
         return name
     edges = {}
     for name, path in modules.items():
-        tree = ast.parse(path.read_text(), filename=str(path))
+        tree = source_tree(path)
         imported = set()
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
@@ -159,7 +161,7 @@ def test_no_import_circle_anywhere_in_the_project():
 def test_no_module_imports_another_modules_private_name():
     for package in PACKAGES:
         for path in (ROOT / package).rglob("*.py"):
-            tree = ast.parse(path.read_text(), filename=str(path))
+            tree = source_tree(path)
             for node in ast.walk(tree):
                 if isinstance(node, ast.ImportFrom) and node.module:
                     private = [a.name for a in node.names if a.name.startswith("_")
@@ -179,7 +181,7 @@ def _definitions(root, packages, kinds):
     """``(where, lines)`` of every definition of ``kinds`` in ``packages`` under ``root``."""
     for package in packages:
         for path in (root / package).rglob("*.py"):
-            tree = ast.parse(path.read_text(), filename=str(path))
+            tree = source_tree(path)
             for node in ast.walk(tree):
                 if isinstance(node, kinds):
                     yield (f"{path.relative_to(root).as_posix()}:{node.name}",

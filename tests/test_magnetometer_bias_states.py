@@ -68,6 +68,7 @@ def _hard_iron_nees(scenario, runs: int = 20) -> float:
     return sum(e @ np.linalg.solve(P[6:, 6:], e) for e, P in zip(errors, final["covariance"]))
 
 
+@pytest.mark.slow
 def test_the_hard_iron_is_estimated_within_its_covariance(tmp_path):
     # Twenty runs of half an orbit: the hard-iron estimate's NEES summed over
     # them is χ²(60) for a consistent filter, within [35.5, 92.0] at 99 %

@@ -28,7 +28,7 @@ def _gyro_only_error_deg(cls, dt: float, interpolation: str) -> float:
     return float(attitude_error_deg(truth.q_true[-1:], estimates[-1:])[0])
 
 
-@pytest.mark.parametrize("cls", [MultiplicativeEKF, USQUE])
+@pytest.mark.parametrize("cls", [MultiplicativeEKF, pytest.param(USQUE, marks=pytest.mark.slow)])
 def test_the_trapezoid_is_second_order_where_holding_the_reading_is_first(cls):
     # Holding a sampled rate misses ½ ω̇ Δt² a step: an error linear in Δt
     # over a fixed time. The trapezoidal rule's is third order a step,

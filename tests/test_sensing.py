@@ -273,6 +273,7 @@ def test_magnetic_north_filters_are_scored_in_the_frame_they_estimate(name, tmp_
     assert settled.mean() < declination / 4      # was the declination itself
 
 
+@pytest.mark.slow
 def test_campaigns_say_what_their_runs_made_of_their_readings(tmp_path, capsys):
     """montecarlo and consistency print the notes a single run's table prints,
     summed over their runs (engine and per-run paths alike)."""

@@ -222,7 +222,8 @@ def _offline_run(recording, name, fit):
                          recording.movement)["total_rmse_deg"]
 
 
-@pytest.mark.parametrize("name", ["mekf-smoother", "vqf-offline"])
+@pytest.mark.parametrize("name", [pytest.param("mekf-smoother", marks=pytest.mark.slow),
+                                  "vqf-offline"])
 def test_an_offline_estimator_times_its_field_itself(name):
     # Measured here (total RMSE, without → with the fit): trial 02 the smoother
     # 0.918° → 0.800°, offline VQF 1.014° → 0.882°; trial 07 1.331° → 1.327°
@@ -307,6 +308,7 @@ def test_gaps_in_the_readings_leave_the_fit_as_it_was(brisk):
     assert np.allclose(gapped.offset, 0.0, atol=0.5)
 
 
+@pytest.mark.slow
 def test_the_stated_error_is_the_fits_scatter(brisk):
     # Over 48 draws of the magnetometer's noise (σ 2 µT) the fit scatters as
     # its stated error says. The RMS of n errors over their σ is √(χ²_n / n):
@@ -517,6 +519,7 @@ def test_the_timed_fields_kept_stay_within_their_bytes(monkeypatch):
     assert len(delay._KEPT) == 1
 
 
+@pytest.mark.slow
 def test_a_trial_is_fitted_once_for_its_note_and_its_offline_estimators(monkeypatch, tmp_path):
     # broad's delay note and the offline estimators' timing read the same
     # readings: the second takes the first's fit (the warm-up's few samples

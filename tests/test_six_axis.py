@@ -182,6 +182,7 @@ def broad_runs(tmp_path_factory):
     return tables
 
 
+@pytest.mark.slow
 def test_broad_scores_a_six_axis_log_on_its_inclination(broad_runs):
     # Every filter runs without a field and is scored on its inclination:
     # no total or heading score (its heading is the gyro's from an

@@ -286,6 +286,7 @@ def test_an_optimum_beyond_the_range_is_flagged():
     assert inside.at_bound == []
 
 
+@pytest.mark.slow
 def test_json_outputs_hold_no_nan(tmp_path, capsys):
     import json
     out = tmp_path / "out"

@@ -235,7 +235,7 @@ def test_an_npz_reference_scalar_last_is_refused_naming_the_fix(tmp_path):
         assert np.allclose(load_recording(path).reference_quat, quat)
 
 
-@pytest.mark.parametrize("hz", [5.0, 2.0])
+@pytest.mark.parametrize("hz", [pytest.param(5.0, marks=pytest.mark.slow), 2.0])
 def test_an_accelerometer_slower_than_the_windows_is_compared_reading_to_reading(hz):
     """A simulated hand-held IMU's accelerometer kept at a few hertz turns
     as its gyro says (correlation near 1, scale near 1), compared reading to

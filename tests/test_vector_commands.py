@@ -37,6 +37,7 @@ def test_compare_on_the_cubesat_runs_the_vector_estimators_by_default(tmp_path, 
     assert (out / "compare.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_consistency_on_the_cubesat_reports_every_static_solver_and_filter(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["consistency", "--scenario", str(short_cubesat(tmp_path, 60.0)), "--runs",

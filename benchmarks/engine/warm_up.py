@@ -23,11 +23,16 @@ from concurrent.futures import ProcessPoolExecutor
 #: MEKF's lanes kernel (about 35 s more, on a slower day) the EKF went to
 #: USQUE's group and dead reckoning to the MEKF's: both groups in parallel,
 #: 101 s on that day, where the groups before took 88 s without it.
+#: On a slower day still (2026-12-08): the MEKF's two kernels alone 118 s
+#: once its lanes kernel called its output's bookkeeping instead of inlining
+#: it twice (127 s before); the groups in parallel, USQUE's 104 s and the
+#: MEKF's 124 s; dead reckoning with resets (9 s) then went to USQUE's
+#: group: 123 s against the MEKF's group's 120 s, in parallel.
 #: The vector sensors' compiled readings (:mod:`sensors.sun_faces`,
 #: :mod:`sensors.vector_arithmetic`, about 8 s: each function twice, for the
 #: per-run path's arrays and the engine's views) go with the first group.
-GROUPS = (("usque", "ekf", "vector-sensors"),
-          ("mekf", "dead-reckoning-resets", "dead-reckoning"))
+GROUPS = (("usque", "ekf", "dead-reckoning-resets", "vector-sensors"),
+          ("mekf", "dead-reckoning"))
 
 
 def compile_kernels(names) -> tuple:
